@@ -1,0 +1,387 @@
+"""One thin adapter per FMI version over FMPy's loaded library.
+
+The adapters speak FMI (camelCase, value references, status codes) so nothing above
+``bridge.fmu`` has to. Set-up calls go through FMPy's checked wrappers; the per-step calls
+(get/set/doStep) use the raw ctypes functions FMPy has already bound, with preallocated
+arguments, which is what keeps stepping cheaper than FMPy's own convenience API.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import pathlib
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+from fmpy import fmi1, fmi2, fmi3
+
+from bridge.errors import FmuError, FmuLoadError
+from bridge.fmu import logs
+from bridge.fmu.description import Interface, ModelInfo
+
+OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
+STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+
+# FMI-3 type name -> (FMI 1/2 function suffix, FMI 3 function suffix, ctypes type per version)
+_V12 = {
+    "Float64": ("Real", ctypes.c_double),
+    "Int32": ("Integer", ctypes.c_int),
+    "Enumeration": ("Integer", ctypes.c_int),
+    "Boolean": ("Boolean", None),  # c_char in 1.0, c_int in 2.0
+    "String": ("String", ctypes.c_char_p),
+}
+_V3 = {
+    "Float32": ("Float32", ctypes.c_float),
+    "Float64": ("Float64", ctypes.c_double),
+    "Int8": ("Int8", ctypes.c_int8),
+    "UInt8": ("UInt8", ctypes.c_uint8),
+    "Int16": ("Int16", ctypes.c_int16),
+    "UInt16": ("UInt16", ctypes.c_uint16),
+    "Int32": ("Int32", ctypes.c_int32),
+    "UInt32": ("UInt32", ctypes.c_uint32),
+    "Int64": ("Int64", ctypes.c_int64),
+    "UInt64": ("UInt64", ctypes.c_uint64),
+    "Enumeration": ("Int64", ctypes.c_int64),
+    "Boolean": ("Boolean", ctypes.c_bool),
+    "String": ("String", ctypes.c_char_p),
+}
+
+
+class Backend:
+    """Common shape of the FMI 1/2/3 adapters; one instance owns one loaded FMPy object."""
+
+    major: int
+    fmu: Any
+
+    def __init__(self, info: ModelInfo, unzip_dir: pathlib.Path, interface: Interface, name: str) -> None:
+        self.info = info
+        self.interface = interface
+        self.instance_name = name
+        self.log = logs.LogBuffer(name)
+        self.component: Any = None
+        self.fmu = self._load(unzip_dir)
+        self.functions: dict[str, Any] = self.fmu._functions
+
+    def _load(self, unzip_dir: pathlib.Path) -> Any:
+        raise NotImplementedError
+
+    def _fmpy_kwargs(self, unzip_dir: pathlib.Path) -> dict[str, Any]:
+        library = unzip_dir / "binaries" / _platform() / (self.info.model_identifiers[self.interface] + _suffix())
+        if not library.is_file():
+            available = sorted(p.name for p in (unzip_dir / "binaries").glob("*")) or ["none"]
+            raise FmuLoadError(
+                f"{self.info.path.name} has no binary for this platform ({_platform()}): it ships "
+                f"{', '.join(available)}; re-export it for {_platform()} or build it from its sources "
+                f"(`fmpy compile`) [{self.info.path}]"
+            )
+        return {
+            "guid": self.info.guid,
+            "modelIdentifier": self.info.model_identifiers[self.interface],
+            "unzipDirectory": str(unzip_dir),
+            "instanceName": self.instance_name,
+            "libraryPath": str(library),
+        }
+
+    # -- typed access -------------------------------------------------------------------------
+    def ctype(self, var_type: str) -> Any:
+        raise NotImplementedError
+
+    def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
+        raise NotImplementedError
+
+    def type_key(self, var_type: str) -> str:
+        """Variables with the same key share one get/set call (FMI 2 Integer and Enumeration)."""
+        return _V3[var_type][0] if self.major == 3 else _V12[var_type][0]
+
+    # -- life cycle (implemented per version) --------------------------------------------------
+    def instantiate(self) -> None:
+        raise NotImplementedError
+
+    def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
+        raise NotImplementedError
+
+    def exit_initialization(self) -> None:
+        raise NotImplementedError
+
+    def reset(self) -> None:
+        raise NotImplementedError
+
+    def free_instance(self) -> None:
+        raise NotImplementedError
+
+    def do_step(self, t: float, h: float) -> int:
+        """One communication step; returns the FMI status (termination is reported as DISCARD)."""
+        raise NotImplementedError
+
+    def terminated_after_discard(self) -> bool:
+        return False
+
+    def get_state(self) -> ctypes.c_void_p:
+        raise FmuError(f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states")
+
+    def set_state(self, state: ctypes.c_void_p) -> None:
+        raise FmuError(f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states")
+
+    def free_state(self, state: ctypes.c_void_p) -> None:
+        pass
+
+    def unload(self) -> None:
+        self.fmu.freeLibrary()
+        self.log.close()
+
+    def call(self, what: str, fn: Callable[[], Any]) -> Any:
+        """Run a set-up call; FMPy's exceptions become FmuError with the FMU's log attached."""
+        try:
+            return fn()
+        except FmuError:
+            raise
+        except Exception as exc:
+            raise FmuError(
+                f"{self.info.model_name}: {what} failed ({exc})", log=self.log.recent()
+            ) from exc
+
+
+def _platform() -> str:
+    import fmpy
+
+    return str(fmpy.platform)
+
+
+def _suffix() -> str:
+    import fmpy
+
+    return str(fmpy.sharedLibraryExtension)
+
+
+def _bool_false(v: Any) -> bool:
+    return not bool(v) or v == b"\x00"
+
+
+class Fmi1Backend(Backend):
+    major = 1
+
+    def _load(self, unzip_dir: pathlib.Path) -> Any:
+        if self.interface != "cs":
+            raise FmuLoadError(
+                f"{self.info.path.name}: FMI 1.0 model exchange is not supported; use its co-simulation "
+                f"interface or an FMI 2.0/3.0 export [{self.info.path}]"
+            )
+        self._callbacks = logs.fmi1_callbacks()
+        return fmi1.FMU1Slave(**self._fmpy_kwargs(unzip_dir))
+
+    def ctype(self, var_type: str) -> Any:
+        if var_type == "Boolean":
+            return ctypes.c_char
+        return _V12[var_type][1]
+
+    def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
+        fn = self.functions[f"fmi1{'Set' if setter else 'Get'}{_V12[var_type][0]}"]
+        return fn  # type: ignore[no-any-return]
+
+    def instantiate(self) -> None:
+        location = pathlib.Path(self.fmu.unzipDirectory).as_uri()
+        self.component = self.call(
+            "fmiInstantiateSlave",
+            lambda: self.fmu.fmi1InstantiateSlave(
+                self.instance_name.encode(), self.info.guid.encode(), location.encode(),
+                b"application/x-fmu-sharedlibrary", 0.0, fmi1.fmi1False, fmi1.fmi1False,
+                self._callbacks, fmi1.fmi1False,
+            ),
+        )
+        if not self.component:
+            raise FmuError(f"{self.info.model_name}: fmiInstantiateSlave returned NULL", log=self.log.recent())
+        self.fmu.component = self.component
+
+    def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
+        self._init_args = (start_s, stop_s)
+
+    def exit_initialization(self) -> None:
+        start_s, stop_s = self._init_args
+        self.call("fmiInitializeSlave", lambda: self.fmu.initialize(tStart=start_s, stopTime=stop_s))
+
+    def reset(self) -> None:
+        self.call("fmiResetSlave", self.fmu.reset)
+
+    def free_instance(self) -> None:
+        if self.component:
+            self.fmu.fmi1FreeSlaveInstance(self.component)
+            self.component = None
+
+    def do_step(self, t: float, h: float) -> int:
+        return int(self.functions["fmi1DoStep"](self.component, t, h, fmi1.fmi1True))
+
+
+class Fmi2Backend(Backend):
+    major = 2
+
+    def _load(self, unzip_dir: pathlib.Path) -> Any:
+        self._callbacks = logs.fmi2_callbacks(self.log)
+        cls = fmi2.FMU2Slave if self.interface == "cs" else fmi2.FMU2Model
+        return cls(**self._fmpy_kwargs(unzip_dir))
+
+    def ctype(self, var_type: str) -> Any:
+        if var_type == "Boolean":
+            return ctypes.c_int
+        return _V12[var_type][1]
+
+    def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
+        return self.functions[f"fmi2{'Set' if setter else 'Get'}{_V12[var_type][0]}"]  # type: ignore[no-any-return]
+
+    def instantiate(self) -> None:
+        kind = fmi2.fmi2CoSimulation if self.interface == "cs" else fmi2.fmi2ModelExchange
+        resources = pathlib.Path(self.fmu.unzipDirectory, "resources").as_uri()
+        self.component = self.call(
+            "fmi2Instantiate",
+            lambda: self.fmu.fmi2Instantiate(
+                self.instance_name.encode(), kind, self.info.guid.encode(), resources.encode(),
+                ctypes.byref(self._callbacks), fmi2.fmi2False, fmi2.fmi2False,
+            ),
+        )
+        if not self.component:
+            raise FmuError(f"{self.info.model_name}: fmi2Instantiate returned NULL", log=self.log.recent())
+        self.fmu.component = self.component
+
+    def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
+        self.call(
+            "fmi2SetupExperiment",
+            lambda: self.fmu.setupExperiment(tolerance=tolerance, startTime=start_s, stopTime=stop_s),
+        )
+        self.call("fmi2EnterInitializationMode", self.fmu.enterInitializationMode)
+
+    def exit_initialization(self) -> None:
+        self.call("fmi2ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    def reset(self) -> None:
+        self.call("fmi2Reset", self.fmu.reset)
+
+    def free_instance(self) -> None:
+        if self.component:
+            self.fmu.fmi2FreeInstance(self.component)
+            self.component = None
+
+    def do_step(self, t: float, h: float) -> int:
+        return int(self.functions["fmi2DoStep"](self.component, t, h, fmi2.fmi2True))
+
+    def terminated_after_discard(self) -> bool:
+        flag = ctypes.c_int(0)
+        status = self.functions["fmi2GetBooleanStatus"](self.component, fmi2.fmi2Terminated, ctypes.byref(flag))
+        return bool(status <= WARNING and flag.value)
+
+    def get_state(self) -> ctypes.c_void_p:
+        state = ctypes.c_void_p()
+        self.call("fmi2GetFMUstate", lambda: self.fmu.fmi2GetFMUstate(self.component, ctypes.byref(state)))
+        return state
+
+    def set_state(self, state: ctypes.c_void_p) -> None:
+        self.call("fmi2SetFMUstate", lambda: self.fmu.fmi2SetFMUstate(self.component, state))
+
+    def free_state(self, state: ctypes.c_void_p) -> None:
+        if self.component and state:
+            self.fmu.fmi2FreeFMUstate(self.component, ctypes.byref(state))
+
+
+class Fmi3Backend(Backend):
+    major = 3
+
+    def _load(self, unzip_dir: pathlib.Path) -> Any:
+        cls = fmi3.FMU3Slave if self.interface == "cs" else fmi3.FMU3Model
+        fmu = cls(**self._fmpy_kwargs(unzip_dir))
+        self._event = fmi3.fmi3Boolean()
+        self._terminate = fmi3.fmi3Boolean()
+        self._early = fmi3.fmi3Boolean()
+        self._last_time = fmi3.fmi3Float64()
+        self._step_refs = (
+            ctypes.byref(self._event), ctypes.byref(self._terminate),
+            ctypes.byref(self._early), ctypes.byref(self._last_time),
+        )
+        return fmu
+
+    def ctype(self, var_type: str) -> Any:
+        return _V3[var_type][1]
+
+    def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
+        return self.functions[f"fmi3{'Set' if setter else 'Get'}{_V3[var_type][0]}"]  # type: ignore[no-any-return]
+
+    def instantiate(self) -> None:
+        resources = (str(pathlib.Path(self.fmu.unzipDirectory, "resources")) + "/").encode()
+        name, token = self.instance_name.encode(), self.info.guid.encode()
+        env = ctypes.c_void_p(self.log.id)
+        if self.interface == "cs":
+            no_vrs = (fmi3.fmi3ValueReference * 0)()
+            self._intermediate = fmi3.fmi3IntermediateUpdateCallback()
+            create: Callable[[], Any] = lambda: self.fmu.fmi3InstantiateCoSimulation(  # noqa: E731
+                name, token, resources, False, False, False, False, no_vrs, 0, env,
+                logs.V3_LOGGER, self._intermediate,
+            )
+        else:
+            create = lambda: self.fmu.fmi3InstantiateModelExchange(  # noqa: E731
+                name, token, resources, False, False, env, logs.V3_LOGGER
+            )
+        self.component = self.call("fmi3Instantiate", create)
+        if not self.component:
+            raise FmuError(f"{self.info.model_name}: fmi3Instantiate returned NULL", log=self.log.recent())
+        self.fmu.component = self.component
+
+    def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
+        self.call(
+            "fmi3EnterInitializationMode",
+            lambda: self.fmu.enterInitializationMode(tolerance=tolerance, startTime=start_s, stopTime=stop_s),
+        )
+
+    def exit_initialization(self) -> None:
+        self.call("fmi3ExitInitializationMode", self.fmu.exitInitializationMode)
+
+    def reset(self) -> None:
+        self.call("fmi3Reset", self.fmu.reset)
+
+    def free_instance(self) -> None:
+        if self.component:
+            self.fmu.fmi3FreeInstance(self.component)
+            self.component = None
+
+    def do_step(self, t: float, h: float) -> int:
+        status = int(self.functions["fmi3DoStep"](self.component, t, h, True, *self._step_refs))
+        if status <= WARNING and self._terminate.value:
+            return DISCARD
+        return status
+
+    def terminated_after_discard(self) -> bool:
+        return bool(self._terminate.value)
+
+    def get_state(self) -> ctypes.c_void_p:
+        state = ctypes.c_void_p()
+        self.call("fmi3GetFMUState", lambda: self.fmu.fmi3GetFMUState(self.component, ctypes.byref(state)))
+        return state
+
+    def set_state(self, state: ctypes.c_void_p) -> None:
+        self.call("fmi3SetFMUState", lambda: self.fmu.fmi3SetFMUState(self.component, state))
+
+    def free_state(self, state: ctypes.c_void_p) -> None:
+        if self.component and state:
+            self.fmu.fmi3FreeFMUState(self.component, ctypes.byref(state))
+
+
+def open_backend(info: ModelInfo, unzip_dir: pathlib.Path, interface: Interface, name: str) -> Backend:
+    """Load the FMU's library for ``interface`` and return the adapter for its FMI version."""
+    cls = {1: Fmi1Backend, 2: Fmi2Backend, 3: Fmi3Backend}.get(info.fmi_major)
+    if cls is None:
+        raise FmuLoadError(
+            f"{info.path.name}: FMI version {info.fmi_version!r} is not supported; expected 1.0, 2.0 or 3.0"
+        )
+    try:
+        return cls(info, unzip_dir, interface, name)
+    except FmuError:
+        raise
+    except Exception as exc:
+        raise FmuLoadError(
+            f"{info.path.name}: loading the {interface.upper()} binary failed: {exc} [{info.path}]"
+        ) from exc
+
+
+def numpy_dtype(ctype: Any) -> np.dtype[Any]:
+    if ctype is ctypes.c_char:
+        return np.dtype(np.uint8)
+    if ctype is ctypes.c_bool:
+        return np.dtype(np.bool_)
+    return np.dtype(ctype)

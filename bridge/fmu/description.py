@@ -1,0 +1,271 @@
+"""What an FMU declares: variables, interfaces, default experiment, platforms.
+
+Reading a model description needs no binary, so ``inspect`` works on any FMU,
+including ones built for other platforms.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import fmpy
+from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
+
+from bridge.errors import FmuLoadError, VariableError
+
+_log = logging.getLogger(__name__)
+
+Interface = Literal["cs", "me"]
+
+# FMI 1/2 type names mapped onto the FMI 3 vocabulary; FMI 1/2 Integer is 32 bit.
+_TYPE_ALIASES = {"Real": "Float64", "Integer": "Int32"}
+NUMERIC_TYPES = frozenset(
+    {
+        "Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
+        "Int64", "UInt64", "Boolean", "Enumeration",
+    }
+)
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One scalar variable of an FMU, in FMI-3 type vocabulary (``Real`` is ``Float64``)."""
+
+    name: str
+    value_reference: int
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    start: Any
+    min: float | None = None
+    max: float | None = None
+    nominal: float | None = None
+    unit: str | None = None
+    description: str | None = None
+    declared_type: str | None = None
+    enum_items: tuple[tuple[str, int], ...] = ()
+    is_array: bool = False
+
+    @property
+    def is_numeric(self) -> bool:
+        return self.type in NUMERIC_TYPES
+
+    @property
+    def settable_at_init(self) -> bool:
+        """Whether a value may be given before/at initialisation (parameter or start value)."""
+        if self.variability == "constant" or self.causality in ("calculatedParameter", "independent"):
+            return False
+        return self.causality in ("parameter", "input") or self.initial in ("exact", "approx")
+
+    @property
+    def settable_in_step(self) -> bool:
+        """Whether a value may be set between steps (inputs and tunable parameters)."""
+        return self.causality == "input" or (self.causality == "parameter" and self.variability == "tunable")
+
+
+@dataclass(frozen=True)
+class DefaultExperiment:
+    start_time_s: float | None = None
+    stop_time_s: float | None = None
+    step_size_s: float | None = None
+    tolerance: float | None = None
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """Everything ``inspect`` shows, read from modelDescription.xml without loading a binary."""
+
+    path: Path
+    fmi_version: str
+    model_name: str
+    guid: str
+    interfaces: tuple[Interface, ...]
+    model_identifiers: dict[str, str]
+    default_experiment: DefaultExperiment
+    platforms: tuple[str, ...]
+    variables: dict[str, Variable] = field(repr=False)
+    can_get_set_state: dict[str, bool] = field(repr=False)
+    number_of_states: int = 0
+    number_of_event_indicators: int = 0
+    generation_tool: str | None = None
+    description: str | None = None
+    problems: tuple[str, ...] = ()
+    raw: ModelDescription | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def fmi_major(self) -> int:
+        return int(self.fmi_version.split(".")[0])
+
+    def variable(self, name: str) -> Variable:
+        """The variable called ``name``; a clear error with close matches if there is none."""
+        try:
+            return self.variables[name]
+        except KeyError:
+            raise unknown_variable_error(name, self) from None
+
+    def by_causality(self, *causalities: str) -> list[Variable]:
+        return [v for v in self.variables.values() if v.causality in causalities]
+
+
+def unknown_variable_error(name: str, info: ModelInfo, role: str = "variable") -> VariableError:
+    close = difflib.get_close_matches(name, list(info.variables), n=5, cutoff=0.5)
+    hint = f"did you mean {close}?" if close else f"run `fmu-bridge inspect {info.path}` to list them"
+    return VariableError(
+        f"{role} {name!r} is not a variable of {info.model_name} ({len(info.variables)} variables); "
+        f"{hint} [{info.path}]"
+    )
+
+
+def read_model_info(path: str | Path) -> ModelInfo:
+    """Read an FMU's model description.
+
+    Raises:
+        FmuLoadError: the file is missing, not a zip archive, or has no valid modelDescription.xml.
+    """
+    fmu_path = Path(path).expanduser().resolve()
+    md, problems = _read_description(fmu_path)
+    interfaces: list[Interface] = []
+    identifiers: dict[str, str] = {}
+    can_state: dict[str, bool] = {}
+    for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange)):
+        if iface is not None:
+            interfaces.append(kind)  # type: ignore[arg-type]
+            identifiers[kind] = iface.modelIdentifier
+            can_state[kind] = bool(iface.canGetAndSetFMUstate)
+    if not interfaces:
+        raise FmuLoadError(
+            f"{fmu_path.name} declares neither co-simulation nor model exchange; "
+            f"fmu-bridge runs only those two interfaces [{fmu_path}]"
+        )
+    return ModelInfo(
+        path=fmu_path,
+        fmi_version=md.fmiVersion,
+        model_name=md.modelName,
+        guid=md.guid,
+        interfaces=tuple(interfaces),
+        model_identifiers=identifiers,
+        default_experiment=_default_experiment(md),
+        platforms=tuple(fmpy.supported_platforms(str(fmu_path))) if fmu_path.is_file() else (),
+        variables={v.name: _variable(v) for v in md.modelVariables},
+        can_get_set_state=can_state,
+        number_of_states=int(md.numberOfContinuousStates or 0),
+        number_of_event_indicators=int(md.numberOfEventIndicators or 0),
+        generation_tool=md.generationTool,
+        description=md.description,
+        problems=problems,
+        raw=md,
+    )
+
+
+def _read_description(fmu_path: Path) -> tuple[ModelDescription, tuple[str, ...]]:
+    if not fmu_path.exists():
+        raise FmuLoadError(f"FMU file not found: expected an .fmu archive at {fmu_path}")
+    if fmu_path.is_file():
+        if not zipfile.is_zipfile(fmu_path):
+            raise FmuLoadError(
+                f"{fmu_path.name} is not an FMU: expected a zip archive (an .fmu file exported by a "
+                f"modelling tool), got a file that is not a zip [{fmu_path}]"
+            )
+        with zipfile.ZipFile(fmu_path) as archive:
+            if "modelDescription.xml" not in archive.namelist():
+                raise FmuLoadError(
+                    f"{fmu_path.name} is a zip archive but not an FMU: it has no modelDescription.xml at "
+                    f"its root; re-export the model as an FMU [{fmu_path}]"
+                )
+    try:
+        return read_model_description(str(fmu_path), validate=True), ()
+    except ValidationError as exc:
+        # Exporters in the wild bend the standard (e.g. Integer variables declared continuous).
+        # Load what can be loaded, and say what is wrong instead of refusing the model.
+        problems = tuple(str(p) for p in exc.problems)
+        _log.warning(
+            "%s: modelDescription.xml breaks the FMI standard in %d place(s), loading it anyway: %s",
+            fmu_path.name, len(problems), "; ".join(problems[:3]),
+        )
+    except Exception as exc:
+        raise FmuLoadError(
+            f"{fmu_path.name}: modelDescription.xml cannot be read: {exc}; "
+            f"check it with `fmpy validate {fmu_path}` [{fmu_path}]"
+        ) from exc
+    try:
+        return read_model_description(str(fmu_path), validate=False), problems
+    except Exception as exc:
+        raise FmuLoadError(
+            f"{fmu_path.name}: modelDescription.xml is invalid: {'; '.join(problems[:5])} [{fmu_path}]"
+        ) from exc
+
+
+def _default_experiment(md: ModelDescription) -> DefaultExperiment:
+    de = md.defaultExperiment
+    if de is None:
+        return DefaultExperiment()
+    return DefaultExperiment(
+        start_time_s=_float(de.startTime),
+        stop_time_s=_float(de.stopTime),
+        step_size_s=_float(de.stepSize),
+        tolerance=_float(de.tolerance),
+    )
+
+
+def _float(value: Any) -> float | None:
+    if value is None or value == "":
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _variable(v: ModelVariable) -> Variable:
+    declared = v.declaredType
+    var_type = _TYPE_ALIASES.get(v.type, v.type)
+    items: tuple[tuple[str, int], ...] = ()
+    if var_type == "Enumeration" and declared is not None:
+        items = tuple((item.name, int(item.value)) for item in declared.items)
+
+    def attr(name: str) -> float | None:
+        own = getattr(v, name, None)
+        if own is None and declared is not None:
+            own = getattr(declared, name, None)
+        return _float(own)
+
+    unit = v.unit or (declared.unit if declared is not None else None)
+    return Variable(
+        name=v.name,
+        value_reference=int(v.valueReference),
+        type=var_type,
+        causality=v.causality or "local",
+        variability=v.variability or ("continuous" if var_type in ("Float64", "Float32") else "discrete"),
+        initial=v.initial,
+        start=_start_value(v.start, var_type),
+        min=attr("min"),
+        max=attr("max"),
+        nominal=attr("nominal"),
+        unit=unit,
+        description=v.description,
+        declared_type=declared.name if declared is not None else None,
+        enum_items=items,
+        is_array=bool(v.dimensions),
+    )
+
+
+def _start_value(start: Any, var_type: str) -> Any:
+    if start is None:
+        return None
+    text = str(start).strip()
+    try:
+        if var_type in ("Float64", "Float32"):
+            return float(text)
+        if var_type == "Boolean":
+            return text.lower() in ("true", "1")
+        if var_type == "String":
+            return str(start)
+        return int(text)
+    except ValueError:
+        return text

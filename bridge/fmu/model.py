@@ -1,0 +1,463 @@
+"""``Model``: one FMU instance with typed variable access, integer-indexed stepping and resets.
+
+Time is an integer: after ``k`` FMU steps of size ``h`` the model is at ``t = t0 + k * h``
+(never accumulated). A sample of an agent is ``n`` FMU steps (``advance(n)``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import itertools
+import logging
+import math
+from collections import OrderedDict
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+from bridge.errors import ConfigError, FmuError, StepError, VariableError
+from bridge.fmu import archive
+from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
+from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
+from bridge.fmu.signals import SignalGroup
+from bridge.fmu.solver import MeStepper, event_iteration
+
+_log = logging.getLogger(__name__)
+
+ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
+RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
+_counter = itertools.count(1)
+_MAX_SNAPSHOTS = 8
+
+
+class Model:
+    """One instance of an FMU (FMI 1.0/2.0/3.0, co-simulation or model exchange).
+
+    Args:
+        path: the .fmu archive (or an extracted FMU directory).
+        step_size_s: FMU step size ``h`` in seconds; defaults to the FMU's default experiment.
+        start_time_s: ``t0``; defaults to the default experiment's start time, else 0.
+        stop_time_s: passed to the FMU at initialisation when given.
+        interface: ``"cs"``, ``"me"`` or ``"auto"`` (co-simulation where the FMU has it).
+        reset_policy: ``"restore"`` a state snapshot taken after initialisation, fmi ``"reset"``,
+            ``"reinstantiate"``, or ``"auto"``: restore where the FMU can get/set its state
+            (snapshots are taken for value sets seen more than once), else reset.
+        tolerance: relative tolerance for the FMU (and the ODE solver, for model exchange).
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        step_size_s: float | None = None,
+        start_time_s: float | None = None,
+        stop_time_s: float | None = None,
+        interface: Interface | Literal["auto"] = "auto",
+        reset_policy: ResetPolicy = "auto",
+        tolerance: float | None = None,
+        instance_name: str | None = None,
+    ) -> None:
+        self.info: ModelInfo = read_model_info(path)
+        self.interface: Interface = _choose_interface(self.info, interface)
+        self.step_size_s = _step_size(self.info, step_size_s)
+        de = self.info.default_experiment
+        self.start_time_s = float(start_time_s if start_time_s is not None else de.start_time_s or 0.0)
+        self.stop_time_s = stop_time_s
+        self.tolerance = tolerance if tolerance is not None else de.tolerance
+        if reset_policy not in RESET_POLICIES:
+            raise ConfigError(f"reset_policy {reset_policy!r} is unknown; expected one of {RESET_POLICIES}")
+        self.reset_policy: ResetPolicy = reset_policy
+        self.can_restore = self.info.can_get_set_state.get(self.interface, False) and self.info.fmi_major >= 2
+        self.step_index = 0
+        self.terminated = False
+        self._initialized = False
+        self._closed = False
+        self._failed_status = 0
+        self._snapshots: OrderedDict[tuple[Any, ...], ctypes.c_void_p | None] = OrderedDict()
+        self._me: MeStepper | None = None
+        self._discrete_dirty = False
+        name = instance_name or f"{self.info.model_name}#{next(_counter)}"
+        self._unzip = archive.acquire(self.info.path)
+        try:
+            self._backend: Backend = open_backend(self.info, self._unzip, self.interface, name)
+        except BaseException:
+            archive.release(self.info.path)
+            raise
+        self._do_step = self._backend.do_step
+
+    # -- context management -------------------------------------------------------------------
+    def __enter__(self) -> Model:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Free the instance, its snapshots and the library; safe to call twice."""
+        if self._closed:
+            return
+        self._closed = True
+        self._drop_snapshots()
+        self._me = None
+        try:
+            if self._initialized and self._failed_status < FATAL:
+                self._backend.fmu.terminate()
+        except Exception:
+            _log.debug("terminate failed while closing %s", self.info.model_name, exc_info=True)
+        try:
+            self._backend.free_instance()
+            self._backend.unload()
+        finally:
+            archive.release(self.info.path)
+
+    # -- variables ----------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        """Simulation time ``t0 + k * h`` of the current step index ``k``."""
+        return self.start_time_s + self.step_index * self.step_size_s
+
+    @property
+    def log(self) -> list[str]:
+        """The FMU's most recent log messages."""
+        return list(self._backend.log.messages)
+
+    def variable(self, name: str) -> Variable:
+        return self.info.variable(name)
+
+    def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
+        """A batched accessor for numeric variables (see :class:`SignalGroup`)."""
+        variables = [self._lookup(n, role) for n in names]
+        if not variables:
+            raise ConfigError(f"{role}: at least one variable is needed")
+        for var in variables:
+            if not var.is_numeric:
+                raise VariableError(
+                    f"{role} {var.name!r} is a {var.type} variable: signal groups are numeric "
+                    f"(Float, Int, Boolean, Enumeration); read it with Model.get()"
+                )
+            if writable and not var.settable_in_step:
+                raise VariableError(_not_settable_in_step(var, self.info))
+        return SignalGroup(self, variables)
+
+    def get(self, names: Iterable[str]) -> dict[str, Any]:
+        """Current values by name, typed (float, int, bool, str)."""
+        variables = [self._lookup(n) for n in names]
+        values: dict[str, Any] = {}
+        for var_type, group in _by_type(variables).items():
+            ctype = self._backend.ctype(var_type)
+            buf = (ctype * len(group))()
+            self._call_access(var_type, group, buf, setter=False)
+            for var, raw in zip(group, buf):
+                values[var.name] = _from_c(raw, var_type)
+        return {v.name: values[v.name] for v in variables}
+
+    def set(self, values: Mapping[str, Any]) -> None:
+        """Set inputs or tunable parameters between steps (one FMI call per type)."""
+        variables = [self._lookup(n) for n in values]
+        for var in variables:
+            if not var.settable_in_step:
+                raise VariableError(_not_settable_in_step(var, self.info))
+        self._write(variables, values)
+        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
+            self._discrete_dirty = True
+
+    def _lookup(self, name: str, role: str = "variable") -> Variable:
+        var = self.info.variables.get(name)
+        if var is None:
+            raise unknown_variable_error(name, self.info, role)
+        if var.is_array:
+            raise VariableError(f"{role} {name!r} is an array variable; fmu-bridge supports scalar variables")
+        return var
+
+    def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
+        for var_type, group in _by_type(variables).items():
+            ctype = self._backend.ctype(var_type)
+            buf = (ctype * len(group))(*(_to_c(var, values[var.name], self) for var in group))
+            self._call_access(var_type, group, buf, setter=True)
+
+    def _call_access(self, var_type: str, group: list[Variable], buf: Any, *, setter: bool) -> None:
+        fn = self._backend.accessor(var_type, setter=setter)
+        vrs = (ctypes.c_uint * len(group))(*(v.value_reference for v in group))
+        extra = (len(group),) if self._backend.major == 3 else ()
+        status = fn(self._backend.component, vrs, len(group), buf, *extra)
+        if status > WARNING:
+            what = "set" if setter else "get"
+            raise FmuError(
+                f"{self.info.model_name}: {what} of {[v.name for v in group]} returned "
+                f"{STATUS_NAMES[status]} at step {self.step_index} (t={self.time_s:g} s)",
+                log=self._backend.log.recent(),
+            )
+
+    def _inputs_written(self, group: SignalGroup) -> None:
+        if any(v.variability != "continuous" for v in group.variables):
+            self._discrete_dirty = True
+
+    # -- initialisation and reset -------------------------------------------------------------
+    def initialize(self, values: Mapping[str, Any] | None = None) -> None:
+        """Instantiate (first call) and initialise with parameters and start values ``values``."""
+        if self._closed:
+            raise FmuError(f"{self.info.model_name}: the model is closed; open a new Model")
+        checked = self._check_init_values(values or {})
+        if self._backend.component is None:
+            self._backend.instantiate()
+        self._initialize(checked)
+        self._remember(_freeze(checked))
+
+    def reset(self, values: Mapping[str, Any] | None = None) -> None:
+        """Return to ``t0`` with parameters/start values ``values``, by the configured policy."""
+        if not self._initialized:
+            self.initialize(values)
+            return
+        checked = self._check_init_values(values or {})
+        key = _freeze(checked)
+        snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
+        if snapshot is not None and self.reset_policy in ("auto", "restore"):
+            self._snapshots.move_to_end(key)
+            self._backend.set_state(snapshot)
+            self._restart()
+            return
+        policy = self.reset_policy
+        if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
+            self._reinstantiate(checked)
+        else:
+            try:
+                self._backend.reset()
+                self._initialize(checked)
+            except FmuError:
+                _log.warning("%s: fmi reset failed; re-instantiating", self.info.model_name, exc_info=True)
+                self._reinstantiate(checked)
+        self._remember(key)
+
+    def _reinstantiate(self, values: dict[Variable, Any]) -> None:
+        self._drop_snapshots()
+        self._backend.free_instance()
+        self._backend.instantiate()
+        self._initialize(values)
+
+    def _initialize(self, values: dict[Variable, Any]) -> None:
+        self._initialized = False
+        self._backend.log.clear()
+        early = [v for v in values if v.causality == "input" or v.initial in ("exact", "approx")]
+        late = [v for v in values if v not in early]
+        by_name = {v.name: value for v, value in values.items()}
+        self._write(early, by_name)
+        # Tolerance steers a co-simulation FMU's own solver; for model exchange it is ours (CVode).
+        tolerance = self.tolerance if self.interface == "cs" else None
+        self._backend.enter_initialization(self.start_time_s, self.stop_time_s, tolerance)
+        self._write(late, by_name)
+        self._backend.exit_initialization()
+        if self.interface == "me":
+            self._start_me()
+        self._initialized = True
+        self._failed_status = 0
+        self._restart()
+
+    def _start_me(self) -> None:
+        # FMI 2.0 and 3.0 both leave initialisation in event mode: iterate, then integrate.
+        fmu = self._backend.fmu
+        terminate, next_event = event_iteration(fmu, self._backend.major == 3)
+        if terminate:
+            raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
+        fmu.enterContinuousTimeMode()
+        if self._me is None or self._me._fmu is not fmu:
+            tolerance = self.tolerance or 1e-6
+            self._me = MeStepper(self._backend, self.start_time_s, tolerance, self.step_size_s, next_event)
+        else:
+            self._me.next_event_s = next_event
+
+    def _restart(self) -> None:
+        self.step_index = 0
+        self.terminated = False
+        self._discrete_dirty = False
+        if self._me is not None:
+            self._me.restart(self.start_time_s)
+
+    def _check_init_values(self, values: Mapping[str, Any]) -> dict[Variable, Any]:
+        checked: dict[Variable, Any] = {}
+        for name, value in values.items():
+            var = self._lookup(name, "parameter or start value")
+            if not var.settable_at_init:
+                raise VariableError(_not_settable_at_init(var, self.info))
+            _to_c(var, value, self)
+            checked[var] = value
+        return checked
+
+    def _remember(self, key: tuple[Any, ...]) -> None:
+        """Snapshot the state right after initialisation for value sets that recur."""
+        if not self.can_restore or self.reset_policy not in ("auto", "restore"):
+            return
+        if key in self._snapshots:
+            if self._snapshots[key] is not None:
+                return
+        elif self.reset_policy == "auto":
+            self._snapshots[key] = None  # first sighting: remember the key, snapshot on the next
+            self._evict()
+            return
+        self._snapshots[key] = self._backend.get_state()
+        self._snapshots.move_to_end(key)
+        self._evict()
+
+    def _evict(self) -> None:
+        while len(self._snapshots) > _MAX_SNAPSHOTS:
+            _, state = self._snapshots.popitem(last=False)
+            if state is not None:
+                self._backend.free_state(state)
+
+    def _drop_snapshots(self) -> None:
+        for state in self._snapshots.values():
+            if state is not None:
+                self._backend.free_state(state)
+        self._snapshots.clear()
+
+    # -- stepping -----------------------------------------------------------------------------
+    def advance(self, n: int = 1) -> bool:
+        """Advance ``n`` FMU steps from the current step index; True if the FMU asked to terminate.
+
+        Raises:
+            StepError: the FMU returned Error/Fatal/Discard, or stepping after termination.
+        """
+        if not self._initialized or self.terminated or self._failed_status:
+            self._refuse_step()
+        if self._me is not None:
+            return self._advance_me(n)
+        k, t0, h, do_step = self.step_index, self.start_time_s, self.step_size_s, self._do_step
+        for _ in range(n):
+            status = do_step(t0 + k * h, h)
+            if status > WARNING:
+                self.step_index = k
+                return self._step_failed(status)
+            k += 1
+        self.step_index = k
+        return False
+
+    def _advance_me(self, n: int) -> bool:
+        assert self._me is not None  # guarded by the caller
+        start = self.time_s
+        if self._discrete_dirty:
+            self._discrete_dirty = False
+            if self._me.handle_event(start, self.step_index):
+                self.terminated = True
+                return True
+        end = self.start_time_s + (self.step_index + n) * self.step_size_s
+        terminated = self._me.advance(start, end, self.step_index)
+        self.step_index += n
+        self.terminated = terminated
+        return terminated
+
+    def _step_failed(self, status: int) -> bool:
+        if status == DISCARD and self._backend.terminated_after_discard():
+            self.step_index += 1
+            self.terminated = True
+            return True
+        self._failed_status = status
+        raise StepError(
+            f"{self.info.model_name}: doStep returned {STATUS_NAMES[status]} at step {self.step_index} "
+            f"(t={self.time_s:g} s, h={self.step_size_s:g} s); reset() the model to continue, and see the "
+            f"FMU log for the cause [{self.info.path}]",
+            step=self.step_index, time_s=self.time_s, log=self._backend.log.recent(),
+        )
+
+    def _refuse_step(self) -> None:
+        if not self._initialized:
+            reason = "the model is not initialised: call initialize() or reset() first"
+        elif self.terminated:
+            reason = "the FMU requested termination: reset() before stepping again"
+        else:
+            reason = f"the previous step failed ({STATUS_NAMES[self._failed_status]}): reset() first"
+        raise StepError(
+            f"{self.info.model_name}: cannot step at step {self.step_index}: {reason}",
+            step=self.step_index, time_s=self.time_s, log=self._backend.log.recent(),
+        )
+
+
+def _choose_interface(info: ModelInfo, interface: str) -> Interface:
+    if interface == "auto":
+        return "cs" if "cs" in info.interfaces else "me"
+    if interface not in ("cs", "me"):
+        raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me' or 'auto'")
+    if interface not in info.interfaces:
+        raise ConfigError(
+            f"{info.path.name} has no {interface.upper()} interface; it provides "
+            f"{', '.join(i.upper() for i in info.interfaces)} [{info.path}]"
+        )
+    return interface  # type: ignore[return-value]
+
+
+def _step_size(info: ModelInfo, step_size_s: float | None) -> float:
+    h = step_size_s if step_size_s is not None else info.default_experiment.step_size_s
+    if h is None:
+        raise ConfigError(
+            f"{info.path.name} has no default step size: pass step_size_s (the FMU step size in seconds)"
+        )
+    if not (math.isfinite(h) and h > 0):
+        raise ConfigError(f"step size must be a positive finite number of seconds, got {h!r}")
+    return float(h)
+
+
+def _by_type(variables: Sequence[Variable]) -> dict[str, list[Variable]]:
+    groups: dict[str, list[Variable]] = {}
+    for var in variables:
+        groups.setdefault(var.type, []).append(var)
+    return groups
+
+
+def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:
+    return tuple(sorted((v.name, repr(x)) for v, x in values.items()))
+
+
+def _to_c(var: Variable, value: Any, model: Model) -> Any:
+    """Check ``value`` against ``var``'s type and convert it for the FMI call."""
+    where = f"{model.info.model_name}: {var.name!r} ({var.type})"
+    if var.type == "String":
+        if not isinstance(value, str):
+            raise VariableError(f"{where} expects a str, got {value!r}")
+        return value.encode()
+    if isinstance(value, str) and var.type == "Enumeration":
+        items = dict(var.enum_items)
+        if value not in items:
+            raise VariableError(f"{where}: {value!r} is not one of {list(items)}")
+        return items[value]
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise VariableError(f"{where} expects a number, got {value!r}") from None
+    if not math.isfinite(number):
+        raise VariableError(f"{where} got {value!r}: expected a finite number")
+    if var.type.startswith("Float"):
+        return number
+    if var.type == "Boolean":
+        if number not in (0.0, 1.0):
+            raise VariableError(f"{where} expects True/False (or 0/1), got {value!r}")
+        if model._backend.major == 1:
+            return b"\x01" if number else b"\x00"
+        return bool(number)
+    if number != int(number):
+        raise VariableError(f"{where} expects a whole number, got {value!r}")
+    return int(number)
+
+
+def _from_c(raw: Any, var_type: str) -> Any:
+    if var_type == "String":
+        return raw.decode(errors="replace") if raw is not None else ""
+    if var_type == "Boolean":
+        return raw not in (b"\x00", 0, False)
+    if var_type.startswith("Float"):
+        return float(raw)
+    return int(raw)
+
+
+def _not_settable_at_init(var: Variable, info: ModelInfo) -> str:
+    return (
+        f"{var.name!r} of {info.model_name} cannot be set: it is a {var.variability} "
+        f"{var.causality} (initial={var.initial}); only parameters, inputs and variables with "
+        f"initial exact/approx take values at initialisation"
+    )
+
+
+def _not_settable_in_step(var: Variable, info: ModelInfo) -> str:
+    if var.settable_at_init:
+        return (
+            f"{var.name!r} of {info.model_name} is a {var.variability} {var.causality}: it can only be "
+            f"set at initialisation; pass it to reset(values) instead"
+        )
+    return _not_settable_at_init(var, info)

@@ -1,0 +1,195 @@
+"""Batched, typed reads and writes of a fixed list of numeric variables.
+
+A :class:`SignalGroup` presents any mix of Float/Int/Boolean/Enumeration variables as one
+float64 vector, but talks to the FMU with one call per FMI type group into preallocated,
+correctly typed buffers: integers and booleans are never read through getReal.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.errors import FmuError, VariableError
+from bridge.fmu.backend import STATUS_NAMES, WARNING, numpy_dtype
+
+if TYPE_CHECKING:
+    from bridge.fmu.description import Variable
+    from bridge.fmu.model import Model
+
+FloatArray = npt.NDArray[np.float64]
+_FLOAT, _INT, _BOOL = 0, 1, 2
+
+
+class _Block:
+    """Variables of one FMI type: one get and one set call per sample."""
+
+    __slots__ = ("buf", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
+
+    def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
+        backend = model._backend
+        ctype = backend.ctype(variables[0].type)
+        self.variables = variables
+        self.index = np.asarray(index, dtype=np.intp)
+        self.n = len(variables)
+        self.vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in variables))
+        self.buf = np.zeros(self.n, dtype=numpy_dtype(ctype))
+        self.ptr = self.buf.ctypes.data_as(ctypes.POINTER(ctype))
+        self.get = backend.accessor(variables[0].type, setter=False)
+        self.set = backend.accessor(variables[0].type, setter=True) if _settable(variables) else None
+        # FMI 3.0 getters/setters take the number of values as a fifth argument.
+        self.nargs = (self.n,) if backend.major == 3 else ()
+        kind = variables[0].type
+        self.kind = _FLOAT if kind.startswith("Float") else _BOOL if kind == "Boolean" else _INT
+
+
+def _settable(variables: list[Variable]) -> bool:
+    return all(v.settable_in_step for v in variables)
+
+
+class SignalGroup:
+    """A fixed, ordered list of numeric variables read or written as one float64 vector.
+
+    ``read()`` returns a new array each call; ``read_into(out)`` fills a caller-owned array.
+    ``write(values)`` checks values (finite, integral for integer types, in range) before
+    any FMI call, so a bad action never reaches the FMU.
+    """
+
+    def __init__(self, model: Model, variables: Sequence[Variable]) -> None:
+        self._model = model
+        self.variables = tuple(variables)
+        self.names = tuple(v.name for v in variables)
+        groups: dict[str, tuple[list[Variable], list[int]]] = {}
+        for i, var in enumerate(variables):
+            key = model._backend.type_key(var.type)
+            members, index = groups.setdefault(key, ([], []))
+            members.append(var)
+            index.append(i)
+        self._blocks = [_Block(model, members, index) for members, index in groups.values()]
+        self._values = np.zeros(len(variables), dtype=np.float64)
+        first = self._blocks[0] if len(self._blocks) == 1 else None
+        # The common case (all Float64) reads straight into the float64 vector.
+        self._direct = first is not None and first.buf.dtype == np.float64
+        if self._direct and first is not None:
+            self._values = first.buf
+        # Model exchange must know when discrete inputs change (event iteration before the next step).
+        self._notify = model.interface == "me"
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    @property
+    def writable(self) -> bool:
+        return all(b.set is not None for b in self._blocks)
+
+    def read(self) -> FloatArray:
+        """Current values as a new float64 array (booleans as 0/1)."""
+        self._fetch()
+        return self._values.copy()
+
+    def read_into(self, out: FloatArray) -> None:
+        """Current values written into ``out`` (float64, same length) without allocating."""
+        self._fetch()
+        out[:] = self._values
+
+    def _fetch(self) -> None:
+        component = self._model._backend.component
+        for block in self._blocks:
+            status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
+            if status > WARNING:
+                self._fail("get", block, status)
+            if not self._direct:
+                self._values[block.index] = block.buf
+
+    def write(self, values: npt.ArrayLike) -> None:
+        """Set all variables of the group (inputs or tunable parameters) in one call per type."""
+        component = self._model._backend.component
+        if self._direct:
+            block = self._blocks[0]
+            try:
+                np.copyto(block.buf, values, casting="same_kind")
+            except (ValueError, TypeError) as exc:
+                raise self._shape_error(values) from exc
+            if not np.isfinite(block.buf).all():
+                raise self._value_error(block.buf, block)
+            if block.set is None:
+                raise self._not_settable()
+            status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
+            if status > WARNING:
+                self._fail("set", block, status)
+            if self._notify:
+                self._model._inputs_written(self)
+            return
+        vec = np.asarray(values, dtype=np.float64)
+        if vec.shape != (len(self.names),):
+            raise self._shape_error(values)
+        for block in self._blocks:
+            part = vec[block.index]
+            if not _valid(part, block):
+                raise self._value_error(part, block)
+            if block.set is None:
+                raise self._not_settable()
+            block.buf[:] = part
+            status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
+            if status > WARNING:
+                self._fail("set", block, status)
+        if self._notify:
+            self._model._inputs_written(self)
+
+    def _where(self) -> str:
+        return f"at step {self._model.step_index} (t={self._model.time_s:g} s)"
+
+    def _shape_error(self, values: Any) -> VariableError:
+        shape = np.shape(values)
+        return VariableError(
+            f"{self._model.info.model_name}: expected {len(self.names)} values for {list(self.names)}, "
+            f"got an array of shape {shape}"
+        )
+
+    def _value_error(self, part: npt.NDArray[Any], block: _Block) -> VariableError:
+        values = np.asarray(part, dtype=np.float64)
+        bad = [
+            f"{var.name}={float(value):g}"
+            for value, var in zip(values, block.variables)
+            if not _valid(np.array([value]), block)
+        ]
+        expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
+        hint = "a NaN or inf usually comes from a diverged policy or controller" if not np.isfinite(
+            values
+        ).all() else "round or map the value before writing it"
+        return VariableError(
+            f"{self._model.info.model_name}: invalid value {', '.join(bad)} {self._where()}: expected "
+            f"{expected}; {hint}"
+        )
+
+    def _not_settable(self) -> VariableError:
+        fixed = [v.name for b in self._blocks for v in b.variables if not v.settable_in_step]
+        return VariableError(
+            f"{self._model.info.model_name}: {fixed} cannot be set between steps: only inputs and tunable "
+            f"parameters can; pass parameters and start values to reset() instead"
+        )
+
+    def _fail(self, what: str, block: _Block, status: int) -> None:
+        names = [v.name for v in block.variables]
+        raise FmuError(
+            f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} {self._where()}",
+            log=self._model._backend.log.recent(),
+        )
+
+
+def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
+    if not np.isfinite(part).all():
+        return False
+    if block.kind == _FLOAT:
+        return True
+    if block.kind == _BOOL:
+        return bool(np.isin(part, (0.0, 1.0)).all())
+    if not (part == np.round(part)).all():
+        return False
+    info = np.iinfo(block.buf.dtype)
+    return bool(((part >= info.min) & (part <= info.max)).all())
+
