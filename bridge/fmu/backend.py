@@ -67,12 +67,13 @@ class Backend:
         raise NotImplementedError
 
     def _fmpy_kwargs(self, unzip_dir: pathlib.Path) -> dict[str, Any]:
-        library = unzip_dir / "binaries" / _platform() / (self.info.model_identifiers[self.interface] + _suffix())
+        platform = _platform(self.info.fmi_major)
+        library = unzip_dir / "binaries" / platform / (self.info.model_identifiers[self.interface] + _suffix())
         if not library.is_file():
             available = sorted(p.name for p in (unzip_dir / "binaries").glob("*")) or ["none"]
             raise FmuLoadError(
-                f"{self.info.path.name} has no binary for this platform ({_platform()}): it ships "
-                f"{', '.join(available)}; re-export it for {_platform()} or build it from its sources "
+                f"{self.info.path.name} has no binary for this platform ({platform}): it ships "
+                f"{', '.join(available)}; re-export it for {platform} or build it from its sources "
                 f"(`fmpy compile`) [{self.info.path}]"
             )
         return {
@@ -142,10 +143,11 @@ class Backend:
             ) from exc
 
 
-def _platform() -> str:
+def _platform(fmi_major: int) -> str:
     import fmpy
 
-    return str(fmpy.platform)
+    # FMI 3.0 names binary folders by platform tuple (x86_64-linux), 1.0/2.0 by linux64.
+    return str(fmpy.platform_tuple if fmi_major == 3 else fmpy.platform)
 
 
 def _suffix() -> str:

@@ -63,6 +63,7 @@ class Model:
         de = self.info.default_experiment
         self.start_time_s = float(start_time_s if start_time_s is not None else de.start_time_s or 0.0)
         self.stop_time_s = stop_time_s
+        self._requested_tolerance = tolerance
         self.tolerance = tolerance if tolerance is not None else de.tolerance
         if reset_policy not in RESET_POLICIES:
             raise ConfigError(f"reset_policy {reset_policy!r} is unknown; expected one of {RESET_POLICIES}")
@@ -76,6 +77,7 @@ class Model:
         self._snapshots: OrderedDict[tuple[Any, ...], ctypes.c_void_p | None] = OrderedDict()
         self._me: MeStepper | None = None
         self._discrete_dirty = False
+        self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
         try:
@@ -158,8 +160,9 @@ class Model:
             if not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
         self._write(variables, values)
-        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
-            self._discrete_dirty = True
+        if self.interface == "me":
+            self._inputs_dirty = True
+            self._discrete_dirty = self._discrete_dirty or any(v.variability != "continuous" for v in variables)
 
     def _lookup(self, name: str, role: str = "variable") -> Variable:
         var = self.info.variables.get(name)
@@ -189,6 +192,7 @@ class Model:
             )
 
     def _inputs_written(self, group: SignalGroup) -> None:
+        self._inputs_dirty = True
         if any(v.variability != "continuous" for v in group.variables):
             self._discrete_dirty = True
 
@@ -260,7 +264,9 @@ class Model:
             raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
         fmu.enterContinuousTimeMode()
         if self._me is None or self._me._fmu is not fmu:
-            tolerance = self.tolerance or 1e-6
+            # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
+            # input change needs a tighter one, so 1e-6 unless the caller asks for another.
+            tolerance = self._requested_tolerance or min(self.tolerance or 1e-6, 1e-6)
             self._me = MeStepper(self._backend, self.start_time_s, tolerance, self.step_size_s, next_event)
         else:
             self._me.next_event_s = next_event
@@ -339,7 +345,9 @@ class Model:
                 self.terminated = True
                 return True
         end = self.start_time_s + (self.step_index + n) * self.step_size_s
-        terminated = self._me.advance(start, end, self.step_index)
+        # Inputs are held piecewise constant: restart the integrator only where they may have jumped.
+        restart, self._inputs_dirty = self._inputs_dirty, False
+        terminated = self._me.advance(start, end, self.step_index, restart=restart)
         self.step_index += n
         self.terminated = terminated
         return terminated

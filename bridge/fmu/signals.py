@@ -28,7 +28,7 @@ _FLOAT, _INT, _BOOL = 0, 1, 2
 class _Block:
     """Variables of one FMI type: one get and one set call per sample."""
 
-    __slots__ = ("buf", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
+    __slots__ = ("buf", "enums", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
 
     def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
         backend = model._backend
@@ -45,6 +45,12 @@ class _Block:
         self.nargs = (self.n,) if backend.major == 3 else ()
         kind = variables[0].type
         self.kind = _FLOAT if kind.startswith("Float") else _BOOL if kind == "Boolean" else _INT
+        # Enumerations accept only their declared item values.
+        self.enums = [
+            (i, np.array([value for _, value in v.enum_items], dtype=np.float64))
+            for i, v in enumerate(variables)
+            if v.enum_items
+        ]
 
 
 def _settable(variables: list[Variable]) -> bool:
@@ -153,9 +159,9 @@ class SignalGroup:
     def _value_error(self, part: npt.NDArray[Any], block: _Block) -> VariableError:
         values = np.asarray(part, dtype=np.float64)
         bad = [
-            f"{var.name}={float(value):g}"
-            for value, var in zip(values, block.variables)
-            if not _valid(np.array([value]), block)
+            f"{var.name}={float(value):g}" + (f" (items: {dict(var.enum_items)})" if var.enum_items else "")
+            for i, (value, var) in enumerate(zip(values, block.variables))
+            if not _valid(np.array([value]), block) or _bad_enum(value, i, block)
         ]
         expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
         hint = "a NaN or inf usually comes from a diverged policy or controller" if not np.isfinite(
@@ -181,6 +187,10 @@ class SignalGroup:
         )
 
 
+def _bad_enum(value: float, position: int, block: _Block) -> bool:
+    return any(i == position and value not in allowed for i, allowed in block.enums)
+
+
 def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
     if not np.isfinite(part).all():
         return False
@@ -191,5 +201,9 @@ def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
     if not (part == np.round(part)).all():
         return False
     info = np.iinfo(block.buf.dtype)
-    return bool(((part >= info.min) & (part <= info.max)).all())
+    if not ((part >= info.min) & (part <= info.max)).all():
+        return False
+    if block.enums and len(part) == block.n:
+        return all(part[i] in allowed for i, allowed in block.enums)
+    return True
 

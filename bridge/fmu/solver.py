@@ -93,10 +93,11 @@ class MeStepper:
         self._solver.reset(time_s)
         return False
 
-    def advance(self, start_s: float, end_s: float, step: int) -> bool:
+    def advance(self, start_s: float, end_s: float, step: int, *, restart: bool) -> bool:
         """Integrate from ``start_s`` to ``end_s``; returns True if the FMU requested termination."""
         time_s = start_s
-        self._solver.reset(time_s)
+        if restart:
+            self._solver.reset(time_s)
         while not _close(time_s, end_s) and time_s < end_s:
             target = end_s
             if self.next_event_s is not None and time_s < self.next_event_s < end_s:

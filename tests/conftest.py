@@ -1,0 +1,108 @@
+"""Shared fixtures: real FMUs built once per session (ours with gcc, others by their exporters)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tarfile
+from pathlib import Path
+
+import pytest
+
+
+DATA = Path(__file__).parent / "data"
+
+
+def example_fmu(name: str, fmi_version: str, interface: str) -> Path:
+    from bridge.models import example_fmu as build
+
+    return build(name, fmi_version, interface)
+
+
+def _cache_dir() -> Path:
+    root = Path(os.environ.get("FMU_BRIDGE_CACHE", Path.home() / ".cache" / "fmu-bridge"))
+    path = root / "thirdparty"
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+@pytest.fixture(scope="session")
+def cartpole_fmu() -> Path:
+    return example_fmu("cartpole", "2.0", "cs")
+
+
+@pytest.fixture(scope="session")
+def cartpole_fmu3() -> Path:
+    return example_fmu("cartpole", "3.0", "cs")
+
+
+@pytest.fixture(scope="session")
+def dcmotor_fmu() -> Path:
+    return example_fmu("dcmotor", "2.0", "cs")
+
+
+@pytest.fixture(scope="session")
+def typed_fmu2() -> Path:
+    return example_fmu("typed", "2.0", "cs")
+
+
+@pytest.fixture(scope="session")
+def typed_fmu3() -> Path:
+    return example_fmu("typed", "3.0", "cs")
+
+
+def _pythonfmu_build(tool: str, source: Path, out: Path) -> Path:
+    out.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+    if result.returncode != 0:
+        pytest.fail(f"{tool} could not export {source.name}:\n{result.stdout}\n{result.stderr}")
+    return out / f"{source.stem}.fmu"
+
+
+@pytest.fixture(scope="session")
+def pythonfmu_heater2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An FMI 2.0 co-simulation FMU exported by pythonfmu (a tool we did not write)."""
+    pytest.importorskip("pythonfmu")
+    return _pythonfmu_build("pythonfmu", DATA / "slaves" / "Heater2.py", tmp_path_factory.mktemp("pyfmu2"))
+
+
+@pytest.fixture(scope="session")
+def pythonfmu_heater3(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An FMI 3.0 co-simulation FMU exported by pythonfmu3 (a tool we did not write)."""
+    pytest.importorskip("pythonfmu3")
+    return _pythonfmu_build("pythonfmu3", DATA / "slaves" / "Heater3.py", tmp_path_factory.mktemp("pyfmu3"))
+
+
+@pytest.fixture(scope="session")
+def eta_ctrl_fmus() -> dict[str, Path]:
+    """Dymola-exported FMI 2.0 FMUs shipped in eta-ctrl's source distribution (fetched once, cached)."""
+    cache = _cache_dir() / "eta-ctrl"
+    wanted = {
+        "damped_oscillator": "examples/damped_oscillator/damped_oscillator.fmu",
+        "kea_simplified": "examples/kea_simplified/kea_simplified.fmu",
+    }
+    found = {name: cache / Path(rel).name for name, rel in wanted.items()}
+    if all(p.is_file() for p in found.values()):
+        return found
+    cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--no-binary", ":all:",
+           "eta-ctrl==0.4.0", "-d", str(cache)]
+    try:
+        subprocess.run(cmd, capture_output=True, timeout=180, check=True)
+    except (subprocess.SubprocessError, OSError) as exc:
+        pytest.skip(f"eta-ctrl's source distribution could not be downloaded (offline?): {exc}")
+    archives = sorted(cache.glob("eta_ctrl-*.tar.gz"))
+    if not archives:
+        pytest.skip("eta-ctrl's source distribution is not in the package index")
+    with tarfile.open(archives[-1]) as tar:
+        for member in tar.getmembers():
+            for name, rel in wanted.items():
+                if member.name.endswith(rel):
+                    data = tar.extractfile(member)
+                    assert data is not None
+                    found[name].write_bytes(data.read())
+    missing = [n for n, p in found.items() if not p.is_file()]
+    if missing:
+        pytest.skip(f"eta-ctrl's source distribution no longer ships {missing}")
+    return found
