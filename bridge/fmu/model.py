@@ -15,6 +15,8 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+
 from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import archive
 from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
@@ -99,10 +101,11 @@ class Model:
         if self._closed:
             return
         self._closed = True
+        was_initialized, self._initialized = self._initialized, False
         self._drop_snapshots()
         self._me = None
         try:
-            if self._initialized and self._failed_status < FATAL:
+            if was_initialized and self._failed_status < FATAL:
                 self._backend.fmu.terminate()
         except Exception:
             _log.debug("terminate failed while closing %s", self.info.model_name, exc_info=True)
@@ -366,7 +369,9 @@ class Model:
         )
 
     def _refuse_step(self) -> None:
-        if not self._initialized:
+        if self._closed:
+            reason = "the model is closed"
+        elif not self._initialized:
             reason = "the model is not initialised: call initialize() or reset() first"
         elif self.terminated:
             reason = "the FMU requested termination: reset() before stepping again"
@@ -425,6 +430,9 @@ def _to_c(var: Variable, value: Any, model: Model) -> Any:
         if value not in items:
             raise VariableError(f"{where}: {value!r} is not one of {list(items)}")
         return items[value]
+    if var.type.startswith(("Int", "UInt")) or var.type == "Enumeration":
+        if isinstance(value, int | np.integer) and not isinstance(value, bool):
+            return int(value)  # exact: large 64-bit values must not pass through a float
     try:
         number = float(value)
     except (TypeError, ValueError):

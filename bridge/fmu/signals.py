@@ -104,6 +104,8 @@ class SignalGroup:
 
     def _fetch(self) -> None:
         component = self._model._backend.component
+        if component is None:
+            raise self._no_instance()
         for block in self._blocks:
             status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
             if status > WARNING:
@@ -114,6 +116,8 @@ class SignalGroup:
     def write(self, values: npt.ArrayLike) -> None:
         """Set all variables of the group (inputs or tunable parameters) in one call per type."""
         component = self._model._backend.component
+        if component is None:
+            raise self._no_instance()
         if self._direct:
             block = self._blocks[0]
             try:
@@ -145,6 +149,11 @@ class SignalGroup:
                 self._fail("set", block, status)
         if self._notify:
             self._model._inputs_written(self)
+
+    def _no_instance(self) -> FmuError:
+        return FmuError(
+            f"{self._model.info.model_name}: no FMU instance: the model is closed or was never initialised"
+        )
 
     def _where(self) -> str:
         return f"at step {self._model.step_index} (t={self._model.time_s:g} s)"
