@@ -115,6 +115,10 @@ class Backend:
         """One communication step; returns the FMI status (termination is reported as DISCARD)."""
         raise NotImplementedError
 
+    def stepper(self) -> Callable[[float, float], int]:
+        """``do_step`` with the FMI function bound once (the per-sample hot path)."""
+        return self.do_step
+
     def terminated_after_discard(self) -> bool:
         return False
 
@@ -264,6 +268,10 @@ class Fmi2Backend(Backend):
 
     def do_step(self, t: float, h: float) -> int:
         return int(self.functions["fmi2DoStep"](self.component, t, h, fmi2.fmi2True))
+
+    def stepper(self) -> Callable[[float, float], int]:
+        fn, backend, true = self.functions["fmi2DoStep"], self, fmi2.fmi2True
+        return lambda t, h: fn(backend.component, t, h, true)  # type: ignore[no-any-return]
 
     def terminated_after_discard(self) -> bool:
         flag = ctypes.c_int(0)

@@ -87,7 +87,7 @@ class Model:
         except BaseException:
             archive.release(self.info.path)
             raise
-        self._do_step = self._backend.do_step
+        self._do_step = self._backend.stepper() if self.interface == "cs" else self._backend.do_step
 
     # -- context management -------------------------------------------------------------------
     def __enter__(self) -> Model:

@@ -82,6 +82,7 @@ class SignalGroup:
         self._direct = first is not None and first.buf.dtype == np.float64
         if self._direct and first is not None:
             self._values = first.buf
+            self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)
         # Model exchange must know when discrete inputs change (event iteration before the next step).
         self._notify = model.interface == "me"
 
@@ -119,20 +120,7 @@ class SignalGroup:
         if component is None:
             raise self._no_instance()
         if self._direct:
-            block = self._blocks[0]
-            try:
-                np.copyto(block.buf, values, casting="same_kind")
-            except (ValueError, TypeError) as exc:
-                raise self._shape_error(values) from exc
-            if not np.isfinite(block.buf).all():
-                raise self._value_error(block.buf, block)
-            if block.set is None:
-                raise self._not_settable()
-            status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
-            if status > WARNING:
-                self._fail("set", block, status)
-            if self._notify:
-                self._model._inputs_written(self)
+            self._write_direct(component, values)
             return
         vec = np.asarray(values, dtype=np.float64)
         if vec.shape != (len(self.names),):
@@ -147,6 +135,30 @@ class SignalGroup:
             status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
             if status > WARNING:
                 self._fail("set", block, status)
+        if self._notify:
+            self._model._inputs_written(self)
+
+    def _write_direct(self, component: Any, values: Any) -> None:
+        """All-Float64 groups (the common case): plain-Python checks beat numpy for a few values."""
+        block = self._blocks[0]
+        if block.set is None:
+            raise self._not_settable()
+        try:
+            for v in values:
+                if v - v != 0.0:  # NaN or infinity
+                    raise self._value_error(np.asarray(values, dtype=np.float64).reshape(-1), block)
+            self._cbuf[:] = values
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, VariableError):
+                raise
+            flat = np.asarray(values, dtype=np.float64).reshape(-1)
+            if flat.shape != (block.n,):
+                raise self._shape_error(values) from exc
+            self._write_direct(component, flat.tolist())
+            return
+        status = block.set(component, block.vrs, block.n, self._cbuf, *block.nargs)
+        if status > WARNING:
+            self._fail("set", block, status)
         if self._notify:
             self._model._inputs_written(self)
 

@@ -1,0 +1,239 @@
+"""``Task``: everything an experiment adds on top of a model, independent of where the model runs.
+
+Action mapping, observation processing (selection, scaling, history, noise), reward,
+termination and per-episode scenarios run identically in-process (``FmuEnv``), against a
+remote node (``RemoteFmuEnv``) and inside a deployed agent node. The model side only sees
+``input_names`` written and ``output_names`` read once per sample.
+
+Time: sample ``j`` spans FMU steps ``j*n .. (j+1)*n``; the action of sample ``j`` (and the
+scenario's input profiles at ``t_j``) are held over it; the observation and reward of that
+step use outputs and references at ``t_{j+1}``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from bridge.config import Experiment
+from bridge.config_check import Timing, action_bounds
+from bridge.errors import BridgeError, ConfigError
+from bridge.fmu import Variable
+from bridge.rewards import build_reward
+from bridge.scenario import EpisodeSpec, ScenarioSampler, draw, scenario_inputs
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def load_callable(path: str, key: str) -> Callable[..., Any]:
+    """Import ``module:function`` named at config ``key``."""
+    module_name, _, attr = path.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError(f"{key}: cannot import module {module_name!r} ({exc}); is it on PYTHONPATH?") from exc
+    fn = getattr(module, attr, None)
+    if not callable(fn):
+        raise ConfigError(f"{key}: {module_name} has no callable {attr!r}")
+    return fn  # type: ignore[no-any-return]
+
+
+class Task:
+    """The task side of an experiment (one instance per env; holds per-episode state)."""
+
+    def __init__(self, experiment: Experiment, variables: Mapping[str, Variable], timing: Timing) -> None:
+        self.experiment = exp = experiment
+        self.timing = timing
+        self.episode_duration_s = exp.model.episode_duration
+        self._variables = variables
+        self.action_inputs = tuple(exp.actions.inputs)
+        self.input_names = self.action_inputs + tuple(scenario_inputs(exp))
+        self.reference_names, self.output_names = self._signal_sets(exp, variables)
+        self.signal_names = self.output_names + self.input_names + self.reference_names
+        self._index = {name: i for i, name in enumerate(self.signal_names)}
+        self._n_out, self._n_in = len(self.output_names), len(self.input_names)
+        self._signals = np.zeros(len(self.signal_names))
+        self.sampler = ScenarioSampler(exp, self.sample_times)
+        self._build_actions()
+        self._build_observations()
+        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs)
+        self._build_termination()
+        self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
+        self.episode: EpisodeSpec | None = None
+        self._refs = np.zeros((1, len(self.reference_names)))
+        self._profile_inputs = np.zeros((1, len(self.input_names) - len(self.action_inputs)))
+
+    # -- layout ------------------------------------------------------------------------------------
+    @staticmethod
+    def _signal_sets(exp: Experiment, variables: Mapping[str, Variable]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        from bridge.rewards import reward_signal_names
+        from bridge.scenario import known_references
+
+        refs_known = known_references(exp)
+        obs = exp.observations
+        wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
+        wanted += reward_signal_names(exp.reward, set(variables) | refs_known)
+        wanted += list(exp.termination.bounds)
+        inputs = set(exp.actions.inputs) | set(scenario_inputs(exp))
+        outputs: list[str] = []
+        references: list[str] = []
+        for name in wanted:
+            if name in refs_known and name not in variables:
+                if name not in references:
+                    references.append(name)
+            elif name not in inputs and name not in outputs:
+                outputs.append(name)
+        return tuple(references), tuple(outputs)
+
+    def sample_times(self, duration_s: float | None = None) -> FloatArray:
+        """Times t_j of the samples of an episode (j = 0..N)."""
+        n = int(round((duration_s or self.episode_duration_s) / self.timing.sampling_time_s + 1e-9))
+        return self.timing.start_time_s + np.arange(n + 1) * self.timing.sampling_time_s
+
+    # -- actions -----------------------------------------------------------------------------------
+    def _build_actions(self) -> None:
+        actions = self.experiment.actions
+        n = len(self.action_inputs)
+        self._kind = actions.type
+        if actions.type == "continuous":
+            bounds = [action_bounds(self.experiment, self._variables[name]) for name in self.action_inputs]
+            low = np.array([b[0] for b in bounds], dtype=np.float64)
+            high = np.array([b[1] for b in bounds], dtype=np.float64)
+            self._a_center, self._a_half = (high + low) / 2, (high - low) / 2
+            self.action_space: gym.Space[Any] = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        elif actions.type == "discrete":
+            table = actions.table or [[v] for v in actions.levels[self.action_inputs[0]]]
+            self._table = np.array(table, dtype=np.float64)
+            self.action_space = gym.spaces.Discrete(len(table))
+        else:
+            self._levels = [np.array(actions.levels[name], dtype=np.float64) for name in self.action_inputs]
+            self.action_space = gym.spaces.MultiDiscrete([len(levels) for levels in self._levels])
+        noise = self.experiment.noise.actions
+        self._action_noise = [(self.action_inputs.index(n), d) for n, d in noise.items()]
+        self._inputs = np.zeros(len(self.input_names))
+        self._previous_inputs = np.zeros(len(self.input_names))
+
+    def action_to_inputs(self, action: Any, sample: int, rng: np.random.Generator) -> FloatArray:
+        """FMU input values (physical units) for sample ``sample``: action, actuator noise, profiles."""
+        u = self._inputs
+        self._previous_inputs[:] = u
+        n = len(self.action_inputs)
+        if self._kind == "continuous":
+            a = np.asarray(action, dtype=np.float64).reshape(-1)
+            if a.shape[0] != n or not np.isfinite(a).all():
+                raise self._bad_action(action, sample)
+            u[:n] = self._a_center + self._a_half * np.clip(a, -1.0, 1.0)
+        elif self._kind == "discrete":
+            index = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
+            if not 0 <= index < len(self._table) or index != np.asarray(action).reshape(-1)[0]:
+                raise self._bad_action(action, sample)
+            u[:n] = self._table[index]
+        else:
+            indices = np.asarray(action).reshape(-1)
+            if indices.shape[0] != n or not all(0 <= int(i) < len(lv) for i, lv in zip(indices, self._levels)):
+                raise self._bad_action(action, sample)
+            u[:n] = [lv[int(i)] for i, lv in zip(indices, self._levels)]
+        for i, dist in self._action_noise:
+            u[i] += draw(dist, rng)
+        if len(u) > n:
+            u[n:] = self._profile_inputs[min(sample, len(self._profile_inputs) - 1)]
+        return u
+
+    def _bad_action(self, action: Any, sample: int) -> BridgeError:
+        return BridgeError(
+            f"invalid action {action!r} at sample {sample}: expected an element of {self.action_space} "
+            f"(for {list(self.action_inputs)}); a NaN usually means the policy diverged"
+        )
+
+    # -- observations ------------------------------------------------------------------------------
+    def _build_observations(self) -> None:
+        from bridge.observe import ObservationBuilder
+
+        self.observer = ObservationBuilder(self, self.experiment.observations, self._variables)
+        self.observation_space = self.observer.space
+
+    # -- termination -------------------------------------------------------------------------------
+    def _build_termination(self) -> None:
+        bounds = self.experiment.termination.bounds
+        self._term_names = tuple(bounds)
+        self._term_idx = np.array([self._index[n] for n in bounds], dtype=np.intp)
+        self._term_lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds.values()])
+        self._term_hi = np.array([np.inf if b[1] is None else b[1] for b in bounds.values()])
+
+    def termination_reason(self, signals: FloatArray) -> str | None:
+        if not len(self._term_idx):
+            return None
+        values = signals[self._term_idx]
+        outside = (values < self._term_lo) | (values > self._term_hi)
+        if not outside.any():
+            return None
+        return "bounds:" + self._term_names[int(np.argmax(outside))]
+
+    # -- episode life cycle --------------------------------------------------------------------------
+    def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
+        """Choose and draw the next episode (scenario, parameters, profiles) from ``rng``."""
+        spec = self.sampler.episode(rng, scenario)
+        if self._episode_hook is not None:
+            spec = self._episode_hook(spec, rng) or spec
+        self.episode = spec
+        n = spec.n_samples
+        self._refs = np.column_stack([spec.references[r] for r in self.reference_names]) if self.reference_names \
+            else np.zeros((n + 1, 0))
+        profile_names = self.input_names[len(self.action_inputs):]
+        self._profile_inputs = np.column_stack(
+            [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
+        ) if profile_names else np.zeros((n + 1, 0))
+        self._inputs[len(self.action_inputs):] = self._profile_inputs[0] if profile_names else []
+        self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        self._previous_inputs[:] = self._inputs
+        return spec
+
+    def _start(self, name: str) -> float:
+        var = self._variables[name]
+        if self.episode is not None and name in self.episode.values:
+            return float(self.episode.values[name])
+        return float(var.start) if isinstance(var.start, int | float) else 0.0
+
+    @property
+    def n_samples(self) -> int:
+        return self.episode.n_samples if self.episode is not None else 0
+
+    def initial_inputs(self) -> FloatArray:
+        """Input values at t_0 before any action (start values, profiles at t_0)."""
+        return self._inputs.copy()
+
+    def fill_signals(self, outputs: FloatArray, sample: int) -> FloatArray:
+        s = self._signals
+        s[: self._n_out] = outputs
+        s[self._n_out : self._n_out + self._n_in] = self._inputs
+        s[self._n_out + self._n_in :] = self._refs[min(sample, len(self._refs) - 1)]
+        return s
+
+    def first_observation(self, outputs: FloatArray, rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        signals = self.fill_signals(outputs, 0)
+        self.reward.reset()
+        return self.observer.reset(signals, self._inputs, rng)
+
+    def step_result(
+        self, outputs: FloatArray, sample: int, fmu_terminated: bool, rng: np.random.Generator
+    ) -> tuple[npt.NDArray[np.float32], float, bool, bool, str | None]:
+        """(observation, reward, terminated, truncated, reason) after the step into sample ``sample``."""
+        signals = self.fill_signals(outputs, sample)
+        reason = self.termination_reason(signals)
+        if fmu_terminated and reason is None:
+            reason = "fmu" if self.experiment.termination.on_fmu_terminate else None
+        terminated = reason is not None
+        truncated = not terminated and (sample >= self.n_samples or fmu_terminated)
+        if fmu_terminated and not terminated:
+            reason = "fmu-truncated"
+        reward = self.reward(signals, self._inputs, self._previous_inputs, terminated)
+        obs = self.observer.observe(signals, self._inputs, rng)
+        return obs, reward, terminated, truncated, reason
+
+    def signal_dict(self) -> dict[str, float]:
+        return dict(zip(self.signal_names, self._signals.tolist()))
