@@ -91,7 +91,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
         self.model.reset(spec.values)
         self._inputs.write(self.task.initial_inputs())
         outputs = self._outputs.read()
-        obs = self.task.first_observation(outputs, self.np_random)
+        obs = self.task.first_observation(outputs.tolist(), self.np_random)
         self._sample, self._done = 0, False
         self._record(outputs, reset=True)
         info = {"time_s": self.model.time_s, "step": 0, "outputs": outputs,
@@ -110,7 +110,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
         outputs = self._outputs.read()
         self._sample += 1
         obs, reward, terminated, truncated, reason = task.step_result(
-            outputs, self._sample, fmu_terminated, self.np_random
+            outputs.tolist(), self._sample, fmu_terminated, self.np_random
         )
         info: dict[str, Any] = {"time_s": self.model.time_s, "step": self._sample, "outputs": outputs}
         if terminated or truncated:

@@ -30,7 +30,7 @@ import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Final
 
@@ -55,10 +55,13 @@ _FLOAT_TYPES: Final = frozenset({"Float32", "Float64"})
 _UNSIGNED_TYPES: Final = frozenset({"UInt8", "UInt16", "UInt32", "UInt64"})
 _INT_TYPES: Final = frozenset({"Int8", "Int16", "Int32", "Int64"}) | _UNSIGNED_TYPES
 _ALL_TYPES: Final = _FLOAT_TYPES | _INT_TYPES | {"Boolean", "String", "Enumeration"}
-_FMI2_TYPES: Final = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean", "String": "String",
-                      "Enumeration": "Enumeration"}
-_C_TYPES: Final = {"Float32": "float", "Float64": "double", "Boolean": "bool", "String": "char*",
-                   "Enumeration": "int64_t"} | {t: f"{t.lower()}_t" for t in _INT_TYPES}
+#: FMI 1.0/2.0 element names of the types that exist there (model.json uses the FMI 3.0 names).
+_FMI2_TYPES: Final = dict(
+    Float64="Real", Int32="Integer", Boolean="Boolean", String="String", Enumeration="Enumeration"
+)
+_C_TYPES: Final = dict(
+    Float32="float", Float64="double", Boolean="bool", String="char*", Enumeration="int64_t"
+) | {t: f"{t.lower()}_t" for t in _INT_TYPES}
 _CAUSALITIES: Final = ("parameter", "calculatedParameter", "input", "output", "local", "independent")
 _VARIABILITIES: Final = ("constant", "fixed", "tunable", "discrete", "continuous")
 _LOG_CATEGORIES: Final = {
@@ -66,11 +69,10 @@ _LOG_CATEGORIES: Final = {
     "logStatusWarning": "Values outside their declared min/max (used unchanged)",
     "logStatusError": "Rejected calls and arguments (always reported)",
 }
-_VARIABLE_KEYS: Final = frozenset({"name", "type", "causality", "variability", "initial", "start", "unit", "min",
-                                   "max", "nominal", "description", "derivative", "declared_type", "fmi_versions",
-                                   "interfaces"})
-_SPEC_KEYS: Final = frozenset({"description", "variants", "default_experiment", "max_communication_step",
-                               "event_indicators", "type_definitions", "variables"})
+_SPEC_KEYS: Final = frozenset(
+    {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
+    | {"type_definitions", "variables"}
+)
 
 Scalar = float | int | bool | str
 
@@ -126,6 +128,9 @@ class _Variable:
         return fmi_version in self.fmi_versions and in_interface
 
 
+_VARIABLE_KEYS: Final = frozenset(f.name for f in fields(_Variable)) - {"vr"}
+
+
 @dataclass(frozen=True)
 class _EnumType:
     name: str
@@ -170,7 +175,9 @@ def list_variants() -> list[ModelVariant]:
     variants = []
     for name in model_names():
         spec = _load_spec(name)
-        variants += [ModelVariant(name, version, interface, spec.description) for version, interface in spec.variants]
+        variants += [
+            ModelVariant(name, version, interface, spec.description) for version, interface in spec.variants
+        ]
     return variants
 
 
@@ -221,7 +228,9 @@ def build_all(*, rebuild: bool = False) -> list[Path]:
     """
     variants = list_variants()
     with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
-        futures = [pool.submit(example_fmu, v.name, v.fmi_version, v.interface, rebuild=rebuild) for v in variants]
+        futures = [
+            pool.submit(example_fmu, v.name, v.fmi_version, v.interface, rebuild=rebuild) for v in variants
+        ]
         return [future.result() for future in futures]
 
 
@@ -236,8 +245,8 @@ def _models_root() -> Path:
         if (candidate / "common" / "fmu_core.h").is_file():
             return candidate
     raise BridgeError(
-        "the example model sources were not found; expected models/common/fmu_core.h in an installed wheel or "
-        "a source checkout; reinstall fmu-bridge or run from the repository: "
+        "the example model sources were not found: expected common/fmu_core.h under bridge/_models (wheel) "
+        "or models/ (source checkout); reinstall fmu-bridge or run from a checkout; looked in: "
         + ", ".join(str(c) for c in candidates)
     )
 
@@ -254,8 +263,8 @@ def _check_variant(spec: _Spec, fmi_version: str, interface: str) -> None:
         return
     available = ", ".join(f"fmi_version={v!r} interface={i!r}" for v, i in spec.variants)
     raise ConfigError(
-        f"{spec.name} has no FMI {fmi_version!r} {interface!r} variant (fmi_version is one of {FMI_VERSIONS}, "
-        f"interface one of {INTERFACES}); available for {spec.name}: {available}"
+        f"{spec.name} has no FMI {fmi_version!r} {interface!r} variant (fmi_version is one of "
+        f"{FMI_VERSIONS}, interface one of {INTERFACES}); available for {spec.name}: {available}"
     )
 
 
@@ -272,22 +281,36 @@ def _load_spec(name: str) -> _Spec:
         raise BridgeError(f"invalid model specification ({type(exc).__name__}: {exc}); fix {path}") from exc
 
 
+_TIME: Final = _Variable(
+    vr=0,
+    name="time",
+    type="Float64",
+    causality="independent",
+    variability="continuous",
+    initial=None,
+    description="Simulation time",
+    unit="s",
+    fmi_versions=("2.0", "3.0"),
+)
+
+
 def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> _Spec:
     _reject_unknown(raw, _SPEC_KEYS, "model")
-    variants = tuple((version, interface) for version, interfaces in raw["variants"].items() for interface in interfaces)
+    variants = tuple((version, iface) for version, ifaces in raw["variants"].items() for iface in ifaces)
     for version, interface in variants:
         if version not in FMI_VERSIONS or interface not in INTERFACES:
             raise ValueError(f"variant {version!r}/{interface!r}: expected {FMI_VERSIONS} and {INTERFACES}")
-    time = _Variable(0, "time", "Float64", "independent", "continuous", None, "Simulation time", unit="s",
-                     fmi_versions=("2.0", "3.0"))
-    variables = (time, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1)))
+    max_step = raw.get("max_communication_step")
     spec = _Spec(
-        name=name, directory=directory, description=str(raw["description"]), variants=variants,
+        name=name,
+        directory=directory,
+        description=str(raw["description"]),
+        variants=variants,
         default_experiment={str(k): float(v) for k, v in raw["default_experiment"].items()},
-        max_step_s=None if raw.get("max_communication_step") is None else float(raw["max_communication_step"]),
+        max_step_s=None if max_step is None else float(max_step),
         event_indicators=tuple(str(n) for n in raw.get("event_indicators", [])),
         enums={k: _parse_enum(k, v) for k, v in raw.get("type_definitions", {}).items()},
-        variables=variables,
+        variables=(_TIME, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1))),
     )
     _check_spec(spec)
     return spec
@@ -300,23 +323,26 @@ def _reject_unknown(raw: Mapping[str, Any], allowed: frozenset[str], where: str)
 
 
 def _parse_variable(vr: int, raw: dict[str, Any]) -> _Variable:
+    """A model.json variable with the FMI defaults filled in; value references count from 1 in file order."""
     _reject_unknown(raw, _VARIABLE_KEYS, f"variable {raw.get('name')!r}")
-    type_ = str(raw.get("type", "Float64"))
-    causality = str(raw.get("causality", "local"))
-    default_variability = "fixed" if "arameter" in causality else ("continuous" if type_ in _FLOAT_TYPES else "discrete")
-    variability = str(raw.get("variability", default_variability))
-    initial = raw.get("initial", _default_initial(causality, variability))
+    values = dict(raw)
+    values.setdefault("type", "Float64")
+    values.setdefault("causality", "local")
+    values.setdefault("variability", _default_variability(values["causality"], values["type"]))
+    values.setdefault("initial", _default_initial(values["causality"], values["variability"]))
+    for key in ("min", "max", "nominal"):
+        if key in values:
+            values[key] = float(values[key])
+    for key in ("fmi_versions", "interfaces"):
+        if key in values:
+            values[key] = tuple(values[key])
+    return _Variable(vr=vr, **values)
 
-    def number(key: str) -> float | None:
-        return None if raw.get(key) is None else float(raw[key])
 
-    return _Variable(
-        vr=vr, name=str(raw["name"]), type=type_, causality=causality, variability=variability, initial=initial,
-        description=str(raw["description"]), start=raw.get("start"), unit=raw.get("unit"),
-        min=number("min"), max=number("max"), nominal=number("nominal"), declared_type=raw.get("declared_type"),
-        derivative=raw.get("derivative"),
-        fmi_versions=tuple(raw.get("fmi_versions", FMI_VERSIONS)), interfaces=tuple(raw.get("interfaces", INTERFACES)),
-    )
+def _default_variability(causality: str, type_: str) -> str:
+    if causality in ("parameter", "calculatedParameter"):
+        return "fixed"
+    return "continuous" if type_ in _FLOAT_TYPES else "discrete"
 
 
 def _default_initial(causality: str, variability: str) -> str | None:
@@ -336,27 +362,32 @@ def _check_spec(spec: _Spec) -> None:
     names = [v.name for v in spec.variables]
     if len(set(names)) != len(names):
         raise ValueError(f"variable names are not unique: {names}")
+    units = _units()
     for v in spec.variables:
-        _check_variable(spec, v)
+        _check_variable(spec, v, units)
     for name in spec.event_indicators:
         if spec.variable(name).type != "Float64":
             raise ValueError(f"event indicator {name} must be a Float64 variable")
 
 
-def _check_variable(spec: _Spec, v: _Variable) -> None:
+def _check_variable(spec: _Spec, v: _Variable, units: Mapping[str, object]) -> None:
     if v.type not in _ALL_TYPES or v.causality not in _CAUSALITIES or v.variability not in _VARIABILITIES:
-        raise ValueError(f"{v.name}: type/causality/variability {v.type}/{v.causality}/{v.variability} unknown")
+        raise ValueError(
+            f"{v.name}: type/causality/variability {v.type}/{v.causality}/{v.variability} unknown"
+        )
     if not v.c_name.isidentifier():
         raise ValueError(f"{v.name}: not usable as a C identifier ({v.c_name})")
     if (v.type == "Enumeration") != (v.declared_type in spec.enums):
         raise ValueError(f"{v.name}: Enumeration variables need a declared_type from type_definitions")
     if v.derivative is not None and spec.variable(v.derivative).type != "Float64":
         raise ValueError(f"{v.name}: the derivative of {v.derivative} must belong to a Float64 state")
-    if v.unit is not None and v.unit not in _units():
+    if v.unit is not None and v.unit not in units:
         raise ValueError(f"{v.name}: unit {v.unit!r} is not defined in common/units.json")
     for version in v.fmi_versions:
         if version != "3.0" and v.type not in _FMI2_TYPES:
-            raise ValueError(f"{v.name}: type {v.type} does not exist in FMI {version}; restrict fmi_versions")
+            raise ValueError(
+                f"{v.name}: type {v.type} does not exist in FMI {version}; restrict fmi_versions"
+            )
 
 
 def _units() -> dict[str, dict[str, int]]:
@@ -379,24 +410,40 @@ def _c_header(spec: _Spec, fmi_version: str, interface: str, token: str) -> str:
     lines = [
         f"/* Generated by bridge/models.py from models/{spec.name}/model.json for FMI {fmi_version} "
         f"{interface.upper()}. Do not edit. */",
-        "#ifndef MODEL_GEN_H", "#define MODEL_GEN_H", "", "#include <math.h>", '#include "fmu_types.h"', "",
-        f"#define MODEL_NAME {_c_string(spec.name)}", f"#define MODEL_IDENTIFIER {spec.name}",
+        "#ifndef MODEL_GEN_H",
+        "#define MODEL_GEN_H",
+        "",
+        "#include <math.h>",
+        '#include "fmu_types.h"',
+        "",
+        f"#define MODEL_NAME {_c_string(spec.name)}",
+        f"#define MODEL_IDENTIFIER {spec.name}",
         f"#define INSTANTIATION_TOKEN {_c_string(token)}",
         f"#define MODEL_INTERFACE {'FMU_CS' if interface == 'cs' else 'FMU_ME'}",
-        f"#define MODEL_FMI_VERSION {fmi_version[0]}", f"#define MODEL_MAX_STEP {max_step}",
-        f"#define MODEL_NX {nx}", f"#define MODEL_NX_ALLOC {max(nx, 1)}",
-        f"#define MODEL_NZ {nz}", f"#define MODEL_NZ_ALLOC {max(nz, 1)}",
-        f"#define MODEL_N_VARS {len(spec.variables)}", "", "/* value references */",
-        *(f"#define VR_{v.c_name} {v.vr}" for v in spec.variables), "",
-        *(f"#define {e.name}_{item} {value}" for e in spec.enums.values() for item, value, _ in e.items), "",
+        f"#define MODEL_FMI_VERSION {fmi_version[0]}",
+        f"#define MODEL_MAX_STEP {max_step}",
+        f"#define MODEL_NX {nx}",
+        f"#define MODEL_NX_ALLOC {max(nx, 1)}",
+        f"#define MODEL_NZ {nz}",
+        f"#define MODEL_NZ_ALLOC {max(nz, 1)}",
+        f"#define MODEL_N_VARS {len(spec.variables)}",
+        "",
+        "/* value references */",
+        *(f"#define VR_{v.c_name} {v.vr}" for v in spec.variables),
+        "",
+        *(f"#define {e.name}_{item} {value}" for e in spec.enums.values() for item, value, _ in e.items),
+        *([""] if spec.enums else []),
         "typedef struct {",
         *(f"    {_C_TYPES[v.type]} {v.c_name};  /* {_c_comment(v)} */" for v in spec.variables[1:]),
-        "} ModelData;", "",
+        "} ModelData;",
+        "",
         "extern const FmuVariable MODEL_VARIABLES[MODEL_N_VARS];",
         "extern const size_t MODEL_STATE_OFFSETS[MODEL_NX_ALLOC];",
         "extern const size_t MODEL_DERIVATIVE_OFFSETS[MODEL_NX_ALLOC];",
         "extern const double MODEL_STATE_NOMINALS[MODEL_NX_ALLOC];",
-        "extern const size_t MODEL_EVENT_INDICATOR_OFFSETS[MODEL_NZ_ALLOC];", "", "#endif /* MODEL_GEN_H */",
+        "extern const size_t MODEL_EVENT_INDICATOR_OFFSETS[MODEL_NZ_ALLOC];",
+        "",
+        "#endif /* MODEL_GEN_H */",
     ]
     return "\n".join(lines) + "\n"
 
@@ -412,25 +459,36 @@ def _c_table(spec: _Spec, fmi_version: str, interface: str) -> str:
 
     states = spec.states()
     nominals = ", ".join(repr(s.nominal or 1.0) for s, _ in states) or "0.0"
-    rows = ",\n".join(f"    [{v.vr}] = {{{_c_row(spec, v, fmi_version, interface)}}}" for v in spec.variables)
-    return "\n".join([
-        f"/* Generated by bridge/models.py from models/{spec.name}/model.json. Do not edit. */",
-        "#include <stddef.h>", '#include "model_gen.h"', "",
-        f"const FmuVariable MODEL_VARIABLES[MODEL_N_VARS] = {{\n{rows}\n}};", "",
-        f"const size_t MODEL_STATE_OFFSETS[MODEL_NX_ALLOC] = {{{offsets(s for s, _ in states)}}};",
-        f"const size_t MODEL_DERIVATIVE_OFFSETS[MODEL_NX_ALLOC] = {{{offsets(d for _, d in states)}}};",
-        f"const double MODEL_STATE_NOMINALS[MODEL_NX_ALLOC] = {{{nominals}}};",
-        "const size_t MODEL_EVENT_INDICATOR_OFFSETS[MODEL_NZ_ALLOC] = "
-        f"{{{offsets(spec.variable(n) for n in spec.event_indicators)}}};", "",
-    ])
+    rows = ",\n".join(
+        f"    [VR_{v.c_name}] = {{{_c_row(spec, v, fmi_version, interface)}}}" for v in spec.variables
+    )
+    return "\n".join(
+        [
+            f"/* Generated by bridge/models.py from models/{spec.name}/model.json. Do not edit. */",
+            "#include <stddef.h>",
+            '#include "model_gen.h"',
+            "",
+            f"const FmuVariable MODEL_VARIABLES[MODEL_N_VARS] = {{\n{rows}\n}};",
+            "",
+            f"const size_t MODEL_STATE_OFFSETS[MODEL_NX_ALLOC] = {{{offsets(s for s, _ in states)}}};",
+            f"const size_t MODEL_DERIVATIVE_OFFSETS[MODEL_NX_ALLOC] = {{{offsets(d for _, d in states)}}};",
+            f"const double MODEL_STATE_NOMINALS[MODEL_NX_ALLOC] = {{{nominals}}};",
+            "const size_t MODEL_EVENT_INDICATOR_OFFSETS[MODEL_NZ_ALLOC] = "
+            f"{{{offsets(spec.variable(n) for n in spec.event_indicators)}}};",
+            "",
+        ]
+    )
 
 
 def _c_row(spec: _Spec, v: _Variable, fmi_version: str, interface: str) -> str:
     causality = "C_" + "".join("_" + c if c.isupper() else c for c in v.causality).upper()
     offset = "0" if v.causality == "independent" else f"offsetof(ModelData, {v.c_name})"
     fields = [
-        f".name = {_c_string(v.name)}", f".type = T_{v.type.upper()}", f".causality = {causality}",
-        f".variability = V_{v.variability.upper()}", f".exposed = {str(v.present_in(fmi_version, interface)).lower()}",
+        f".name = {_c_string(v.name)}",
+        f".type = T_{v.type.upper()}",
+        f".causality = {causality}",
+        f".variability = V_{v.variability.upper()}",
+        f".exposed = {str(v.present_in(fmi_version, interface)).lower()}",
         f".offset = {offset}",
     ]
     if v.start is not None:
@@ -472,10 +530,13 @@ def _attributes(**values: Scalar | None) -> dict[str, str]:
 
 
 def _model_description(spec: _Spec, fmi_version: str, interface: str, token: str) -> bytes:
-    builder = {"1.0": _xml_fmi1, "2.0": _xml_fmi2, "3.0": _xml_fmi3}[fmi_version]
-    root = builder(spec, interface, token)
+    if fmi_version == "1.0":
+        root = _xml_fmi1(spec, interface, token)
+    else:
+        root = _xml_fmi23(spec, fmi_version, interface, token)
     ET.indent(root)
-    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+    text: bytes = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+    return text + b"\n"
 
 
 def _units_element(variables: Iterable[_Variable], fmi1: bool = False) -> ET.Element | None:
@@ -488,8 +549,11 @@ def _units_element(variables: Iterable[_Variable], fmi1: bool = False) -> ET.Ele
         if fmi1:
             ET.SubElement(element, "BaseUnit", unit=unit)
         else:
-            ET.SubElement(ET.SubElement(element, "Unit", name=unit), "BaseUnit",
-                          {k: str(e) for k, e in table[unit].items()})
+            ET.SubElement(
+                ET.SubElement(element, "Unit", name=unit),
+                "BaseUnit",
+                {k: str(e) for k, e in table[unit].items()},
+            )
     return element
 
 
@@ -506,9 +570,17 @@ def _log_categories() -> ET.Element:
 
 
 def _root(version: str, spec: _Spec, **attributes: str) -> ET.Element:
-    return ET.Element("fmiModelDescription", {
-        "fmiVersion": version, "modelName": spec.name, **attributes, "description": spec.description,
-        "generationTool": GENERATION_TOOL, "variableNamingConvention": "structured"})
+    return ET.Element(
+        "fmiModelDescription",
+        {
+            "fmiVersion": version,
+            "modelName": spec.name,
+            **attributes,
+            "description": spec.description,
+            "generationTool": GENERATION_TOOL,
+            "variableNamingConvention": "structured",
+        },
+    )
 
 
 def _append(parent: ET.Element, *children: ET.Element | None) -> None:
@@ -517,129 +589,154 @@ def _append(parent: ET.Element, *children: ET.Element | None) -> None:
 
 def _type_attributes(v: _Variable, fmi_version: str) -> dict[str, str]:
     numeric = v.type in _FLOAT_TYPES or v.type in _INT_TYPES
-    start = v.start if (v.type != "String" or fmi_version != "3.0") else None
+    start = None if (v.type == "String" and fmi_version == "3.0") else v.start  # FMI 3.0: <Start value=.../>
     return _attributes(
-        declaredType=v.declared_type, unit=v.unit, start=start,
-        min=v.min if numeric else None, max=v.max if numeric else None, nominal=v.nominal,
+        declaredType=v.declared_type,
+        unit=v.unit,
+        start=start,
+        min=v.min if numeric else None,
+        max=v.max if numeric else None,
+        nominal=v.nominal,
     )
-
-
-def _xml_fmi1(spec: _Spec, interface: str, token: str) -> ET.Element:
-    variables = spec.variant_variables("1.0", interface)
-    root = _root("1.0", spec, modelIdentifier=spec.name, guid=token,
-                 numberOfContinuousStates=str(len(spec.states())),
-                 numberOfEventIndicators=str(len(spec.event_indicators)))
-    _append(root, _units_element(variables, fmi1=True), _type_definitions(spec, "1.0"),
-            _default_experiment(spec, ("startTime", "stopTime", "tolerance")))
-    model_variables = ET.SubElement(root, "ModelVariables")
-    for v in variables:
-        parameter = "arameter" in v.causality
-        causality = {"input": "input", "output": "output"}.get(v.causality, "internal")
-        variability = "parameter" if parameter else v.variability
-        scalar = ET.SubElement(model_variables, "ScalarVariable", name=v.name, valueReference=str(v.vr),
-                               description=v.description, variability=variability, causality=causality)
-        ET.SubElement(scalar, _FMI2_TYPES[v.type], _type_attributes(v, "1.0"))
-    capabilities = {"canHandleVariableCommunicationStepSize": "true", "canNotUseMemoryManagementFunctions": "true"}
-    standalone = ET.SubElement(ET.SubElement(root, "Implementation"), "CoSimulation_StandAlone")
-    ET.SubElement(standalone, "Capabilities", capabilities)
-    return root
 
 
 def _type_definitions(spec: _Spec, fmi_version: str) -> ET.Element | None:
     if not spec.enums:
         return None
+    if fmi_version == "1.0":
+        raise BridgeError(
+            f"{spec.name}: Enumeration types are not generated for FMI 1.0; restrict fmi_versions"
+        )
     element = ET.Element("TypeDefinitions")
     for enum in spec.enums.values():
-        if fmi_version == "1.0":
-            raise BridgeError(f"{spec.name}: Enumeration types are not generated for FMI 1.0")
         if fmi_version == "2.0":
             simple = ET.SubElement(element, "SimpleType", name=enum.name, description=enum.description)
             container = ET.SubElement(simple, "Enumeration")
         else:
-            container = ET.SubElement(element, "EnumerationType", name=enum.name, description=enum.description)
+            container = ET.SubElement(
+                element, "EnumerationType", name=enum.name, description=enum.description
+            )
         for item, value, description in enum.items:
             ET.SubElement(container, "Item", name=item, value=str(value), description=description)
     return element
 
 
-def _initial_unknowns(spec: _Spec, variables: list[_Variable], interface: str) -> list[_Variable]:
-    unknowns = {v.vr: v for v in variables if v.causality == "calculatedParameter"
-                or (v.causality == "output" and v.initial in ("approx", "calculated"))}
-    if interface == "me":
-        for state, derivative in spec.states():
-            unknowns |= {v.vr: v for v in (state, derivative) if v.initial in ("approx", "calculated")}
-    return [unknowns[vr] for vr in sorted(unknowns)]
-
-
-def _variable_element(v: _Variable, fmi_version: str, parent: ET.Element) -> ET.Element:
-    common = _attributes(name=v.name, valueReference=v.vr, description=v.description, causality=v.causality,
-                         variability=v.variability, initial=v.initial)
-    if fmi_version == "2.0":
-        scalar = ET.SubElement(parent, "ScalarVariable", common)
-        return ET.SubElement(scalar, _FMI2_TYPES[v.type], _type_attributes(v, "2.0"))
-    element = ET.SubElement(parent, v.type, common | _type_attributes(v, "3.0"))
-    if v.type == "String" and v.start is not None:
-        ET.SubElement(element, "Start", value=str(v.start))
-    return element
-
-
-def _xml_fmi2(spec: _Spec, interface: str, token: str) -> ET.Element:
-    variables = spec.variant_variables("2.0", interface)
-    index = {v.name: position for position, v in enumerate(variables, start=1)}
-    extra = {"numberOfEventIndicators": str(len(spec.event_indicators))} if interface == "me" else {}
-    root = _root("2.0", spec, guid=token, **extra)
-    flags = {"modelIdentifier": spec.name, "canGetAndSetFMUstate": "true", "canNotUseMemoryManagementFunctions": "true"}
-    if interface == "cs":
-        ET.SubElement(root, "CoSimulation", flags | {"canHandleVariableCommunicationStepSize": "true"})
-    else:
-        ET.SubElement(root, "ModelExchange", flags | {"completedIntegratorStepNotNeeded": "true"})
-    _append(root, _units_element(variables), _type_definitions(spec, "2.0"), _log_categories(),
-            _default_experiment(spec, ("startTime", "stopTime", "tolerance", "stepSize")))
+def _xml_fmi1(spec: _Spec, interface: str, token: str) -> ET.Element:
+    """FMI 1.0 co-simulation stand-alone: no ModelStructure, causality internal, variability parameter."""
+    variables = spec.variant_variables("1.0", interface)
+    counts = {"numberOfContinuousStates": "0", "numberOfEventIndicators": "0"}  # CS exposes neither
+    root = _root("1.0", spec, modelIdentifier=spec.name, guid=token, **counts)
+    experiment = _default_experiment(spec, ("startTime", "stopTime", "tolerance"))
+    _append(root, _units_element(variables, fmi1=True), _type_definitions(spec, "1.0"), experiment)
     model_variables = ET.SubElement(root, "ModelVariables")
     for v in variables:
-        element = _variable_element(v, "2.0", model_variables)
-        if v.derivative is not None:
-            element.set("derivative", str(index[v.derivative]))
-    structure = ET.SubElement(root, "ModelStructure")
-    groups = {
-        "Outputs": [v for v in variables if v.causality == "output"],
-        "Derivatives": [d for _, d in spec.states()] if interface == "me" else [],
-        "InitialUnknowns": _initial_unknowns(spec, variables, interface),
-    }
-    for group, members in groups.items():
-        if members:
-            container = ET.SubElement(structure, group)
-            for v in members:
-                ET.SubElement(container, "Unknown", index=str(index[v.name]))
+        variability = "parameter" if v.causality in ("parameter", "calculatedParameter") else v.variability
+        causality = v.causality if v.causality in ("input", "output") else "internal"
+        attributes = _attributes(
+            name=v.name,
+            valueReference=v.vr,
+            description=v.description,
+            variability=variability,
+            causality=causality,
+        )
+        scalar = ET.SubElement(model_variables, "ScalarVariable", attributes)
+        ET.SubElement(scalar, _FMI2_TYPES[v.type], _type_attributes(v, "1.0"))
+    standalone = ET.SubElement(ET.SubElement(root, "Implementation"), "CoSimulation_StandAlone")
+    flags = ("canHandleVariableCommunicationStepSize", "canNotUseMemoryManagementFunctions")
+    ET.SubElement(standalone, "Capabilities", dict.fromkeys(flags, "true"))
     return root
 
 
-def _xml_fmi3(spec: _Spec, interface: str, token: str) -> ET.Element:
-    variables = spec.variant_variables("3.0", interface)
-    root = _root("3.0", spec, instantiationToken=token)
-    flags = {"modelIdentifier": spec.name, "canGetAndSetFMUState": "true"}
-    if interface == "cs":
-        ET.SubElement(root, "CoSimulation", flags | {"canHandleVariableCommunicationStepSize": "true"})
+def _interface_element(spec: _Spec, fmi_version: str, interface: str) -> ET.Element:
+    flags = {"modelIdentifier": spec.name}
+    if fmi_version == "2.0":
+        flags |= {"canGetAndSetFMUstate": "true", "canNotUseMemoryManagementFunctions": "true"}
     else:
-        ET.SubElement(root, "ModelExchange", flags)
-    _append(root, _units_element(variables), _type_definitions(spec, "3.0"), _log_categories(),
-            _default_experiment(spec, ("startTime", "stopTime", "tolerance", "stepSize")))
-    model_variables = ET.SubElement(root, "ModelVariables")
-    for v in variables:
-        element = _variable_element(v, "3.0", model_variables)
-        if v.derivative is not None:
-            element.set("derivative", str(spec.variable(v.derivative).vr))
-    structure = ET.SubElement(root, "ModelStructure")
-    me = interface == "me"
-    groups = (
-        ("Output", [v for v in variables if v.causality == "output"]),
-        ("ContinuousStateDerivative", [d for _, d in spec.states()] if me else []),
-        ("InitialUnknown", _initial_unknowns(spec, variables, interface)),
-        ("EventIndicator", [spec.variable(n) for n in spec.event_indicators] if me else []),
+        flags |= {"canGetAndSetFMUState": "true"}
+    if interface == "cs":
+        return ET.Element("CoSimulation", flags | {"canHandleVariableCommunicationStepSize": "true"})
+    if fmi_version == "2.0":
+        flags |= {"completedIntegratorStepNotNeeded": "true"}
+    return ET.Element("ModelExchange", flags)
+
+
+def _variable_element(v: _Variable, fmi_version: str) -> tuple[ET.Element, ET.Element]:
+    """(element to append to ModelVariables, element that carries the type attributes)."""
+    common = _attributes(
+        name=v.name,
+        valueReference=v.vr,
+        description=v.description,
+        causality=v.causality,
+        variability=v.variability,
+        initial=v.initial,
     )
-    for tag, members in groups:
-        for v in members:
-            ET.SubElement(structure, tag, valueReference=str(v.vr))
+    if fmi_version == "2.0":
+        scalar = ET.Element("ScalarVariable", common)
+        return scalar, ET.SubElement(scalar, _FMI2_TYPES[v.type], _type_attributes(v, "2.0"))
+    element = ET.Element(v.type, common | _type_attributes(v, "3.0"))
+    if v.type == "String" and v.start is not None:
+        ET.SubElement(element, "Start", value=str(v.start))
+    return element, element
+
+
+def _initial_unknowns(spec: _Spec, variables: list[_Variable], interface: str) -> list[_Variable]:
+    """Outputs and states/derivatives whose initial value the FMU computes, and calculated parameters."""
+    computed = ("approx", "calculated")
+    unknowns = {
+        v.vr: v
+        for v in variables
+        if v.causality == "calculatedParameter" or (v.causality == "output" and v.initial in computed)
+    }
+    if interface == "me":
+        for state, derivative in spec.states():
+            unknowns |= {v.vr: v for v in (state, derivative) if v.initial in computed}
+    return [unknowns[vr] for vr in sorted(unknowns)]
+
+
+def _model_structure(spec: _Spec, variables: list[_Variable], fmi_version: str, interface: str) -> ET.Element:
+    me = interface == "me"
+    groups = {  # (FMI 2.0 list element, FMI 3.0 element): members
+        ("Outputs", "Output"): [v for v in variables if v.causality == "output"],
+        ("Derivatives", "ContinuousStateDerivative"): [d for _, d in spec.states()] if me else [],
+        ("InitialUnknowns", "InitialUnknown"): _initial_unknowns(spec, variables, interface),
+        ("", "EventIndicator"): [spec.variable(n) for n in spec.event_indicators] if me else [],
+    }
+    index = {v.name: position for position, v in enumerate(variables, start=1)}
+    structure = ET.Element("ModelStructure")
+    for (fmi2_list, fmi3_tag), members in groups.items():
+        if fmi_version == "3.0":
+            structure.extend(ET.Element(fmi3_tag, valueReference=str(v.vr)) for v in members)
+        elif members and fmi2_list:
+            container = ET.SubElement(structure, fmi2_list)
+            container.extend(ET.Element("Unknown", index=str(index[v.name])) for v in members)
+    return structure
+
+
+def _xml_fmi23(spec: _Spec, fmi_version: str, interface: str, token: str) -> ET.Element:
+    variables = spec.variant_variables(fmi_version, interface)
+    if fmi_version == "2.0":
+        extra = {"numberOfEventIndicators": str(len(spec.event_indicators))} if interface == "me" else {}
+        root = _root("2.0", spec, guid=token, **extra)
+    else:
+        root = _root("3.0", spec, instantiationToken=token)
+    experiment = _default_experiment(spec, ("startTime", "stopTime", "tolerance", "stepSize"))
+    _append(
+        root,
+        _interface_element(spec, fmi_version, interface),
+        _units_element(variables),
+        _type_definitions(spec, fmi_version),
+        _log_categories(),
+        experiment,
+    )
+    model_variables = ET.SubElement(root, "ModelVariables")
+    index = {v.name: position for position, v in enumerate(variables, start=1)}
+    for v in variables:
+        element, typed = _variable_element(v, fmi_version)
+        if v.derivative is not None:  # FMI 2.0: 1-based variable index; FMI 3.0: value reference
+            state = spec.variable(v.derivative)
+            typed.set("derivative", str(index[state.name] if fmi_version == "2.0" else state.vr))
+        model_variables.append(element)
+    root.append(_model_structure(spec, variables, fmi_version, interface))
     return root
 
 
@@ -653,7 +750,9 @@ def _fmi_headers_dir() -> Path:
         raise DependencyMissing("fmpy", "the FMI headers used to build the example FMUs", "pip install fmpy")
     directory = Path(found.origin).parent / "c-code"
     if not (directory / "fmi3Functions.h").is_file():
-        raise BridgeError(f"FMPy's FMI headers are missing; expected fmi3Functions.h; reinstall fmpy: {directory}")
+        raise BridgeError(
+            f"FMPy's FMI headers are missing; expected fmi3Functions.h; reinstall fmpy: {directory}"
+        )
     return directory
 
 
@@ -681,7 +780,7 @@ def _cache_key(spec: _Spec, fmi_version: str, interface: str) -> str:
 
 
 def _binary_path(name: str, fmi_version: str) -> str:
-    """binaries/<platform>/<id>.<ext>: FMI 1.0/2.0 platform names (linux64) or FMI 3.0 tuples (x86_64-linux)."""
+    """binaries/<platform>/<id>.<ext>: FMI 1.0/2.0 names (linux64) or FMI 3.0 tuples (x86_64-linux)."""
     system = {"linux": "linux", "darwin": "darwin", "win32": "windows"}.get(sys.platform, sys.platform)
     extension = {"linux": ".so", "darwin": ".dylib", "windows": ".dll"}.get(system, ".so")
     machine = platform.machine().lower()
@@ -702,11 +801,24 @@ def _build(spec: _Spec, fmi_version: str, interface: str, key: str, target: Path
         work = Path(tmp)
         (work / "model_gen.h").write_text(_c_header(spec, fmi_version, interface, token), encoding="ascii")
         (work / "model_gen.c").write_text(_c_table(spec, fmi_version, interface), encoding="ascii")
-        sources = [*(common / s for s in _CORE_SOURCES), common / _WRAPPERS[fmi_version], spec.directory / "model.c",
-                   work / "model_gen.c"]
+        sources = [
+            *(common / s for s in _CORE_SOURCES),
+            common / _WRAPPERS[fmi_version],
+            spec.directory / "model.c",
+            work / "model_gen.c",
+        ]
         library = work / "library"
-        command = [gcc, *CFLAGS, f"-I{work}", f"-I{common}", f"-I{headers}", "-o", str(library),
-                   *(str(s) for s in sources), "-lm"]
+        command = [
+            gcc,
+            *CFLAGS,
+            f"-I{work}",
+            f"-I{common}",
+            f"-I{headers}",
+            "-o",
+            str(library),
+            *(str(s) for s in sources),
+            "-lm",
+        ]
         _compile(command, f"{spec.name} FMI {fmi_version} {interface.upper()}")
         files = {
             "modelDescription.xml": _model_description(spec, fmi_version, interface, token),
@@ -714,7 +826,12 @@ def _build(spec: _Spec, fmi_version: str, interface: str, key: str, target: Path
             "sources/model_gen.h": (work / "model_gen.h").read_bytes(),
             "sources/model_gen.c": (work / "model_gen.c").read_bytes(),
         }
-        for path in (*sources[:-1], common / "fmu_core.h", common / "fmu_types.h", spec.directory / "model.json"):
+        for path in (
+            *sources[:-1],
+            common / "fmu_core.h",
+            common / "fmu_types.h",
+            spec.directory / "model.json",
+        ):
             files[f"sources/{path.name}"] = path.read_bytes()
         partial = work / "archive.fmu"
         _write_zip(partial, files)

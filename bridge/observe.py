@@ -9,7 +9,8 @@ output they track.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections import deque
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING
 
 import gymnasium as gym
@@ -18,12 +19,12 @@ import numpy.typing as npt
 
 from bridge.config import ObservationSection
 from bridge.fmu import Variable
-from bridge.scenario import draw
 
 if TYPE_CHECKING:
     from bridge.task import Task
 
 FloatArray = npt.NDArray[np.float64]
+_NO_NOISE: list[float] = []
 
 
 class ObservationBuilder:
@@ -35,23 +36,24 @@ class ObservationBuilder:
         self._bounds = task.experiment.termination.bounds
         index = {name: i for i, name in enumerate(task.signal_names)}
         direct = [*section.outputs, *section.references]
-        self._direct = np.array([index[n] for n in direct], dtype=np.intp)
-        self._err_ref = np.array([index[r] for r in section.errors], dtype=np.intp)
-        self._err_out = np.array([index[o] for o in section.errors.values()], dtype=np.intp)
+        self._direct_list = [index[n] for n in direct]
+        self._errors = [(index[r], index[o]) for r, o in section.errors.items()]
         self._n_action = len(task.action_inputs) if section.include_action else 0
         self.names = (
             direct + [f"{r}-{o}" for r, o in section.errors.items()]
             + [f"action:{a}" for a in task.action_inputs[: self._n_action]]
         )
+        self.dim = len(self.names)
         centre, half = self._scales(section, task)
-        self._centre, self._inv_half = centre, 1.0 / half
+        self._centre_list, self._inv_list = centre.tolist(), (1.0 / half).tolist()
         noise = task.experiment.noise.observations
         self._noise = [(section.outputs.index(n), d) for n, d in noise.items()]
-        self.dim = len(self.names)
-        self._history = np.zeros((section.history, self.dim), dtype=np.float32)
+        self._noise_table: list[list[float]] = []
+        self._sample = 0
+        self._compiled = self._compile()
+        self._history: deque[list[float]] = deque(maxlen=section.history)
         bound = section.clip if section.clip is not None else np.inf
         self.space = gym.spaces.Box(-bound, bound, shape=(section.history * self.dim,), dtype=np.float32)
-        self._raw = np.zeros(self.dim)
 
     # -- scaling ------------------------------------------------------------------------------------
     def _range(self, name: str) -> tuple[float, float]:
@@ -85,33 +87,53 @@ class ObservationBuilder:
         half = np.array([r[1] for r in ranges], dtype=np.float64)
         return centre, np.where(half > 0, half, 1.0)
 
+    def _compile(self) -> Callable[[list[float], list[float], list[float]], list[float]]:
+        """``lambda s, u, nz: [...]``: one expression per observation element, constants inlined.
+
+        The source is generated from indices and floats computed here (never from user text); a
+        single list display avoids the per-element cost of zip, comprehensions and numpy calls,
+        which dominate for the handful of values an observation has.
+        """
+        noise_slot = {i: k for k, (i, _) in enumerate(self._noise)}
+        raw = [f"s[{i}]" + (f" + nz[{noise_slot[p]}]" if p in noise_slot else "")
+               for p, i in enumerate(self._direct_list)]
+        raw += [f"s[{r}] - s[{o}]" for r, o in self._errors]
+        raw += [f"u[{j}]" for j in range(self._n_action)]
+        terms = [f"({x} - {c!r}) * {k!r}" for x, c, k in zip(raw, self._centre_list, self._inv_list)]
+        clip = self._section.clip
+        if clip is not None:
+            terms = [f"min(max({t}, {-clip!r}), {clip!r})" for t in terms]
+        source = f"lambda s, u, nz: [{', '.join(terms)}]"
+        return eval(source, {"__builtins__": {}, "min": min, "max": max})  # type: ignore[no-any-return]  # noqa: S307
+
     # -- per sample ---------------------------------------------------------------------------------
-    def _single(self, signals: FloatArray, inputs: FloatArray, rng: np.random.Generator) -> FloatArray:
-        raw = self._raw
-        nd = len(self._direct)
-        raw[:nd] = signals[self._direct]
-        for i, dist in self._noise:
-            raw[i] += draw(dist, rng)
-        ne = len(self._err_ref)
-        if ne:
-            raw[nd : nd + ne] = signals[self._err_ref] - signals[self._err_out]
-        if self._n_action:
-            raw[nd + ne :] = inputs[: self._n_action]
-        scaled = (raw - self._centre) * self._inv_half
-        if self._section.clip is not None:
-            np.clip(scaled, -self._section.clip, self._section.clip, out=scaled)
-        return scaled
+    def new_episode(self, rng: np.random.Generator, rows: int) -> None:
+        """Draw the sensor noise of a whole episode at once (rows = samples + 1)."""
+        from bridge.task import _noise_table
 
-    def reset(self, signals: FloatArray, inputs: FloatArray, rng: np.random.Generator) -> npt.NDArray[np.float32]:
-        self._history[:] = self._single(signals, inputs, rng)
-        return self._history.reshape(-1).copy()
+        self._noise_table = _noise_table(self._noise, rng, rows)
+        self._sample = 0
 
-    def observe(self, signals: FloatArray, inputs: FloatArray, rng: np.random.Generator) -> npt.NDArray[np.float32]:
-        history = self._history
-        if len(history) > 1:
-            history[:-1] = history[1:]
-        history[-1] = self._single(signals, inputs, rng)
-        return history.reshape(-1).copy()
+    def _single(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> list[float]:
+        if self._noise:
+            row = self._noise_table[min(self._sample, len(self._noise_table) - 1)]
+            self._sample += 1
+            return self._compiled(signals, inputs, row)
+        return self._compiled(signals, inputs, _NO_NOISE)
+
+    def reset(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        first = self._single(signals, inputs, rng)
+        self._history = deque([first] * self._section.history, maxlen=self._section.history)
+        return self._stack()
+
+    def observe(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        if self._section.history == 1:
+            return np.array(self._single(signals, inputs, rng), dtype=np.float32)
+        self._history.append(self._single(signals, inputs, rng))
+        return self._stack()
+
+    def _stack(self) -> npt.NDArray[np.float32]:
+        return np.array([v for row in self._history for v in row], dtype=np.float32)
 
 
 def _finite(*values: float | None) -> bool:

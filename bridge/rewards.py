@@ -17,7 +17,7 @@ from bridge.config import RewardSection, RewardTerm
 from bridge.errors import BridgeError
 
 FloatArray = npt.NDArray[np.float64]
-Term = Callable[[FloatArray, FloatArray, FloatArray], float]
+Term = Callable[[list[float], list[float], list[float]], float]
 
 
 def reward_signal_names(section: RewardSection, known: set[str]) -> list[str]:
@@ -76,14 +76,14 @@ class Reward:
     def reset(self) -> None:
         """Nothing is carried between episodes today; kept for stateful rewards."""
 
-    def __call__(self, signals: FloatArray, inputs: FloatArray, previous: FloatArray, terminated: bool) -> float:
+    def __call__(self, signals: list[float], inputs: list[float], previous: list[float], terminated: bool) -> float:
         total = 0.0
         for term in self._terms:
             total += term(signals, inputs, previous)
         if self._expression is not None:
             total += self._expression(signals)
         if self._user is not None:
-            value = self._user(dict(zip(self._names, signals.tolist())))
+            value = self._user(dict(zip(self._names, signals)))
             try:
                 total += float(value)
             except (TypeError, ValueError) as exc:

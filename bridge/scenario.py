@@ -51,6 +51,21 @@ def draw(dist: Distribution, rng: np.random.Generator) -> float:
     return float(dist.choice[int(rng.choice(len(dist.choice), p=weights))])
 
 
+def draw_many(dist: Distribution, rng: np.random.Generator, size: int) -> FloatArray:
+    """``size`` independent values from ``dist`` in one vectorised draw (noise for a whole episode)."""
+    if dist.uniform is not None:
+        return rng.uniform(*dist.uniform, size=size)
+    if dist.normal is not None:
+        return rng.normal(*dist.normal, size=size)
+    if dist.lognormal is not None:
+        median, sigma = dist.lognormal
+        return np.asarray(median * np.exp(rng.normal(0.0, sigma, size=size)))
+    if dist.choice is not None:
+        weights = None if dist.weights is None else np.asarray(dist.weights) / sum(dist.weights)
+        return np.asarray(dist.choice, dtype=np.float64)[rng.choice(len(dist.choice), size=size, p=weights)]
+    return np.array([draw(dist, rng) for _ in range(size)])
+
+
 def evaluate(profile: Profile, times: FloatArray, base_dir: Path) -> FloatArray:
     """The profile's values at ``times`` (seconds)."""
     values = _evaluate_one(profile, times, base_dir)

@@ -25,7 +25,8 @@ from bridge.config_check import Timing, action_bounds
 from bridge.errors import BridgeError, ConfigError
 from bridge.fmu import Variable
 from bridge.rewards import build_reward
-from bridge.scenario import EpisodeSpec, ScenarioSampler, draw, scenario_inputs
+from bridge.config import Distribution
+from bridge.scenario import EpisodeSpec, ScenarioSampler, draw_many, scenario_inputs
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -43,6 +44,12 @@ def load_callable(path: str, key: str) -> Callable[..., Any]:
     return fn  # type: ignore[no-any-return]
 
 
+def _noise_table(entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int) -> list[list[float]]:
+    if not entries:
+        return []
+    return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
+
+
 class Task:
     """The task side of an experiment (one instance per env; holds per-episode state)."""
 
@@ -57,7 +64,8 @@ class Task:
         self.signal_names = self.output_names + self.input_names + self.reference_names
         self._index = {name: i for i, name in enumerate(self.signal_names)}
         self._n_out, self._n_in = len(self.output_names), len(self.input_names)
-        self._signals = np.zeros(len(self.signal_names))
+        self._signals: list[float] = [0.0] * len(self.signal_names)
+        self._has_refs = False
         self.sampler = ScenarioSampler(exp, self.sample_times)
         self._build_actions()
         self._build_observations()
@@ -104,45 +112,63 @@ class Task:
             bounds = [action_bounds(self.experiment, self._variables[name]) for name in self.action_inputs]
             low = np.array([b[0] for b in bounds], dtype=np.float64)
             high = np.array([b[1] for b in bounds], dtype=np.float64)
-            self._a_center, self._a_half = (high + low) / 2, (high - low) / 2
+            self._a_centre = ((high + low) / 2).tolist()
+            self._a_half_list = ((high - low) / 2).tolist()
             self.action_space: gym.Space[Any] = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
         elif actions.type == "discrete":
             table = actions.table or [[v] for v in actions.levels[self.action_inputs[0]]]
-            self._table = np.array(table, dtype=np.float64)
+            self._table_rows = [[float(v) for v in row] for row in table]
             self.action_space = gym.spaces.Discrete(len(table))
         else:
             self._levels = [np.array(actions.levels[name], dtype=np.float64) for name in self.action_inputs]
             self.action_space = gym.spaces.MultiDiscrete([len(levels) for levels in self._levels])
         noise = self.experiment.noise.actions
         self._action_noise = [(self.action_inputs.index(n), d) for n, d in noise.items()]
-        self._inputs = np.zeros(len(self.input_names))
-        self._previous_inputs = np.zeros(len(self.input_names))
+        self._action_noise_table: list[list[float]] = []
+        self._inputs = [0.0] * len(self.input_names)
+        self._previous_inputs = [0.0] * len(self.input_names)
+        self._n_profiles = len(self.input_names) - n
 
-    def action_to_inputs(self, action: Any, sample: int, rng: np.random.Generator) -> FloatArray:
-        """FMU input values (physical units) for sample ``sample``: action, actuator noise, profiles."""
+    def action_to_inputs(self, action: Any, sample: int, rng: np.random.Generator) -> list[float]:
+        """FMU input values (physical units) for sample ``sample``: action, actuator noise, profiles.
+
+        Plain-Python floats on purpose: for a handful of values they beat numpy's per-call cost.
+        """
         u = self._inputs
         self._previous_inputs[:] = u
         n = len(self.action_inputs)
         if self._kind == "continuous":
-            a = np.asarray(action, dtype=np.float64).reshape(-1)
-            if a.shape[0] != n or not np.isfinite(a).all():
+            values = action.tolist() if hasattr(action, "tolist") else list(action)
+            if not isinstance(values, list) or len(values) != n:
                 raise self._bad_action(action, sample)
-            u[:n] = self._a_center + self._a_half * np.clip(a, -1.0, 1.0)
+            centre, half = self._a_centre, self._a_half_list
+            for i, v in enumerate(values):
+                if v - v != 0.0:
+                    raise self._bad_action(action, sample)
+                u[i] = centre[i] + half[i] * (-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
         elif self._kind == "discrete":
-            index = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
-            if not 0 <= index < len(self._table) or index != np.asarray(action).reshape(-1)[0]:
-                raise self._bad_action(action, sample)
-            u[:n] = self._table[index]
+            u[:n] = self._discrete_row(action, sample)
         else:
             indices = np.asarray(action).reshape(-1)
             if indices.shape[0] != n or not all(0 <= int(i) < len(lv) for i, lv in zip(indices, self._levels)):
                 raise self._bad_action(action, sample)
-            u[:n] = [lv[int(i)] for i, lv in zip(indices, self._levels)]
-        for i, dist in self._action_noise:
-            u[i] += draw(dist, rng)
-        if len(u) > n:
-            u[n:] = self._profile_inputs[min(sample, len(self._profile_inputs) - 1)]
+            u[:n] = [float(lv[int(i)]) for i, lv in zip(indices, self._levels)]
+        if self._action_noise:
+            row = self._action_noise_table[min(sample, len(self._action_noise_table) - 1)]
+            for k, (i, _) in enumerate(self._action_noise):
+                u[i] += row[k]
+        if self._n_profiles:
+            u[n:] = self._profile_inputs[min(sample, len(self._profile_inputs) - 1)].tolist()
         return u
+
+    def _discrete_row(self, action: Any, sample: int) -> list[float]:
+        try:
+            index = int(action)
+        except (TypeError, ValueError):
+            raise self._bad_action(action, sample) from None
+        if index != action or not 0 <= index < len(self._table_rows):
+            raise self._bad_action(action, sample)
+        return self._table_rows[index]
 
     def _bad_action(self, action: Any, sample: int) -> BridgeError:
         return BridgeError(
@@ -160,19 +186,17 @@ class Task:
     # -- termination -------------------------------------------------------------------------------
     def _build_termination(self) -> None:
         bounds = self.experiment.termination.bounds
-        self._term_names = tuple(bounds)
-        self._term_idx = np.array([self._index[n] for n in bounds], dtype=np.intp)
-        self._term_lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds.values()])
-        self._term_hi = np.array([np.inf if b[1] is None else b[1] for b in bounds.values()])
+        self._term = [
+            (name, self._index[name], -np.inf if lo is None else lo, np.inf if hi is None else hi)
+            for name, (lo, hi) in bounds.items()
+        ]
 
-    def termination_reason(self, signals: FloatArray) -> str | None:
-        if not len(self._term_idx):
-            return None
-        values = signals[self._term_idx]
-        outside = (values < self._term_lo) | (values > self._term_hi)
-        if not outside.any():
-            return None
-        return "bounds:" + self._term_names[int(np.argmax(outside))]
+    def termination_reason(self, signals: list[float]) -> str | None:
+        for name, i, lo, hi in self._term:
+            value = signals[i]
+            if not lo <= value <= hi:
+                return "bounds:" + name
+        return None
 
     # -- episode life cycle --------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
@@ -188,9 +212,13 @@ class Task:
         self._profile_inputs = np.column_stack(
             [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
         ) if profile_names else np.zeros((n + 1, 0))
-        self._inputs[len(self.action_inputs):] = self._profile_inputs[0] if profile_names else []
+        self._has_refs = bool(self.reference_names)
+        self._inputs[len(self.action_inputs):] = self._profile_inputs[0].tolist() if profile_names else []
         self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
         self._previous_inputs[:] = self._inputs
+        # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
+        self._action_noise_table = _noise_table(self._action_noise, rng, n + 1)
+        self.observer.new_episode(rng, n + 1)
         return spec
 
     def _start(self, name: str) -> float:
@@ -203,24 +231,25 @@ class Task:
     def n_samples(self) -> int:
         return self.episode.n_samples if self.episode is not None else 0
 
-    def initial_inputs(self) -> FloatArray:
+    def initial_inputs(self) -> list[float]:
         """Input values at t_0 before any action (start values, profiles at t_0)."""
-        return self._inputs.copy()
+        return list(self._inputs)
 
-    def fill_signals(self, outputs: FloatArray, sample: int) -> FloatArray:
-        s = self._signals
-        s[: self._n_out] = outputs
-        s[self._n_out : self._n_out + self._n_in] = self._inputs
-        s[self._n_out + self._n_in :] = self._refs[min(sample, len(self._refs) - 1)]
+    def fill_signals(self, outputs: list[float], sample: int) -> list[float]:
+        """The signal vector [outputs | inputs | references at t_sample] as a list."""
+        s = outputs + self._inputs
+        if self._has_refs:
+            s += self._refs[min(sample, len(self._refs) - 1)].tolist()
+        self._signals = s
         return s
 
-    def first_observation(self, outputs: FloatArray, rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    def first_observation(self, outputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
         signals = self.fill_signals(outputs, 0)
         self.reward.reset()
         return self.observer.reset(signals, self._inputs, rng)
 
     def step_result(
-        self, outputs: FloatArray, sample: int, fmu_terminated: bool, rng: np.random.Generator
+        self, outputs: list[float], sample: int, fmu_terminated: bool, rng: np.random.Generator
     ) -> tuple[npt.NDArray[np.float32], float, bool, bool, str | None]:
         """(observation, reward, terminated, truncated, reason) after the step into sample ``sample``."""
         signals = self.fill_signals(outputs, sample)
@@ -229,11 +258,11 @@ class Task:
             reason = "fmu" if self.experiment.termination.on_fmu_terminate else None
         terminated = reason is not None
         truncated = not terminated and (sample >= self.n_samples or fmu_terminated)
-        if fmu_terminated and not terminated:
-            reason = "fmu-truncated"
+        if truncated:
+            reason = "fmu-truncated" if fmu_terminated else "time"
         reward = self.reward(signals, self._inputs, self._previous_inputs, terminated)
         obs = self.observer.observe(signals, self._inputs, rng)
         return obs, reward, terminated, truncated, reason
 
     def signal_dict(self) -> dict[str, float]:
-        return dict(zip(self.signal_names, self._signals.tolist()))
+        return dict(zip(self.signal_names, self._signals))

@@ -327,6 +327,13 @@ class Model:
         """
         if not self._initialized or self.terminated or self._failed_status:
             self._refuse_step()
+        if n == 1 and self._me is None:  # one FMU step per sample: the common hot path
+            k = self.step_index
+            status = self._do_step(self.start_time_s + k * self.step_size_s, self.step_size_s)
+            if status > WARNING:
+                return self._step_failed(status)
+            self.step_index = k + 1
+            return False
         if self._me is not None:
             return self._advance_me(n)
         k, t0, h, do_step = self.step_index, self.start_time_s, self.step_size_s, self._do_step

@@ -28,7 +28,8 @@ _FLOAT, _INT, _BOOL = 0, 1, 2
 class _Block:
     """Variables of one FMI type: one get and one set call per sample."""
 
-    __slots__ = ("buf", "enums", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
+    __slots__ = ("_vrs", "buf", "enums", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
+    # ``vrs`` and ``ptr`` are integer addresses of ``_vrs`` and ``buf``, which the block keeps alive.
 
     def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
         backend = model._backend
@@ -36,11 +37,12 @@ class _Block:
         self.variables = variables
         self.index = np.asarray(index, dtype=np.intp)
         self.n = len(variables)
-        self.vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in variables))
+        self._vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in variables))
+        self.vrs = ctypes.addressof(self._vrs)
         self.buf = np.zeros(self.n, dtype=numpy_dtype(ctype))
-        self.ptr = self.buf.ctypes.data_as(ctypes.POINTER(ctype))
-        self.get = backend.accessor(variables[0].type, setter=False)
-        self.set = backend.accessor(variables[0].type, setter=True) if _settable(variables) else None
+        self.ptr = self.buf.ctypes.data
+        self.get = backend.fast_accessor(variables[0].type, setter=False)
+        self.set = backend.fast_accessor(variables[0].type, setter=True) if _settable(variables) else None
         # FMI 3.0 getters/setters take the number of values as a fifth argument.
         self.nargs = (self.n,) if backend.major == 3 else ()
         kind = variables[0].type
@@ -156,7 +158,7 @@ class SignalGroup:
                 raise self._shape_error(values) from exc
             self._write_direct(component, flat.tolist())
             return
-        status = block.set(component, block.vrs, block.n, self._cbuf, *block.nargs)
+        status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
         if status > WARNING:
             self._fail("set", block, status)
         if self._notify:

@@ -1,0 +1,87 @@
+"""FmuEnv.step vs the raw FMPy loop on the same FMU, in one run (medians of interleaved repeats).
+
+Run: python benchmarks/bench_env.py [--experiment NAME] [--steps N] [--repeats R]
+
+Both loops are driven by the same balancing controller, so episodes run their full 500 samples
+and resets weigh the same in both. The env does everything an RL step needs (action mapping,
+observation processing, reward, termination, info); the raw loop sets the input, steps and
+reads the outputs with FMPy's API.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+from common import RawFmpyLoop, fmt_us, interleaved, table
+
+from bridge.env import FmuEnv
+from bridge.examples import example_experiment
+from bridge.models import example_fmu
+
+OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
+GAINS = (1.0, 1.5, 30.0, 5.0)  # a stabilising state feedback for the cart-pole
+
+
+def push(y: list[float]) -> float:
+    """Force in N from the unscaled state (positive force tips the pole towards -theta)."""
+    return max(-10.0, min(10.0, sum(g * v for g, v in zip(GAINS, y))))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--steps", type=int, default=20_000)
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--experiment", default="cartpole_balance",
+                        help="cartpole_balance (discrete actions, raw observations) or cartpole_continuous "
+                             "(Box actions, scaled observations, sensor noise)")
+    args = parser.parse_args()
+
+    env = FmuEnv(example_experiment(args.experiment))
+    discrete = env.action_space.shape == ()
+    raw = RawFmpyLoop(example_fmu("cartpole", "2.0", "cs"), ["force"], OUTPUTS, 0.02,
+                      start={"theta0": 0.02})
+    episode = env.task.sample_times().size - 1
+
+    def env_loop(steps: int) -> None:
+        _, info = env.reset(seed=0)
+        y = info["outputs"].tolist()
+        for _ in range(steps):
+            force = push(y)
+            action = int(force > 0) if discrete else np.array([force / 10.0], dtype=np.float32)
+            _, _, terminated, truncated, info = env.step(action)
+            y = info["outputs"].tolist()
+            if terminated or truncated:
+                _, info = env.reset()
+                y = info["outputs"].tolist()
+
+    def raw_loop(steps: int) -> None:
+        done = 0
+        while done < steps:
+            raw.reset()
+            chunk = min(steps - done, episode)
+            raw.run(chunk, action=lambda y: [10.0 if push(y) > 0 else -10.0] if discrete else [push(y)])
+            done += chunk
+
+    rates = interleaved({"raw FMPy loop": raw_loop, "FmuEnv.step": env_loop}, args.steps, args.repeats)
+    ratio = rates["raw FMPy loop"] / rates["FmuEnv.step"]
+    print(f"experiment: {args.experiment} (FMI 2.0 CS, 1 FMU step per sample, {episode}-sample episodes), "
+          f"{args.steps} steps x {args.repeats} repeats, interleaved\n")
+    print(table([(n, f"{r:,.0f}", fmt_us(r)) for n, r in rates.items()], ("loop", "steps/s (median)", "us/step")))
+    print(f"\ncost ratio FmuEnv / raw FMPy loop: {ratio:.3f}  (target <= 1.25)")
+
+    samples = []
+    for _ in range(5):
+        start = time.perf_counter()
+        for i in range(2000):
+            env.reset(seed=i)
+        samples.append((time.perf_counter() - start) / 2000)
+    print(f"env.reset(seed=...) with per-episode randomisation: {statistics.median(samples) * 1e6:.1f} us (median)")
+    env.close()
+    raw.close()
+
+
+if __name__ == "__main__":
+    main()
