@@ -113,6 +113,74 @@ def models(
     console.print(table)
 
 
+ExperimentArg = Annotated[Path, typer.Argument(help="An experiment YAML file.")]
+VersionOpt = Annotated[str | None, typer.Option("--version", help="Env version (default: the file's).")]
+
+
+@app.command()
+def init(
+    fmu: Annotated[Path, typer.Argument(help="The .fmu to write a starting experiment for.")],
+    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the YAML.")] = Path("experiment.yaml"),
+    force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
+) -> None:
+    """Write a commented starting experiment from an FMU's model description."""
+    from bridge.errors import ConfigError
+    from bridge.init_config import starting_config
+
+    if output.exists() and not force:
+        raise ConfigError(f"{output} exists; pass --force to overwrite it")
+    output.write_text(starting_config(fmu, relative_to=output.parent))
+    console.print(f"wrote {output}; next: fmu-bridge check {output}")
+
+
+@app.command()
+def check(
+    experiment: ExperimentArg,
+    version: VersionOpt = None,
+    steps: Annotated[int, typer.Option(help="Sample steps to show.")] = 5,
+) -> None:
+    """Validate an experiment against its FMU, run Gymnasium's and SB3's env checkers, show a few steps."""
+    from bridge.checks import check_and_report
+
+    check_and_report(experiment, version=version, steps=steps, console=console)
+
+
+@app.command()
+def simulate(
+    experiment: ExperimentArg,
+    version: VersionOpt = None,
+    scenario: Annotated[str | None, typer.Option(help="Force this scenario for every episode.")] = None,
+    policy: Annotated[str, typer.Option(help="zero | random | constant:VALUE")] = "zero",
+    episodes: Annotated[int, typer.Option(min=1)] = 1,
+    seed: Annotated[int | None, typer.Option()] = 0,
+) -> None:
+    """Run open-loop episodes and print a table."""
+    from bridge.env import FmuEnv
+    from bridge.simulate import make_policy, run_episodes
+
+    with FmuEnv(experiment, version=version) as env:
+        results = run_episodes(env, make_policy(policy, env.task, seed), episodes, seed=seed,
+                               scenario=scenario, output_names=env.output_names)
+    names = list(results[0].final_outputs) if results else []
+    table = Table("episode", "scenario", "steps", "return", "end", "t [s]", *names, title=f"{experiment} ({policy})")
+    for r in results:
+        table.add_row(str(r.episode), r.scenario, str(r.steps), f"{r.episode_return:.3f}", r.reason or "",
+                      f"{r.time_s:g}", *(f"{r.final_outputs[n]:.4g}" for n in names))
+    console.print(table)
+
+
+@app.command()
+def scenarios(
+    experiment: ExperimentArg,
+    sample: Annotated[int, typer.Option(help="Draw this many episodes and show what each gets.")] = 0,
+    seed: Annotated[int, typer.Option()] = 0,
+) -> None:
+    """Show the scenarios of an experiment and, with --sample, what episodes will get."""
+    from bridge.checks import scenario_report
+
+    scenario_report(experiment, sample=sample, seed=seed, console=console)
+
+
 @app.command()
 def demo(
     model: Annotated[str, typer.Option(help="Bundled example model to simulate.")] = "cartpole",

@@ -155,14 +155,14 @@ class Expression:
         self._count = count
         self._where = where
 
-    def __call__(self, values: npt.NDArray[np.float64]) -> float:
-        """Evaluate with ``values[i]`` the value of ``names[i]``.
+    def __call__(self, values: npt.NDArray[np.float64] | list[float]) -> float:
+        """Evaluate with ``values[i]`` the value of ``names[i]`` (a list or a float array).
 
         Raises:
             BridgeError: an operation failed (``log(-1)``, division by zero, overflow) or the
                 result is not finite; the message names the operation and the input values.
         """
-        row: list[float] = values.tolist()
+        row: list[float] = values if isinstance(values, list) else values.tolist()
         if len(row) != self._count:
             raise BridgeError(
                 f"{self._where}: {self.text!r} expects {self._count} values (one per name), "

@@ -36,6 +36,18 @@ from typing import Any, Final
 
 from bridge.errors import BridgeError, ConfigError, DependencyMissing
 
+__all__ = [
+    "CFLAGS",
+    "FMI_VERSIONS",
+    "INTERFACES",
+    "ModelVariant",
+    "build_all",
+    "cache_dir",
+    "example_fmu",
+    "list_variants",
+    "model_names",
+]
+
 logger = logging.getLogger(__name__)
 
 FMI_VERSIONS: Final = ("1.0", "2.0", "3.0")

@@ -46,6 +46,7 @@ from bridge import models
 from bridge.errors import BridgeError, ConfigError, DependencyMissing
 
 VARIANTS = [(v.name, v.fmi_version, v.interface) for v in models.list_variants()]
+Fmus = dict[tuple[str, str, str], Path]
 ERROR, DISCARD = 3, 2
 STATE_NAMES = ("x", "x_dot", "theta", "theta_dot")
 
@@ -55,7 +56,7 @@ def variant_id(variant: tuple[str, str, str]) -> str:
 
 
 @pytest.fixture(scope="session")
-def fmus() -> dict[tuple[str, str, str], Path]:
+def fmus() -> Fmus:
     """Every example FMU, built once per session (or taken from the per-user cache)."""
     return dict(zip(VARIANTS, models.build_all(), strict=True))
 
@@ -75,8 +76,11 @@ class Slave:
         return "\n".join(message for _, _, message in self.log)
 
 
+OpenSlave = Callable[..., Slave]
+
+
 @pytest.fixture
-def open_slave(tmp_path: Path) -> Iterator[Callable[..., Slave]]:
+def open_slave(tmp_path: Path) -> Iterator[OpenSlave]:
     """Factory: extract and instantiate a CS FMU with a log-collecting logger; freed at teardown."""
     opened: list[Slave] = []
 
@@ -276,15 +280,13 @@ def ball_state(
 
 
 @pytest.mark.parametrize("variant", VARIANTS, ids=variant_id)
-def test_every_variant_passes_fmpy_validation(
-    fmus: dict[tuple[str, str, str], Path], variant: tuple[str, str, str]
-) -> None:
+def test_every_variant_passes_fmpy_validation(fmus: Fmus, variant: tuple[str, str, str]) -> None:
     assert validate_fmu(str(fmus[variant])) == []
 
 
 @pytest.mark.parametrize("variant", VARIANTS, ids=variant_id)
 def test_generated_c_value_references_match_model_description(
-    fmus: dict[tuple[str, str, str], Path], variant: tuple[str, str, str]
+    fmus: Fmus, variant: tuple[str, str, str]
 ) -> None:
     name, version, interface = variant
     with zipfile.ZipFile(fmus[variant]) as archive:
@@ -326,7 +328,7 @@ def cartpole_cs_case() -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("version", ["1.0", "2.0", "3.0"])
 def test_cartpole_cs_matches_solve_ivp(
-    fmus: dict[tuple[str, str, str], Path], version: str, cartpole_cs_case: tuple[np.ndarray, np.ndarray]
+    fmus: Fmus, version: str, cartpole_cs_case: tuple[np.ndarray, np.ndarray]
 ) -> None:
     signal, reference = cartpole_cs_case
     result = simulate_fmu(
@@ -343,7 +345,7 @@ def test_cartpole_cs_matches_solve_ivp(
 
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
-def test_cartpole_me_matches_solve_ivp(fmus: dict[tuple[str, str, str], Path], version: str) -> None:
+def test_cartpole_me_matches_solve_ivp(fmus: Fmus, version: str) -> None:
     # piecewise-constant force: FMPy stops its ME solver at the input discontinuities
     signal = input_signal([0.0, 0.5, 0.5, 1.0, 1.0, 1.5], force=[2.0, 2.0, -3.0, -3.0, 1.0, 1.0])
     result = simulate_fmu(
@@ -364,7 +366,7 @@ def test_cartpole_me_matches_solve_ivp(fmus: dict[tuple[str, str, str], Path], v
 
 @pytest.mark.parametrize("version", ["1.0", "2.0", "3.0"])
 def test_cartpole_rejects_step_sizes_outside_zero_to_one_second(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave], version: str
+    fmus: Fmus, open_slave: OpenSlave, version: str
 ) -> None:
     slave = open_slave(fmus["cartpole", version, "cs"])
     set_real(slave, "theta0", 0.1)
@@ -384,7 +386,7 @@ def test_cartpole_rejects_step_sizes_outside_zero_to_one_second(
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
 def test_cartpole_cs_requests_termination_beyond_track_limit(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave], version: str
+    fmus: Fmus, open_slave: OpenSlave, version: str
 ) -> None:
     slave = open_slave(fmus["cartpole", version, "cs"], logging_on=True)
     set_real(slave, "track_limit", 0.05)
@@ -403,9 +405,7 @@ def test_cartpole_cs_requests_termination_beyond_track_limit(
 
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
-def test_cartpole_me_terminates_at_the_track_limit(
-    fmus: dict[tuple[str, str, str], Path], version: str
-) -> None:
+def test_cartpole_me_terminates_at_the_track_limit(fmus: Fmus, version: str) -> None:
     result = simulate_fmu(
         str(fmus["cartpole", version, "me"]),
         stop_time=2.0,
@@ -418,9 +418,7 @@ def test_cartpole_me_terminates_at_the_track_limit(
     assert abs(result["x"][-1]) == pytest.approx(0.2, abs=1e-6)
 
 
-def test_cartpole_uses_out_of_range_force_unchanged_with_a_warning(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_cartpole_uses_out_of_range_force_unchanged_with_a_warning(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["cartpole", "2.0", "cs"], logging_on=True)
     initialize(slave)
     set_real(slave, "force", 20.0)  # beyond the declared max of 10 N: FMPy accepts the Warning status
@@ -430,9 +428,7 @@ def test_cartpole_uses_out_of_range_force_unchanged_with_a_warning(
     np.testing.assert_allclose(get_reals(slave, STATE_NAMES), expected[0], atol=1e-9)
 
 
-def test_fixed_parameter_cannot_change_after_initialization(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_fixed_parameter_cannot_change_after_initialization(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["cartpole", "3.0", "cs"])
     initialize(slave)
     with pytest.raises(FMICallException):
@@ -440,9 +436,7 @@ def test_fixed_parameter_cannot_change_after_initialization(
     assert "fixed parameter m_cart can only be set before initialization ends" in slave.log[-1][2]
 
 
-def test_invalid_parameter_is_rejected_at_initialization(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_invalid_parameter_is_rejected_at_initialization(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["cartpole", "2.0", "cs"])
     set_real(slave, "m_pole", 0.0)
     with pytest.raises(FMICallException):
@@ -452,7 +446,7 @@ def test_invalid_parameter_is_rejected_at_initialization(
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
 def test_fmu_state_restore_replays_the_trajectory_exactly(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave], version: str
+    fmus: Fmus, open_slave: OpenSlave, version: str
 ) -> None:
     slave = open_slave(fmus["cartpole", version, "cs"])
     set_real(slave, "theta0", 0.05)
@@ -494,9 +488,7 @@ def motor_signal() -> np.ndarray:
 
 
 @pytest.mark.parametrize("variant", [("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")], ids="-".join)
-def test_dcmotor_matches_matrix_exponential(
-    fmus: dict[tuple[str, str, str], Path], variant: tuple[str, str]
-) -> None:
+def test_dcmotor_matches_matrix_exponential(fmus: Fmus, variant: tuple[str, str]) -> None:
     version, interface = variant
     result = simulate_fmu(
         str(fmus["dcmotor", version, interface]),
@@ -516,7 +508,7 @@ def test_dcmotor_matches_matrix_exponential(
     np.testing.assert_allclose(result["torque"], DCMOTOR["K"] * result["current"], rtol=1e-12)
 
 
-def test_dcmotor_defaults_have_the_documented_time_constants(fmus: dict[tuple[str, str, str], Path]) -> None:
+def test_dcmotor_defaults_have_the_documented_time_constants(fmus: Fmus) -> None:
     description = read_model_description(str(fmus["dcmotor", "2.0", "cs"]))
     start = {v.name: float(v.start) for v in description.modelVariables if v.causality == "parameter"}
     assert {k: start[k] for k in DCMOTOR} == DCMOTOR
@@ -531,9 +523,7 @@ def test_dcmotor_defaults_have_the_documented_time_constants(fmus: dict[tuple[st
 
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
-def test_bouncing_ball_me_bounce_times_match_analytic(
-    fmus: dict[tuple[str, str, str], Path], version: str
-) -> None:
+def test_bouncing_ball_me_bounce_times_match_analytic(fmus: Fmus, version: str) -> None:
     result = simulate_fmu(
         str(fmus["bouncing_ball", version, "me"]),
         stop_time=3.0,
@@ -549,7 +539,7 @@ def test_bouncing_ball_me_bounce_times_match_analytic(
     assert result["h"][-1] == 0.0 and result["v"][-1] == 0.0  # at rest after the last bounce
 
 
-def test_bouncing_ball_cs_locates_contacts_analytically(fmus: dict[tuple[str, str, str], Path]) -> None:
+def test_bouncing_ball_cs_locates_contacts_analytically(fmus: Fmus) -> None:
     result = simulate_fmu(str(fmus["bouncing_ball", "2.0", "cs"]), stop_time=3.0, output_interval=0.03)
     expected = np.array([ball_state(t) for t in result["time"]])
     np.testing.assert_allclose(as_array(result, ["h", "v"]), expected, rtol=0, atol=1e-9)
@@ -575,9 +565,7 @@ FMI3_VALUES: dict[str, tuple[str, Any]] = {
 }
 
 
-def test_typed_fmi2_round_trips_every_type(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_typed_fmi2_round_trips_every_type(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["typed", "2.0", "cs"])
     fmu, vr = slave.fmu, slave.vr
     fmu.setupExperiment(startTime=0.0)
@@ -612,15 +600,13 @@ def test_typed_fmi2_round_trips_every_type(
     assert fmu.getReal([vr["real_scaled"], vr["real_integral"]]) == pytest.approx([3.75, 0.25])
     with pytest.raises(FMICallException):
         fmu.setInteger([vr["enum_in"]], [4])  # not an item of Mode
-    assert "is not an item of enum_in" in slave.log[-1][2]
+    assert "enum_in = 4 is not an item of its enumeration type (items 1..3)" in slave.log[-1][2]
     with pytest.raises(FMICallException):
         fmu.getReal([vr["integer_out"]])
     assert "its type is Integer" in slave.log[-1][2]
 
 
-def test_typed_fmi3_round_trips_every_type(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_typed_fmi3_round_trips_every_type(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["typed", "3.0", "cs"])
     fmu, vr = slave.fmu, slave.vr
     initialize(slave)
@@ -644,7 +630,7 @@ def test_typed_fmi3_round_trips_every_type(
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
 def test_typed_fail_at_step_returns_error_and_logs_why(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave], version: str
+    fmus: Fmus, open_slave: OpenSlave, version: str
 ) -> None:
     slave = open_slave(fmus["typed", version, "cs"])
     initialize(slave)
@@ -661,7 +647,7 @@ def test_typed_fail_at_step_returns_error_and_logs_why(
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])
 def test_typed_requests_termination_beyond_terminate_at_time(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave], version: str
+    fmus: Fmus, open_slave: OpenSlave, version: str
 ) -> None:
     slave = open_slave(fmus["typed", version, "cs"])
     set_real(slave, "terminate_at_time", 0.25)
@@ -671,9 +657,7 @@ def test_typed_requests_termination_beyond_terminate_at_time(
         assert slave.fmu.getRealStatus(fmi2LastSuccessfulTime) == pytest.approx(0.3)
 
 
-def test_typed_fmu_state_restores_strings(
-    fmus: dict[tuple[str, str, str], Path], open_slave: Callable[..., Slave]
-) -> None:
+def test_typed_fmu_state_restores_strings(fmus: Fmus, open_slave: OpenSlave) -> None:
     slave = open_slave(fmus["typed", "3.0", "cs"])
     fmu, vr = slave.fmu, slave.vr
     initialize(slave)
@@ -727,11 +711,13 @@ def test_missing_gcc_raises_dependency_missing(
         models.example_fmu("typed")
 
 
-def test_cache_is_reused_and_rebuilds_are_atomic(private_cache: Path) -> None:
+def test_cache_is_reused_and_rebuilds_are_atomic(fmus: Fmus, private_cache: Path) -> None:
+    built = fmus["typed", "2.0", "cs"]
+    private_cache.mkdir(parents=True)
+    shutil.copy2(built, private_cache / built.name)  # same sources, same key: a cache hit, no gcc run
     path = models.example_fmu("typed", "2.0", "cs")
-    assert path.parent == private_cache
-    built = path.stat().st_mtime_ns
-    assert models.example_fmu("typed", "2.0", "cs") == path and path.stat().st_mtime_ns == built
+    assert path == private_cache / built.name
+    cached = path.stat().st_mtime_ns
     broken: list[str] = []
 
     def read_while_rebuilding(stop: threading.Event) -> None:
@@ -744,12 +730,13 @@ def test_cache_is_reused_and_rebuilds_are_atomic(private_cache: Path) -> None:
     reader = threading.Thread(target=read_while_rebuilding, args=(stop,))
     reader.start()
     try:
-        rebuilt = [models.example_fmu("typed", "2.0", "cs", rebuild=True) for _ in range(2)]
+        rebuilt = models.example_fmu("typed", "2.0", "cs", rebuild=True)
     finally:
         stop.set()
         reader.join()
-    assert rebuilt == [path, path] and not broken
-    assert path.stat().st_mtime_ns != built
+    assert rebuilt == path and not broken
+    assert path.stat().st_mtime_ns != cached
+    assert validate_fmu(str(path)) == []
     assert sorted(p.name for p in private_cache.iterdir()) == [path.name]  # no temporary leftovers
 
 
@@ -759,12 +746,16 @@ def test_changed_sources_change_the_cache_key_and_gcc_errors_are_reported(
     root = tmp_path / "models"
     shutil.copytree(models._models_root(), root)
     monkeypatch.setattr(models, "_models_root", lambda: root)
-    first = models.example_fmu("typed", "2.0", "cs")
+
+    def key() -> str:
+        return models._cache_key(models._load_spec("typed"), "2.0", "cs")
+
+    original = key()
     source = root / "typed" / "model.c"
     source.write_text(source.read_text() + "\n/* a change */\n")
-    second = models.example_fmu("typed", "2.0", "cs")
-    assert first != second and first.exists() and second.exists()
+    assert key() != original
     source.write_text(source.read_text() + "\nthis is not C;\n")
     with pytest.raises(BridgeError, match=re.escape("gcc failed to build typed FMI 2.0 CS")) as excinfo:
         models.example_fmu("typed", "2.0", "cs")
     assert "error:" in str(excinfo.value) and "model.c" in str(excinfo.value)
+    assert list(private_cache.iterdir()) == []  # a failed build leaves nothing behind

@@ -69,6 +69,7 @@ class SignalGroup:
 
     def __init__(self, model: Model, variables: Sequence[Variable]) -> None:
         self._model = model
+        self._backend = model._backend
         self.variables = tuple(variables)
         self.names = tuple(v.name for v in variables)
         groups: dict[str, tuple[list[Variable], list[int]]] = {}
@@ -97,6 +98,15 @@ class SignalGroup:
 
     def read(self) -> FloatArray:
         """Current values as a new float64 array (booleans as 0/1)."""
+        if self._direct:  # inlined: this runs once per sample
+            block = self._blocks[0]
+            component = self._backend.component
+            if component is None:
+                raise self._no_instance()
+            status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
+            if status > WARNING:
+                self._fail("get", block, status)
+            return block.buf.copy()
         self._fetch()
         return self._values.copy()
 
@@ -106,7 +116,7 @@ class SignalGroup:
         out[:] = self._values
 
     def _fetch(self) -> None:
-        component = self._model._backend.component
+        component = self._backend.component
         if component is None:
             raise self._no_instance()
         for block in self._blocks:
@@ -118,7 +128,7 @@ class SignalGroup:
 
     def write(self, values: npt.ArrayLike) -> None:
         """Set all variables of the group (inputs or tunable parameters) in one call per type."""
-        component = self._model._backend.component
+        component = self._backend.component
         if component is None:
             raise self._no_instance()
         if self._direct:

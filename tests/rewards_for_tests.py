@@ -1,0 +1,21 @@
+"""Python hooks referenced as ``module:function`` by experiments in the tests."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from bridge.scenario import EpisodeSpec
+
+
+def half_current(signals: dict[str, float]) -> float:
+    return 0.5 * signals["current"]
+
+
+def heavier_rotor(spec: EpisodeSpec, rng: np.random.Generator) -> EpisodeSpec:
+    return spec.with_values(J=0.05)
+
+
+def load_after_5(step: int, time_s: float, signals: dict[str, Any]) -> dict[str, float] | None:
+    return {"load_torque": 0.25} if step >= 5 else None
