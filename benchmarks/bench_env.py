@@ -34,15 +34,17 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--repeats", type=int, default=7)
-    parser.add_argument("--experiment", default="cartpole_balance",
-                        help="cartpole_balance (discrete actions, raw observations) or cartpole_continuous "
-                             "(Box actions, scaled observations, sensor noise)")
+    parser.add_argument(
+        "--experiment",
+        default="cartpole_balance",
+        help="cartpole_balance (discrete actions, raw observations) or cartpole_continuous "
+        "(Box actions, scaled observations, sensor noise)",
+    )
     args = parser.parse_args()
 
     env = FmuEnv(example_experiment(args.experiment))
     discrete = env.action_space.shape == ()
-    raw = RawFmpyLoop(example_fmu("cartpole", "2.0", "cs"), ["force"], OUTPUTS, 0.02,
-                      start={"theta0": 0.02})
+    raw = RawFmpyLoop(example_fmu("cartpole", "2.0", "cs"), ["force"], OUTPUTS, 0.02, start={"theta0": 0.02})
     episode = env.task.sample_times().size - 1
 
     def env_loop(steps: int) -> None:
@@ -67,9 +69,15 @@ def main() -> None:
 
     rates = interleaved({"raw FMPy loop": raw_loop, "FmuEnv.step": env_loop}, args.steps, args.repeats)
     ratio = rates["raw FMPy loop"] / rates["FmuEnv.step"]
-    print(f"experiment: {args.experiment} (FMI 2.0 CS, 1 FMU step per sample, {episode}-sample episodes), "
-          f"{args.steps} steps x {args.repeats} repeats, interleaved\n")
-    print(table([(n, f"{r:,.0f}", fmt_us(r)) for n, r in rates.items()], ("loop", "steps/s (median)", "us/step")))
+    print(
+        f"experiment: {args.experiment} (FMI 2.0 CS, 1 FMU step per sample, {episode}-sample episodes), "
+        f"{args.steps} steps x {args.repeats} repeats, interleaved\n"
+    )
+    print(
+        table(
+            [(n, f"{r:,.0f}", fmt_us(r)) for n, r in rates.items()], ("loop", "steps/s (median)", "us/step")
+        )
+    )
     print(f"\ncost ratio FmuEnv / raw FMPy loop: {ratio:.3f}  (target <= 1.25)")
 
     samples = []
@@ -78,7 +86,10 @@ def main() -> None:
         for i in range(2000):
             env.reset(seed=i)
         samples.append((time.perf_counter() - start) / 2000)
-    print(f"env.reset(seed=...) with per-episode randomisation: {statistics.median(samples) * 1e6:.1f} us (median)")
+    print(
+        "env.reset(seed=...) with per-episode randomisation: "
+        f"{statistics.median(samples) * 1e6:.1f} us (median)"
+    )
     env.close()
     raw.close()
 

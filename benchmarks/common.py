@@ -42,13 +42,23 @@ def interleaved(named: dict[str, Callable[[int], None]], steps: int, repeats: in
 class RawFmpyLoop:
     """The loop a user writes with FMPy alone: setReal, doStep, getReal per step."""
 
-    def __init__(self, fmu_path: Path, inputs: list[str], outputs: list[str], step_size_s: float,
-                 start: dict[str, Any] | None = None) -> None:
+    def __init__(
+        self,
+        fmu_path: Path,
+        inputs: list[str],
+        outputs: list[str],
+        step_size_s: float,
+        start: dict[str, Any] | None = None,
+    ) -> None:
         md = read_model_description(str(fmu_path))
         refs = {v.name: v.valueReference for v in md.modelVariables}
         self._unzip = archive.acquire(fmu_path)
-        self.fmu = FMU2Slave(guid=md.guid, unzipDirectory=str(self._unzip),
-                             modelIdentifier=md.coSimulation.modelIdentifier, instanceName="raw")
+        self.fmu = FMU2Slave(
+            guid=md.guid,
+            unzipDirectory=str(self._unzip),
+            modelIdentifier=md.coSimulation.modelIdentifier,
+            instanceName="raw",
+        )
         self.fmu.instantiate()
         self._start = start or {}
         self._in = [refs[n] for n in inputs]

@@ -34,7 +34,9 @@ err_console = Console(stderr=True)
 
 @app.callback()
 def _root(
-    verbose: Annotated[int, typer.Option("--verbose", "-v", count=True, help="More log output (-v, -vv).")] = 0,
+    verbose: Annotated[
+        int, typer.Option("--verbose", "-v", count=True, help="More log output (-v, -vv).")
+    ] = 0,
 ) -> None:
     level = logging.WARNING - 10 * min(verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
@@ -120,7 +122,9 @@ VersionOpt = Annotated[str | None, typer.Option("--version", help="Env version (
 @app.command()
 def init(
     fmu: Annotated[Path, typer.Argument(help="The .fmu to write a starting experiment for.")],
-    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the YAML.")] = Path("experiment.yaml"),
+    output: Annotated[Path, typer.Option("--output", "-o", help="Where to write the YAML.")] = Path(
+        "experiment.yaml"
+    ),
     force: Annotated[bool, typer.Option("--force", help="Overwrite an existing file.")] = False,
 ) -> None:
     """Write a commented starting experiment from an FMU's model description."""
@@ -159,13 +163,28 @@ def simulate(
     from bridge.simulate import make_policy, run_episodes
 
     with FmuEnv(experiment, version=version) as env:
-        results = run_episodes(env, make_policy(policy, env.task, seed), episodes, seed=seed,
-                               scenario=scenario, output_names=env.output_names)
+        results = run_episodes(
+            env,
+            make_policy(policy, env.task, seed),
+            episodes,
+            seed=seed,
+            scenario=scenario,
+            output_names=env.output_names,
+        )
     names = list(results[0].final_outputs) if results else []
-    table = Table("episode", "scenario", "steps", "return", "end", "t [s]", *names, title=f"{experiment} ({policy})")
+    table = Table(
+        "episode", "scenario", "steps", "return", "end", "t [s]", *names, title=f"{experiment} ({policy})"
+    )
     for r in results:
-        table.add_row(str(r.episode), r.scenario, str(r.steps), f"{r.episode_return:.3f}", r.reason or "",
-                      f"{r.time_s:g}", *(f"{r.final_outputs[n]:.4g}" for n in names))
+        table.add_row(
+            str(r.episode),
+            r.scenario,
+            str(r.steps),
+            f"{r.episode_return:.3f}",
+            r.reason or "",
+            f"{r.time_s:g}",
+            *(f"{r.final_outputs[n]:.4g}" for n in names),
+        )
     console.print(table)
 
 

@@ -63,7 +63,9 @@ class Distribution(Strict):
 
     @property
     def kind(self) -> str:
-        return next(k for k in ("uniform", "normal", "truncnormal", "lognormal", "choice") if getattr(self, k))
+        return next(
+            k for k in ("uniform", "normal", "truncnormal", "lognormal", "choice") if getattr(self, k)
+        )
 
 
 # -- time profiles ----------------------------------------------------------------------------
@@ -101,8 +103,10 @@ class TableSpec(Strict):
     @model_validator(mode="after")
     def _table(self) -> TableSpec:
         if len(self.time) != len(self.value) or not self.time:
-            raise ValueError(f"table: time and value need the same non-zero length, got {len(self.time)} "
-                             f"and {len(self.value)}")
+            raise ValueError(
+                f"table: time and value need the same non-zero length, got {len(self.time)} "
+                f"and {len(self.value)}"
+            )
         if any(b < a for a, b in zip(self.time, self.time[1:])):
             raise ValueError("table: time must be non-decreasing")
         return self
@@ -147,7 +151,9 @@ PROFILE_KINDS = ("constant", "step", "ramp", "sine", "table", "csv")
 
 # -- model --------------------------------------------------------------------------------------
 class ModelSection(Strict):
-    fmu: str = Field(description="Path to the .fmu, or example:NAME[:FMI version][:cs|me] for a bundled model")
+    fmu: str = Field(
+        description="Path to the .fmu, or example:NAME[:FMI version][:cs|me] for a bundled model"
+    )
     interface: Literal["auto", "cs", "me"] = "auto"
     step_size: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     sampling_time: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
@@ -183,7 +189,9 @@ class ActionSection(Strict):
                 if any(len(row) != len(self.inputs) for row in self.table):
                     raise ValueError(f"each table row needs {len(self.inputs)} values (one per input)")
             elif len(self.inputs) != 1 or self.inputs[0] not in self.levels:
-                raise ValueError("discrete actions need levels for their one input, or a table of input vectors")
+                raise ValueError(
+                    "discrete actions need levels for their one input, or a table of input vectors"
+                )
         if self.type == "multi_discrete" and set(self.levels) != set(self.inputs):
             raise ValueError(f"multi_discrete needs levels for every input {self.inputs}")
         for name, levels in self.levels.items():
@@ -248,7 +256,9 @@ class RewardTerm(Strict):
         if isinstance(data, dict):
             unknown = [k for k in data if k not in REWARD_TERMS]
             if unknown:
-                raise ValueError(f"unknown reward term {unknown[0]!r}; known terms: {', '.join(REWARD_TERMS)}")
+                raise ValueError(
+                    f"unknown reward term {unknown[0]!r}; known terms: {', '.join(REWARD_TERMS)}"
+                )
             if len(data) != 1:
                 raise ValueError(f"each reward term has exactly one key, got {list(data)}")
         return data
@@ -314,7 +324,9 @@ class Scenario(Strict):
     description: str = ""
     parameters: dict[str, Scalar] = {}
     start_values: dict[str, Scalar] = {}
-    inputs: dict[str, Profile] = Field(default={}, description="time profiles of FMU inputs the agent does not drive")
+    inputs: dict[str, Profile] = Field(
+        default={}, description="time profiles of FMU inputs the agent does not drive"
+    )
     references: dict[str, Profile] = {}
     randomization: Randomization = Randomization()
     episode_duration: Annotated[float, Field(gt=0)] | None = None
@@ -381,9 +393,11 @@ class Experiment(Strict):
         if self.version not in versions:
             raise ValueError(f"version {self.version!r} is not defined; defined: {sorted(versions)}")
         names = set(self.scenarios)
-        for key, listed in (("schedule.training", self.schedule.training),
-                            ("schedule.evaluation", self.schedule.evaluation),
-                            ("schedule.weights", list(self.schedule.weights))):
+        for key, listed in (
+            ("schedule.training", self.schedule.training),
+            ("schedule.evaluation", self.schedule.evaluation),
+            ("schedule.weights", list(self.schedule.weights)),
+        ):
             missing = [n for n in listed if n not in names]
             if missing:
                 raise ValueError(f"{key}: {missing} are not scenarios; defined: {sorted(names) or 'none'}")
@@ -423,11 +437,15 @@ def load_experiment(path: str | Path, *, version: str | None = None) -> Experime
     except yaml.YAMLError as exc:
         raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
     if not isinstance(data, dict):
-        raise ConfigError(f"{file}: expected a mapping of sections (model, actions, ...), got {type(data).__name__}")
+        raise ConfigError(
+            f"{file}: expected a mapping of sections (model, actions, ...), got {type(data).__name__}"
+        )
     return parse_experiment(data, source=file, version=version)
 
 
-def parse_experiment(data: dict[str, Any], *, source: Path | None = None, version: str | None = None) -> Experiment:
+def parse_experiment(
+    data: dict[str, Any], *, source: Path | None = None, version: str | None = None
+) -> Experiment:
     """Validate an experiment given as a dict (as read from YAML)."""
     try:
         experiment = Experiment.model_validate({**data, "source": source})

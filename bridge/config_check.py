@@ -19,7 +19,7 @@ from bridge.scenario import known_references, scenario_inputs
 
 
 def resolve_fmu(experiment: Experiment) -> Path:
-    """The FMU file of ``model.fmu``: a path (relative to the experiment file) or ``example:NAME[:VER][:IF]``."""
+    """The FMU of ``model.fmu``: a path (relative to the experiment file) or ``example:NAME[:VER][:IF]``."""
     spec = experiment.model.fmu
     if spec.startswith("example:"):
         from bridge.models import example_fmu
@@ -75,10 +75,14 @@ def check_experiment(experiment: Experiment, info: ModelInfo | None = None) -> M
     return info
 
 
-def _unknown(key: str, name: str, names: Iterable[str], where: str, what: str = "a variable of the FMU") -> ConfigError:
+def _unknown(
+    key: str, name: str, names: Iterable[str], where: str, what: str = "a variable of the FMU"
+) -> ConfigError:
     names = sorted(names)
     close = difflib.get_close_matches(name, names, n=4, cutoff=0.5)
-    hint = f"did you mean {close}?" if close else f"{len(names)} are available; `fmu-bridge inspect` lists them"
+    hint = (
+        f"did you mean {close}?" if close else f"{len(names)} are available; `fmu-bridge inspect` lists them"
+    )
     return ConfigError(f"{key}: {name!r} is not {what}; {hint}{where}")
 
 
@@ -165,12 +169,19 @@ def _check_observations(exp: Experiment, variables: Mapping[str, Variable], wher
                 f"measurements: observe an output, or set observations.include_action: true{where}"
             )
         if not var.is_numeric:
-            raise ConfigError(f"observations.outputs: {name!r} is a {var.type} variable; observations are numeric{where}")
+            raise ConfigError(
+                f"observations.outputs: {name!r} is a {var.type} variable; observations are numeric{where}"
+            )
     references = known_references(exp)
     for name in [*obs.references, *obs.errors]:
         if name not in references:
-            raise _unknown("observations.references", name, references, where,
-                           "a reference defined by a scenario or randomization.references")
+            raise _unknown(
+                "observations.references",
+                name,
+                references,
+                where,
+                "a reference defined by a scenario or randomization.references",
+            )
         _every_scenario_defines(exp, name, where)
     for name in exp.noise.observations:
         if name not in obs.outputs:
@@ -185,12 +196,16 @@ def _check_observations(exp: Experiment, variables: Mapping[str, Variable], wher
 def _every_scenario_defines(exp: Experiment, reference: str, where: str) -> None:
     if reference in exp.randomization.references:
         return
-    missing = [n for n, sc in exp.scenarios.items()
-               if reference not in sc.references and reference not in sc.randomization.references]
+    missing = [
+        n
+        for n, sc in exp.scenarios.items()
+        if reference not in sc.references and reference not in sc.randomization.references
+    ]
     if missing or not exp.scenarios:
         raise ConfigError(
-            f"reference {reference!r} is used but scenarios {missing or ['(none defined)']} do not define it; "
-            f"give every scenario a references.{reference} profile or draw it in randomization.references{where}"
+            f"reference {reference!r} is used but scenarios {missing or ['(none defined)']} do not define "
+            f"it; give every scenario a references.{reference} profile or draw it in "
+            f"randomization.references{where}"
         )
 
 
@@ -202,8 +217,13 @@ def _check_reward_and_termination(
         if term.tracking is not None:
             _need(f"{key}.tracking.output", term.tracking.output, variables, where)
             if term.tracking.reference not in known_references(exp):
-                raise _unknown(f"{key}.tracking.reference", term.tracking.reference, known_references(exp),
-                               where, "a reference defined by the scenarios")
+                raise _unknown(
+                    f"{key}.tracking.reference",
+                    term.tracking.reference,
+                    known_references(exp),
+                    where,
+                    "a reference defined by the scenarios",
+                )
             _every_scenario_defines(exp, term.tracking.reference, where)
         for kind in ("effort", "rate"):
             spec = getattr(term, kind)

@@ -54,15 +54,21 @@ class FmuEnv(gym.Env[ObsType, Any]):
     ) -> None:
         self.experiment = exp = as_experiment(experiment, version)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ConfigError(f"render_mode {render_mode!r} is not supported; use one of {self.metadata['render_modes']}")
+            raise ConfigError(
+                f"render_mode {render_mode!r} is not supported; use one of {self.metadata['render_modes']}"
+            )
         self.render_mode = render_mode
         self.fmu_path = resolve_fmu(exp)
         info = check_experiment(exp, read_model_info(self.fmu_path))
         self.timing = t = timing(exp, info)
         self.task = Task(exp, info.variables, t)
         self.model = Model(
-            self.fmu_path, step_size_s=t.step_size_s, start_time_s=t.start_time_s,
-            interface=exp.model.interface, reset_policy=exp.model.reset_policy, tolerance=exp.model.tolerance,
+            self.fmu_path,
+            step_size_s=t.step_size_s,
+            start_time_s=t.start_time_s,
+            interface=exp.model.interface,
+            reset_policy=exp.model.reset_policy,
+            tolerance=exp.model.tolerance,
         )
         try:
             self._inputs = self.model.signals(self.task.input_names, writable=True, role="input")
@@ -82,7 +88,9 @@ class FmuEnv(gym.Env[ObsType, Any]):
         self._last_outputs = np.zeros(len(self.output_names))
 
     # -- Gymnasium API ----------------------------------------------------------------------------
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[ObsType, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[ObsType, dict[str, Any]]:
         super().reset(seed=seed)
         if seed is not None:
             self.task.sampler.restart()
@@ -94,8 +102,13 @@ class FmuEnv(gym.Env[ObsType, Any]):
         obs = self.task.first_observation(outputs.tolist(), self.np_random)
         self._sample, self._done = 0, False
         self._record(outputs, reset=True)
-        info = {"time_s": self.model.time_s, "step": 0, "outputs": outputs,
-                "scenario": spec.scenario, "drawn": dict(spec.drawn)}
+        info = {
+            "time_s": self.model.time_s,
+            "step": 0,
+            "outputs": outputs,
+            "scenario": spec.scenario,
+            "drawn": dict(spec.drawn),
+        }
         return obs, info
 
     def step(self, action: Any) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
@@ -150,12 +163,14 @@ class FmuEnv(gym.Env[ObsType, Any]):
         if "x" in names and "theta" in names:
             limit = self.experiment.termination.bounds.get("x", (None, 2.4))[1] or 2.4
             return render.draw_cartpole(
-                float(self._last_outputs[names.index("x")]), float(self._last_outputs[names.index("theta")]),
+                float(self._last_outputs[names.index("x")]),
+                float(self._last_outputs[names.index("theta")]),
                 x_limit=float(limit),
             )
         trace = np.array(self._trace)
-        return render.plot_signals(trace[:, 0], {n: trace[:, i + 1] for i, n in enumerate(names)},
-                                   title=self.experiment.name)
+        return render.plot_signals(
+            trace[:, 0], {n: trace[:, i + 1] for i, n in enumerate(names)}, title=self.experiment.name
+        )
 
 
 def make(experiment: Experiment | str | Path, **kwargs: Any) -> FmuEnv:

@@ -47,13 +47,15 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
     step = de.step_size_s or 0.01
     duration = (de.stop_time_s or 10.0) - (de.start_time_s or 0.0)
     return [
-        f"# Experiment for {info.model_name} (FMI {info.fmi_version}, {'/'.join(i.upper() for i in info.interfaces)})",
+        f"# Experiment for {info.model_name} (FMI {info.fmi_version}, "
+        f"{'/'.join(i.upper() for i in info.interfaces)})",
         f"# written by `fmu-bridge init` from {shown.name}; check it with `fmu-bridge check <this file>`.",
         f"name: {info.model_name.lower()}",
         "",
         "model:",
         f"  fmu: {shown}",
-        f"  step_size: {step!r}          # FMU step, s" + ("" if de.step_size_s else "  (TODO: the FMU declares none)"),
+        f"  step_size: {step!r}          # FMU step, s"
+        + ("" if de.step_size_s else "  (TODO: the FMU declares none)"),
         f"  sampling_time: {step!r}      # one agent sample; a whole multiple of step_size",
         f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
         "  reset_policy: auto          # restore | reset | reinstantiate | auto",
@@ -63,8 +65,12 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
 def _actions(inputs: list[Variable]) -> list[str]:
     if not inputs:
         return ["# The FMU has no numeric inputs: an agent cannot act on it.", "actions:", "  inputs: []", ""]
-    lines = ["actions:", f"  inputs: [{', '.join(v.name for v in inputs)}]",
-             "  type: continuous            # the agent acts in [-1, 1], mapped onto [low, high]", "  low:"]
+    lines = [
+        "actions:",
+        f"  inputs: [{', '.join(v.name for v in inputs)}]",
+        "  type: continuous            # the agent acts in [-1, 1], mapped onto [low, high]",
+        "  low:",
+    ]
     for v in inputs:
         todo = "" if v.min is not None and math.isfinite(v.min) else "  # TODO: the FMU declares no min"
         lines.append(f"    {v.name}: {_num(v.min) if todo == '' else '-1.0'}{todo or _comment(v)}")
@@ -77,8 +83,11 @@ def _actions(inputs: list[Variable]) -> list[str]:
 
 def _observations(outputs: list[Variable]) -> list[str]:
     lines = ["observations:", f"  outputs: [{', '.join(v.name for v in outputs)}]"]
-    lines += ["  scale: auto                 # from the FMU's min/max or nominal; or {name: [low, high]}",
-              "  history: 1                  # stack the last k samples", ""]
+    lines += [
+        "  scale: auto                 # from the FMU's min/max or nominal; or {name: [low, high]}",
+        "  history: 1                  # stack the last k samples",
+        "",
+    ]
     for v in outputs:
         lines.insert(-3, f"  #   {v.name}{_comment(v).replace('  #', ':')}")
     return lines
@@ -91,7 +100,7 @@ def _reward_and_termination(outputs: list[Variable]) -> list[str]:
         "  terms:",
         "    - alive: 1.0",
         f"    # - signal: {{name: {first}, norm: squared, weight: 1.0}}",
-        f"  # expression: \"1.0 - abs({first})\"",
+        f'  # expression: "1.0 - abs({first})"',
         "  termination_penalty: 0.0",
         "",
         "termination:",
@@ -102,12 +111,17 @@ def _reward_and_termination(outputs: list[Variable]) -> list[str]:
 
 
 def _parameters(info: ModelInfo) -> list[str]:
-    params = [v for v in info.variables.values()
-              if v.causality == "parameter" and v.variability != "constant" and v.settable_at_init]
+    params = [
+        v
+        for v in info.variables.values()
+        if v.causality == "parameter" and v.variability != "constant" and v.settable_at_init
+    ]
     if not params:
         return [""]
-    lines = ["  parameters: {}              # values for every episode; draw them per episode under",
-             "                              # randomization.parameters. The FMU's parameters and defaults:"]
+    lines = [
+        "  parameters: {}              # values for every episode; draw them per episode under",
+        "                              # randomization.parameters. The FMU's parameters and defaults:",
+    ]
     for v in params:
         value = v.start if not isinstance(v.start, str) else repr(v.start)
         lines.append(f"  #   {v.name}: {value}{_comment(v)}")

@@ -8,7 +8,16 @@ from typing import Any
 from bridge.fmu import ModelInfo, read_model_info
 
 VARIABLE_COLUMNS = (
-    "name", "causality", "variability", "type", "start", "min", "max", "nominal", "unit", "description",
+    "name",
+    "causality",
+    "variability",
+    "type",
+    "start",
+    "min",
+    "max",
+    "nominal",
+    "unit",
+    "description",
 )
 
 

@@ -40,7 +40,8 @@ class ObservationBuilder:
         self._errors = [(index[r], index[o]) for r, o in section.errors.items()]
         self._n_action = len(task.action_inputs) if section.include_action else 0
         self.names = (
-            direct + [f"{r}-{o}" for r, o in section.errors.items()]
+            direct
+            + [f"{r}-{o}" for r, o in section.errors.items()]
             + [f"action:{a}" for a in task.action_inputs[: self._n_action]]
         )
         self.dim = len(self.names)
@@ -66,9 +67,14 @@ class ObservationBuilder:
         var = self._variables.get(name)
         if var is not None and _finite(var.min, var.max) and var.max > var.min:  # type: ignore[operator]
             return (var.max + var.min) / 2, (var.max - var.min) / 2  # type: ignore[operator]
-        low, high = self._bounds.get(name, (None, None))
-        if _finite(low, high) and high > low:  # type: ignore[operator]
-            return (high + low) / 2, (high - low) / 2  # type: ignore[operator]
+        bound_low, bound_high = self._bounds.get(name, (None, None))
+        if (
+            bound_low is not None
+            and bound_high is not None
+            and _finite(bound_low, bound_high)
+            and (bound_high > bound_low)
+        ):
+            return (bound_high + bound_low) / 2, (bound_high - bound_low) / 2
         if var is not None and var.nominal and math.isfinite(var.nominal):
             return 0.0, abs(var.nominal)
         return 0.0, 1.0
@@ -95,8 +101,10 @@ class ObservationBuilder:
         which dominate for the handful of values an observation has.
         """
         noise_slot = {i: k for k, (i, _) in enumerate(self._noise)}
-        raw = [f"s[{i}]" + (f" + nz[{noise_slot[p]}]" if p in noise_slot else "")
-               for p, i in enumerate(self._direct_list)]
+        raw = [
+            f"s[{i}]" + (f" + nz[{noise_slot[p]}]" if p in noise_slot else "")
+            for p, i in enumerate(self._direct_list)
+        ]
         raw += [f"s[{r}] - s[{o}]" for r, o in self._errors]
         raw += [f"u[{j}]" for j in range(self._n_action)]
         terms = [f"({x} - {c!r}) * {k!r}" for x, c, k in zip(raw, self._centre_list, self._inv_list)]
@@ -104,7 +112,7 @@ class ObservationBuilder:
         if clip is not None:
             terms = [f"min(max({t}, {-clip!r}), {clip!r})" for t in terms]
         source = f"lambda s, u, nz: [{', '.join(terms)}]"
-        return eval(source, {"__builtins__": {}, "min": min, "max": max})  # type: ignore[no-any-return]  # noqa: S307
+        return eval(source, {"__builtins__": {}, "min": min, "max": max})  # type: ignore[no-any-return]
 
     # -- per sample ---------------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, rows: int) -> None:
@@ -121,12 +129,16 @@ class ObservationBuilder:
             return self._compiled(signals, inputs, row)
         return self._compiled(signals, inputs, _NO_NOISE)
 
-    def reset(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    def reset(
+        self, signals: list[float], inputs: list[float], rng: np.random.Generator
+    ) -> npt.NDArray[np.float32]:
         first = self._single(signals, inputs, rng)
         self._history = deque([first] * self._section.history, maxlen=self._section.history)
         return self._stack()
 
-    def observe(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    def observe(
+        self, signals: list[float], inputs: list[float], rng: np.random.Generator
+    ) -> npt.NDArray[np.float32]:
         if self._section.history == 1:
             return np.array(self._single(signals, inputs, rng), dtype=np.float32)
         self._history.append(self._single(signals, inputs, rng))

@@ -31,7 +31,9 @@ def reward_signal_names(section: RewardSection, known: set[str]) -> list[str]:
     if section.expression:
         from bridge.expr import compile_expression
 
-        names += list(compile_expression(section.expression, sorted(known), where="reward.expression").names_used)
+        names += list(
+            compile_expression(section.expression, sorted(known), where="reward.expression").names_used
+        )
     return names
 
 
@@ -52,7 +54,10 @@ def _term(term: RewardTerm, index: dict[str, int], action_inputs: Sequence[str])
         o, r, f = index[t.output], index[t.reference], _norm(t.norm, t.weight, t.scale)
         return lambda s, u, p: f(s[o] - s[r])
     if term.effort is not None:
-        i, f = action_inputs.index(term.effort.name), _norm(term.effort.norm, term.effort.weight, term.effort.scale)
+        i, f = (
+            action_inputs.index(term.effort.name),
+            _norm(term.effort.norm, term.effort.weight, term.effort.scale),
+        )
         return lambda s, u, p: f(u[i])
     if term.rate is not None:
         i, f = action_inputs.index(term.rate.name), _norm(term.rate.norm, term.rate.weight, term.rate.scale)
@@ -65,8 +70,14 @@ def _term(term: RewardTerm, index: dict[str, int], action_inputs: Sequence[str])
 class Reward:
     """``reward(signals, inputs, previous_inputs, terminated) -> float``."""
 
-    def __init__(self, terms: list[Term], expression: Any, user: Callable[..., Any] | None,
-                 names: Sequence[str], penalty: float) -> None:
+    def __init__(
+        self,
+        terms: list[Term],
+        expression: Any,
+        user: Callable[..., Any] | None,
+        names: Sequence[str],
+        penalty: float,
+    ) -> None:
         self._terms = terms
         self._expression = expression
         self._user = user
@@ -76,7 +87,9 @@ class Reward:
     def reset(self) -> None:
         """Nothing is carried between episodes today; kept for stateful rewards."""
 
-    def __call__(self, signals: list[float], inputs: list[float], previous: list[float], terminated: bool) -> float:
+    def __call__(
+        self, signals: list[float], inputs: list[float], previous: list[float], terminated: bool
+    ) -> float:
         total = 0.0
         for term in self._terms:
             total += term(signals, inputs, previous)

@@ -110,9 +110,7 @@ def _read_csv(path: Path, time_column: str, column: str) -> tuple[FloatArray, Fl
         raise ConfigError(f"profile csv: cannot read {path}: {exc.strerror}") from exc
     if not rows or time_column not in rows[0] or column not in rows[0]:
         found = list(rows[0]) if rows else []
-        raise ConfigError(
-            f"profile csv: {path} needs columns {time_column!r} and {column!r}; it has {found}"
-        )
+        raise ConfigError(f"profile csv: {path} needs columns {time_column!r} and {column!r}; it has {found}")
     try:
         t = np.array([float(r[time_column]) for r in rows])
         v = np.array([float(r[column]) for r in rows])
@@ -181,7 +179,12 @@ class ScenarioSampler:
             raise ConfigError(f"scenario {name!r} is not defined; defined: {sorted(self._scenarios)}")
         sc = self._scenarios[name]
         model = self._exp.model
-        values: dict[str, Any] = {**model.parameters, **model.start_values, **sc.parameters, **sc.start_values}
+        values: dict[str, Any] = {
+            **model.parameters,
+            **model.start_values,
+            **sc.parameters,
+            **sc.start_values,
+        }
         drawn: dict[str, float] = {}
         for rand in (self._exp.randomization, sc.randomization):
             for section in (rand.parameters, rand.start_values):

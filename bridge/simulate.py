@@ -64,8 +64,15 @@ def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
     raise ConfigError(f"--policy {spec!r} is unknown; use zero, random or constant:VALUE")
 
 
-def run_episodes(env: gym.Env[Any, Any], policy: Policy, episodes: int, *, seed: int | None = None,
-                 scenario: str | None = None, output_names: tuple[str, ...] = ()) -> list[EpisodeResult]:
+def run_episodes(
+    env: gym.Env[Any, Any],
+    policy: Policy,
+    episodes: int,
+    *,
+    seed: int | None = None,
+    scenario: str | None = None,
+    output_names: tuple[str, ...] = (),
+) -> list[EpisodeResult]:
     """Run ``episodes`` episodes of ``policy`` and summarise each."""
     results = []
     for i in range(episodes):

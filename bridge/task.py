@@ -20,12 +20,11 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from bridge.config import Experiment
+from bridge.config import Distribution, Experiment
 from bridge.config_check import Timing, action_bounds
 from bridge.errors import BridgeError, ConfigError
 from bridge.fmu import Variable
 from bridge.rewards import build_reward
-from bridge.config import Distribution
 from bridge.scenario import EpisodeSpec, ScenarioSampler, draw_many, scenario_inputs
 
 FloatArray = npt.NDArray[np.float64]
@@ -37,14 +36,18 @@ def load_callable(path: str, key: str) -> Callable[..., Any]:
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
-        raise ConfigError(f"{key}: cannot import module {module_name!r} ({exc}); is it on PYTHONPATH?") from exc
+        raise ConfigError(
+            f"{key}: cannot import module {module_name!r} ({exc}); is it on PYTHONPATH?"
+        ) from exc
     fn = getattr(module, attr, None)
     if not callable(fn):
         raise ConfigError(f"{key}: {module_name} has no callable {attr!r}")
     return fn  # type: ignore[no-any-return]
 
 
-def _noise_table(entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int) -> list[list[float]]:
+def _noise_table(
+    entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int
+) -> list[list[float]]:
     if not entries:
         return []
     return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
@@ -78,7 +81,9 @@ class Task:
 
     # -- layout ------------------------------------------------------------------------------------
     @staticmethod
-    def _signal_sets(exp: Experiment, variables: Mapping[str, Variable]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    def _signal_sets(
+        exp: Experiment, variables: Mapping[str, Variable]
+    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
         from bridge.rewards import reward_signal_names
         from bridge.scenario import known_references
 
@@ -100,8 +105,11 @@ class Task:
 
     def sample_times(self, duration_s: float | None = None) -> FloatArray:
         """Times t_j of the samples of an episode (j = 0..N)."""
-        n = int(round((duration_s or self.episode_duration_s) / self.timing.sampling_time_s + 1e-9))
-        return self.timing.start_time_s + np.arange(n + 1) * self.timing.sampling_time_s
+        n = round((duration_s or self.episode_duration_s) / self.timing.sampling_time_s + 1e-9)
+        times: FloatArray = (
+            self.timing.start_time_s + np.arange(n + 1, dtype=np.float64) * self.timing.sampling_time_s
+        )
+        return times
 
     # -- actions -----------------------------------------------------------------------------------
     def _build_actions(self) -> None:
@@ -150,7 +158,9 @@ class Task:
             u[:n] = self._discrete_row(action, sample)
         else:
             indices = np.asarray(action).reshape(-1)
-            if indices.shape[0] != n or not all(0 <= int(i) < len(lv) for i, lv in zip(indices, self._levels)):
+            if indices.shape[0] != n or not all(
+                0 <= int(i) < len(lv) for i, lv in zip(indices, self._levels)
+            ):
                 raise self._bad_action(action, sample)
             u[:n] = [float(lv[int(i)]) for i, lv in zip(indices, self._levels)]
         if self._action_noise:
@@ -206,14 +216,21 @@ class Task:
             spec = self._episode_hook(spec, rng) or spec
         self.episode = spec
         n = spec.n_samples
-        self._refs = np.column_stack([spec.references[r] for r in self.reference_names]) if self.reference_names \
+        self._refs = (
+            np.column_stack([spec.references[r] for r in self.reference_names])
+            if self.reference_names
             else np.zeros((n + 1, 0))
-        profile_names = self.input_names[len(self.action_inputs):]
-        self._profile_inputs = np.column_stack(
-            [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
-        ) if profile_names else np.zeros((n + 1, 0))
+        )
+        profile_names = self.input_names[len(self.action_inputs) :]
+        self._profile_inputs = (
+            np.column_stack(
+                [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
+            )
+            if profile_names
+            else np.zeros((n + 1, 0))
+        )
         self._has_refs = bool(self.reference_names)
-        self._inputs[len(self.action_inputs):] = self._profile_inputs[0].tolist() if profile_names else []
+        self._inputs[len(self.action_inputs) :] = self._profile_inputs[0].tolist() if profile_names else []
         self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
         self._previous_inputs[:] = self._inputs
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 
-
 DATA = Path(__file__).parent / "data"
 
 
@@ -86,8 +85,19 @@ def eta_ctrl_fmus() -> dict[str, Path]:
     found = {name: cache / Path(rel).name for name, rel in wanted.items()}
     if all(p.is_file() for p in found.values()):
         return found
-    cmd = [sys.executable, "-m", "pip", "download", "-q", "--no-deps", "--no-binary", ":all:",
-           "eta-ctrl==0.4.0", "-d", str(cache)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "pip",
+        "download",
+        "-q",
+        "--no-deps",
+        "--no-binary",
+        ":all:",
+        "eta-ctrl==0.4.0",
+        "-d",
+        str(cache),
+    ]
     try:
         subprocess.run(cmd, capture_output=True, timeout=180, check=True)
     except (subprocess.SubprocessError, OSError) as exc:

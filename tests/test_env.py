@@ -19,7 +19,9 @@ from bridge.errors import BridgeError
 from bridge.examples import GYM_IDS, example_experiment, example_names
 
 
-def run(env: FmuEnv, actions: Any, seed: int | None = 0, options: dict[str, Any] | None = None) -> dict[str, Any]:
+def run(
+    env: FmuEnv, actions: Any, seed: int | None = 0, options: dict[str, Any] | None = None
+) -> dict[str, Any]:
     obs, info = env.reset(seed=seed, options=options)
     observations, rewards, outputs = [obs], [], [info["outputs"]]
     for action in actions:
@@ -29,8 +31,13 @@ def run(env: FmuEnv, actions: Any, seed: int | None = 0, options: dict[str, Any]
         outputs.append(info["outputs"])
         if terminated or truncated:
             break
-    return {"obs": np.array(observations), "rewards": np.array(rewards), "outputs": np.array(outputs),
-            "info": info, "scenario": info.get("scenario")}
+    return {
+        "obs": np.array(observations),
+        "rewards": np.array(rewards),
+        "outputs": np.array(outputs),
+        "info": info,
+        "scenario": info.get("scenario"),
+    }
 
 
 @pytest.mark.parametrize("name", example_names())
@@ -43,7 +50,12 @@ def test_examples_pass_both_env_checkers(name: str) -> None:
 
 def _heater_experiment(fmu: Path) -> dict[str, Any]:
     return {
-        "model": {"fmu": str(fmu), "step_size": 1.0, "episode_duration": 30.0, "parameters": {"label": "lab"}},
+        "model": {
+            "fmu": str(fmu),
+            "step_size": 1.0,
+            "episode_duration": 30.0,
+            "parameters": {"label": "lab"},
+        },
         "actions": {"inputs": ["power"], "low": {"power": 0.0}, "high": {"power": 200.0}},
         "observations": {"outputs": ["room", "steps", "heating"], "references": ["room_ref"]},
         "reward": {"terms": [{"tracking": {"output": "room", "reference": "room_ref", "norm": "squared"}}]},
@@ -53,7 +65,9 @@ def _heater_experiment(fmu: Path) -> dict[str, Any]:
 
 
 @pytest.mark.parametrize("fixture", ["pythonfmu_heater2", "pythonfmu_heater3"])
-def test_fmus_from_other_exporters_pass_both_env_checkers(fixture: str, request: pytest.FixtureRequest) -> None:
+def test_fmus_from_other_exporters_pass_both_env_checkers(
+    fixture: str, request: pytest.FixtureRequest
+) -> None:
     experiment = parse_experiment(_heater_experiment(request.getfixturevalue(fixture)))
     with FmuEnv(experiment) as env, warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -64,12 +78,18 @@ def test_fmus_from_other_exporters_pass_both_env_checkers(fixture: str, request:
 
 
 def test_dymola_fmu_passes_both_env_checkers(eta_ctrl_fmus: dict[str, Path]) -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": str(eta_ctrl_fmus["damped_oscillator"]), "step_size": 0.01, "episode_duration": 2.0},
-        "actions": {"inputs": ["f"], "low": {"f": -5.0}, "high": {"f": 5.0}},
-        "observations": {"outputs": ["s", "v"]},
-        "reward": {"expression": "-abs(s - 0.1)"},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {
+                "fmu": str(eta_ctrl_fmus["damped_oscillator"]),
+                "step_size": 0.01,
+                "episode_duration": 2.0,
+            },
+            "actions": {"inputs": ["f"], "low": {"f": -5.0}, "high": {"f": 5.0}},
+            "observations": {"outputs": ["s", "v"]},
+            "reward": {"expression": "-abs(s - 0.1)"},
+        }
+    )
     with FmuEnv(experiment) as env, warnings.catch_warnings():
         warnings.simplefilter("ignore")
         gym_check_env(env, skip_render_check=True)
@@ -79,14 +99,21 @@ def test_dymola_fmu_passes_both_env_checkers(eta_ctrl_fmus: dict[str, Path]) -> 
 def test_scenario_trajectory_equals_fmpy_simulate_fmu() -> None:
     """Action 0.5 -> 12 V held, a load step from the scenario, fixed parameters, two FMU steps per
     sample: the env's outputs at every sample equal FMPy's own co-simulation within 1e-9."""
-    experiment = parse_experiment({
-        "model": {"fmu": "example:dcmotor", "step_size": 0.005, "sampling_time": 0.01, "episode_duration": 2.0,
-                  "parameters": {"J": 0.012, "R": 1.1}},
-        "actions": {"inputs": ["voltage"]},
-        "observations": {"outputs": ["omega", "current"]},
-        "reward": {"terms": [{"alive": 1.0}]},
-        "scenarios": {"load": {"inputs": {"load_torque": {"step": {"time": 1.0075, "after": 0.3}}}}},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {
+                "fmu": "example:dcmotor",
+                "step_size": 0.005,
+                "sampling_time": 0.01,
+                "episode_duration": 2.0,
+                "parameters": {"J": 0.012, "R": 1.1},
+            },
+            "actions": {"inputs": ["voltage"]},
+            "observations": {"outputs": ["omega", "current"]},
+            "reward": {"terms": [{"alive": 1.0}]},
+            "scenarios": {"load": {"inputs": {"load_torque": {"step": {"time": 1.0075, "after": 0.3}}}}},
+        }
+    )
     with FmuEnv(experiment) as env:
         result = run(env, [np.array([0.5], dtype=np.float32)] * 200)
         fmu = str(env.fmu_path)
@@ -94,10 +121,20 @@ def test_scenario_trajectory_equals_fmpy_simulate_fmu() -> None:
     # communication points (every 5 ms) from this table: 0 N.m up to 1.005 s, 0.3 N.m from 1.01 s,
     # which is what the env's step at 1.0075 s gives (no duplicate times: no FMPy input event).
     t = np.array([0.0, 1.005, 1.01, 2.0])
-    signal = np.array(list(zip(t, [12.0] * 4, [0.0, 0.0, 0.3, 0.3])),
-                      dtype=[("time", np.float64), ("voltage", np.float64), ("load_torque", np.float64)])
-    ref = simulate_fmu(fmu, fmi_type="CoSimulation", start_values={"J": 0.012, "R": 1.1}, input=signal,
-                       stop_time=2.0, step_size=0.005, output_interval=0.01, output=["omega", "current"])
+    signal = np.array(
+        list(zip(t, [12.0] * 4, [0.0, 0.0, 0.3, 0.3])),
+        dtype=[("time", np.float64), ("voltage", np.float64), ("load_torque", np.float64)],
+    )
+    ref = simulate_fmu(
+        fmu,
+        fmi_type="CoSimulation",
+        start_values={"J": 0.012, "R": 1.1},
+        input=signal,
+        stop_time=2.0,
+        step_size=0.005,
+        output_interval=0.01,
+        output=["omega", "current"],
+    )
     samples = np.arange(201) * 0.01
     rows = [int(np.flatnonzero(np.abs(ref["time"] - t) < 1e-9)[-1]) for t in samples]  # skip event rows
     expected = np.column_stack([ref["omega"][rows], ref["current"][rows]])
@@ -129,13 +166,15 @@ def test_reset_with_same_seed_replays_including_scenario_choice() -> None:
 
 
 def test_sensor_noise_changes_observation_not_outputs() -> None:
-    base = parse_experiment({
-        "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 1.0},
-        "actions": {"inputs": ["force"], "low": {"force": -10}, "high": {"force": 10}},
-        "observations": {"outputs": ["x", "theta"], "scale": "none"},
-        "reward": {"terms": [{"alive": 1.0}]},
-        "noise": {"observations": {"theta": {"normal": [0.0, 0.01]}}},
-    })
+    base = parse_experiment(
+        {
+            "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 1.0},
+            "actions": {"inputs": ["force"], "low": {"force": -10}, "high": {"force": 10}},
+            "observations": {"outputs": ["x", "theta"], "scale": "none"},
+            "reward": {"terms": [{"alive": 1.0}]},
+            "noise": {"observations": {"theta": {"normal": [0.0, 0.01]}}},
+        }
+    )
     with FmuEnv(base) as env:
         result = run(env, [np.zeros(1, dtype=np.float32)] * 10)
     theta_obs, theta_true = result["obs"][:, 1], result["outputs"][:, 1]
@@ -149,17 +188,19 @@ def test_termination_and_truncation_are_distinct() -> None:
         env.reset(seed=0)
         terminated = truncated = False
         while not (terminated or truncated):
-            _, reward, terminated, truncated, info = env.step(1)  # always push right: the pole falls
+            _, _reward, terminated, truncated, info = env.step(1)  # always push right: the pole falls
         assert terminated and not truncated and info["reason"].startswith("bounds:")
         with pytest.raises(BridgeError, match="reset"):
             env.step(1)
-    short = parse_experiment({
-        "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 0.1},
-        "actions": {"inputs": ["force"], "type": "discrete", "levels": {"force": [-10, 10]}},
-        "observations": {"outputs": ["theta"]},
-        "reward": {"terms": [{"alive": 1.0}], "termination_penalty": -100.0},
-        "termination": {"bounds": {"theta": [-1.0, 1.0]}},
-    })
+    short = parse_experiment(
+        {
+            "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 0.1},
+            "actions": {"inputs": ["force"], "type": "discrete", "levels": {"force": [-10, 10]}},
+            "observations": {"outputs": ["theta"]},
+            "reward": {"terms": [{"alive": 1.0}], "termination_penalty": -100.0},
+            "termination": {"bounds": {"theta": [-1.0, 1.0]}},
+        }
+    )
     with FmuEnv(short) as env:
         result = run(env, [0, 1, 0, 1, 0, 1, 0])
         assert len(result["rewards"]) == 5 and result["info"]["reason"] == "time"
@@ -167,26 +208,37 @@ def test_termination_and_truncation_are_distinct() -> None:
 
 
 def test_fmu_requested_termination_ends_the_episode() -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 5.0,
-                  "parameters": {"track_limit": 0.05}},
-        "actions": {"inputs": ["force"], "type": "discrete", "levels": {"force": [-10, 10]}},
-        "observations": {"outputs": ["x"]},
-        "reward": {"terms": [{"alive": 1.0}], "termination_penalty": -5.0},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {
+                "fmu": "example:cartpole",
+                "step_size": 0.02,
+                "episode_duration": 5.0,
+                "parameters": {"track_limit": 0.05},
+            },
+            "actions": {"inputs": ["force"], "type": "discrete", "levels": {"force": [-10, 10]}},
+            "observations": {"outputs": ["x"]},
+            "reward": {"terms": [{"alive": 1.0}], "termination_penalty": -5.0},
+        }
+    )
     with FmuEnv(experiment) as env:
         result = run(env, [1] * 100)
     assert result["info"]["reason"] == "fmu" and result["rewards"][-1] == -4.0
 
 
 def test_discrete_and_multidiscrete_actions_map_to_levels() -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 1.0},
-        "actions": {"inputs": ["voltage", "load_torque"], "type": "multi_discrete",
-                    "levels": {"voltage": [-12, 0, 12], "load_torque": [0.0, 0.2]}},
-        "observations": {"outputs": ["omega"]},
-        "reward": {"terms": [{"effort": {"name": "voltage", "norm": "abs", "weight": 1.0}}]},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 1.0},
+            "actions": {
+                "inputs": ["voltage", "load_torque"],
+                "type": "multi_discrete",
+                "levels": {"voltage": [-12, 0, 12], "load_torque": [0.0, 0.2]},
+            },
+            "observations": {"outputs": ["omega"]},
+            "reward": {"terms": [{"effort": {"name": "voltage", "norm": "abs", "weight": 1.0}}]},
+        }
+    )
     with FmuEnv(experiment) as env:
         assert env.action_space == gym.spaces.MultiDiscrete([3, 2])
         env.reset(seed=0)
@@ -204,39 +256,60 @@ def test_nan_action_is_a_clear_error() -> None:
 
 
 def test_reward_terms_expression_and_callable_add_up() -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 0.5},
-        "actions": {"inputs": ["voltage"]},
-        "observations": {"outputs": ["omega"], "references": ["omega_ref"]},
-        "reward": {
-            "terms": [
-                {"alive": 2.0},
-                {"tracking": {"output": "omega", "reference": "omega_ref", "norm": "squared", "scale": 10.0}},
-                {"rate": {"name": "voltage", "norm": "abs", "weight": 0.5}},
-            ],
-            "expression": "0.01 * current - abs(omega_ref - omega) / 100",
-            "callable": "rewards_for_tests:half_current",
-        },
-        "scenarios": {"s": {"references": {"omega_ref": 50.0}}},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 0.5},
+            "actions": {"inputs": ["voltage"]},
+            "observations": {"outputs": ["omega"], "references": ["omega_ref"]},
+            "reward": {
+                "terms": [
+                    {"alive": 2.0},
+                    {
+                        "tracking": {
+                            "output": "omega",
+                            "reference": "omega_ref",
+                            "norm": "squared",
+                            "scale": 10.0,
+                        }
+                    },
+                    {"rate": {"name": "voltage", "norm": "abs", "weight": 0.5}},
+                ],
+                "expression": "0.01 * current - abs(omega_ref - omega) / 100",
+                "callable": "rewards_for_tests:half_current",
+            },
+            "scenarios": {"s": {"references": {"omega_ref": 50.0}}},
+        }
+    )
     with FmuEnv(experiment) as env:
         env.reset(seed=0)
-        _, _, _, _, info0 = env.step(np.array([0.25], dtype=np.float32))
+        _, _, _, _, _info0 = env.step(np.array([0.25], dtype=np.float32))
         _, reward, _, _, info = env.step(np.array([0.5], dtype=np.float32))
         omega, current = info["outputs"][0], info["outputs"][1]
-        expected = (2.0 - ((omega - 50.0) / 10.0) ** 2 - 0.5 * abs(12.0 - 6.0)
-                    + 0.01 * current - abs(50.0 - omega) / 100 + 0.5 * current)
+        expected = (
+            2.0
+            - ((omega - 50.0) / 10.0) ** 2
+            - 0.5 * abs(12.0 - 6.0)
+            + 0.01 * current
+            - abs(50.0 - omega) / 100
+            + 0.5 * current
+        )
         assert reward == pytest.approx(expected, rel=1e-12)
 
 
 def test_observation_history_stacks_the_last_k_samples() -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 1.0,
-                  "parameters": {"theta0": 0.05}},
-        "actions": {"inputs": ["force"], "low": {"force": -10}, "high": {"force": 10}},
-        "observations": {"outputs": ["theta"], "scale": "none", "history": 3},
-        "reward": {"terms": [{"alive": 1.0}]},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {
+                "fmu": "example:cartpole",
+                "step_size": 0.02,
+                "episode_duration": 1.0,
+                "parameters": {"theta0": 0.05},
+            },
+            "actions": {"inputs": ["force"], "low": {"force": -10}, "high": {"force": 10}},
+            "observations": {"outputs": ["theta"], "scale": "none", "history": 3},
+            "reward": {"terms": [{"alive": 1.0}]},
+        }
+    )
     with FmuEnv(experiment) as env:
         result = run(env, [np.zeros(1, dtype=np.float32)] * 4)
     theta = result["outputs"][:, 0].astype(np.float32)
@@ -245,18 +318,23 @@ def test_observation_history_stacks_the_last_k_samples() -> None:
 
 
 def test_episode_and_state_hooks(tmp_path: Path) -> None:
-    experiment = parse_experiment({
-        "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 0.2},
-        "actions": {"inputs": ["voltage"]},
-        "observations": {"outputs": ["omega"]},
-        "reward": {"terms": [{"alive": 1.0}]},
-        "hooks": {"episode": "rewards_for_tests:heavier_rotor", "state": "rewards_for_tests:load_after_5"},
-    })
+    experiment = parse_experiment(
+        {
+            "model": {"fmu": "example:dcmotor", "step_size": 0.01, "episode_duration": 0.2},
+            "actions": {"inputs": ["voltage"]},
+            "observations": {"outputs": ["omega"]},
+            "reward": {"terms": [{"alive": 1.0}]},
+            "hooks": {
+                "episode": "rewards_for_tests:heavier_rotor",
+                "state": "rewards_for_tests:load_after_5",
+            },
+        }
+    )
     with FmuEnv(experiment) as env:
-        _, info = env.reset(seed=0)
+        env.reset(seed=0)
         assert env.task.episode is not None and env.task.episode.values["J"] == 0.05
         for _ in range(10):
-            _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
+            _, _, _, _, _info = env.step(np.zeros(1, dtype=np.float32))
         assert env.model.get(["load_torque"])["load_torque"] == 0.25
 
 
@@ -301,7 +379,7 @@ def test_subproc_vec_env_opens_the_fmu_in_each_worker() -> None:
         assert obs.shape == (2, 4)
         ended = 0
         for _ in range(100):  # constant pushes: every episode falls within ~20 samples
-            obs, rewards, dones, infos = vec.step(np.array([0, 1]))
+            obs, _rewards, dones, infos = vec.step(np.array([0, 1]))
             for done, info in zip(dones, infos):
                 if done:
                     ended += 1

@@ -68,7 +68,9 @@ class Backend:
 
     def _fmpy_kwargs(self, unzip_dir: pathlib.Path) -> dict[str, Any]:
         platform = _platform(self.info.fmi_major)
-        library = unzip_dir / "binaries" / platform / (self.info.model_identifiers[self.interface] + _suffix())
+        library = (
+            unzip_dir / "binaries" / platform / (self.info.model_identifiers[self.interface] + _suffix())
+        )
         if not library.is_file():
             available = sorted(p.name for p in (unzip_dir / "binaries").glob("*")) or ["none"]
             raise FmuLoadError(
@@ -97,12 +99,11 @@ class Backend:
         Callers pass integer addresses of buffers they keep alive; this skips ctypes' per-call
         pointer type checks, about a third of the cost of a small get/set.
         """
-        fn = self.accessor(var_type, setter)
-        address = ctypes.cast(fn, ctypes.c_void_p).value
         args: list[Any] = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p]
         if self.major == 3:
             args.append(ctypes.c_size_t)
-        return ctypes.CFUNCTYPE(ctypes.c_int, *args)(address)  # type: ignore[no-any-return]
+        fn: Callable[..., int] = rebind(self.accessor(var_type, setter), *args)
+        return fn
 
     def type_key(self, var_type: str) -> str:
         """Variables with the same key share one get/set call (FMI 2 Integer and Enumeration)."""
@@ -155,9 +156,7 @@ class Backend:
         except FmuError:
             raise
         except Exception as exc:
-            raise FmuError(
-                f"{self.info.model_name}: {what} failed ({exc})", log=self.log.recent()
-            ) from exc
+            raise FmuError(f"{self.info.model_name}: {what} failed ({exc})", log=self.log.recent()) from exc
 
 
 def _platform(fmi_major: int) -> str:
@@ -203,13 +202,21 @@ class Fmi1Backend(Backend):
         self.component = self.call(
             "fmiInstantiateSlave",
             lambda: self.fmu.fmi1InstantiateSlave(
-                self.instance_name.encode(), self.info.guid.encode(), location.encode(),
-                b"application/x-fmu-sharedlibrary", 0.0, fmi1.fmi1False, fmi1.fmi1False,
-                self._callbacks, fmi1.fmi1False,
+                self.instance_name.encode(),
+                self.info.guid.encode(),
+                location.encode(),
+                b"application/x-fmu-sharedlibrary",
+                0.0,
+                fmi1.fmi1False,
+                fmi1.fmi1False,
+                self._callbacks,
+                fmi1.fmi1False,
             ),
         )
         if not self.component:
-            raise FmuError(f"{self.info.model_name}: fmiInstantiateSlave returned NULL", log=self.log.recent())
+            raise FmuError(
+                f"{self.info.model_name}: fmiInstantiateSlave returned NULL", log=self.log.recent()
+            )
         self.fmu.component = self.component
 
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
@@ -232,9 +239,8 @@ class Fmi1Backend(Backend):
 
     def stepper(self) -> Callable[[float, float], int]:
         # FMPy 0.3 declares fmiDoStep as returning a string; re-bind it with the FMI 1.0 prototype.
-        address = ctypes.cast(self.functions["fmi1DoStep"], ctypes.c_void_p).value
-        fn = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_char)(
-            address
+        fn = rebind(
+            self.functions["fmi1DoStep"], ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_char
         )
         backend = self
         return lambda t, h: fn(backend.component, t, h, b"\x01")  # type: ignore[no-any-return]
@@ -262,8 +268,13 @@ class Fmi2Backend(Backend):
         self.component = self.call(
             "fmi2Instantiate",
             lambda: self.fmu.fmi2Instantiate(
-                self.instance_name.encode(), kind, self.info.guid.encode(), resources.encode(),
-                ctypes.byref(self._callbacks), fmi2.fmi2False, fmi2.fmi2False,
+                self.instance_name.encode(),
+                kind,
+                self.info.guid.encode(),
+                resources.encode(),
+                ctypes.byref(self._callbacks),
+                fmi2.fmi2False,
+                fmi2.fmi2False,
             ),
         )
         if not self.component:
@@ -297,7 +308,9 @@ class Fmi2Backend(Backend):
 
     def terminated_after_discard(self) -> bool:
         flag = ctypes.c_int(0)
-        status = self.functions["fmi2GetBooleanStatus"](self.component, fmi2.fmi2Terminated, ctypes.byref(flag))
+        status = self.functions["fmi2GetBooleanStatus"](
+            self.component, fmi2.fmi2Terminated, ctypes.byref(flag)
+        )
         return bool(status <= WARNING and flag.value)
 
     def get_state(self) -> ctypes.c_void_p:
@@ -324,8 +337,10 @@ class Fmi3Backend(Backend):
         self._early = fmi3.fmi3Boolean()
         self._last_time = fmi3.fmi3Float64()
         self._step_refs = (
-            ctypes.byref(self._event), ctypes.byref(self._terminate),
-            ctypes.byref(self._early), ctypes.byref(self._last_time),
+            ctypes.byref(self._event),
+            ctypes.byref(self._terminate),
+            ctypes.byref(self._early),
+            ctypes.byref(self._last_time),
         )
         return fmu
 
@@ -343,8 +358,18 @@ class Fmi3Backend(Backend):
             no_vrs = (fmi3.fmi3ValueReference * 0)()
             self._intermediate = fmi3.fmi3IntermediateUpdateCallback()
             create: Callable[[], Any] = lambda: self.fmu.fmi3InstantiateCoSimulation(  # noqa: E731
-                name, token, resources, False, False, False, False, no_vrs, 0, env,
-                logs.V3_LOGGER, self._intermediate,
+                name,
+                token,
+                resources,
+                False,
+                False,
+                False,
+                False,
+                no_vrs,
+                0,
+                env,
+                logs.V3_LOGGER,
+                self._intermediate,
             )
         else:
             create = lambda: self.fmu.fmi3InstantiateModelExchange(  # noqa: E731
@@ -416,4 +441,13 @@ def numpy_dtype(ctype: Any) -> np.dtype[Any]:
         return np.dtype(np.uint8)
     if ctype is ctypes.c_bool:
         return np.dtype(np.bool_)
-    return np.dtype(ctype)
+    dtype: np.dtype[Any] = np.dtype(ctype)
+    return dtype
+
+
+def rebind(fn: Any, *argtypes: Any) -> Any:
+    """A loaded FMI function re-bound with our own prototype (returning an FMI status)."""
+    address = ctypes.cast(fn, ctypes.c_void_p).value
+    if address is None:
+        raise FmuLoadError(f"FMI function {fn!r} has a NULL address")
+    return ctypes.CFUNCTYPE(ctypes.c_int, *argtypes)(address)

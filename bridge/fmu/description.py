@@ -26,8 +26,18 @@ Interface = Literal["cs", "me"]
 _TYPE_ALIASES = {"Real": "Float64", "Integer": "Int32"}
 NUMERIC_TYPES = frozenset(
     {
-        "Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
-        "Int64", "UInt64", "Boolean", "Enumeration",
+        "Float32",
+        "Float64",
+        "Int8",
+        "UInt8",
+        "Int16",
+        "UInt16",
+        "Int32",
+        "UInt32",
+        "Int64",
+        "UInt64",
+        "Boolean",
+        "Enumeration",
     }
 )
 
@@ -186,7 +196,9 @@ def _read_description(fmu_path: Path) -> tuple[ModelDescription, tuple[str, ...]
         problems = tuple(str(p) for p in exc.problems)
         _log.warning(
             "%s: modelDescription.xml breaks the FMI standard in %d place(s), loading it anyway: %s",
-            fmu_path.name, len(problems), "; ".join(problems[:3]),
+            fmu_path.name,
+            len(problems),
+            "; ".join(problems[:3]),
         )
     except Exception as exc:
         raise FmuLoadError(

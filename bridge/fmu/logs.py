@@ -37,7 +37,7 @@ class LogBuffer:
         self.id = next(_ids)
         self.instance_name = instance_name
         self.messages: deque[str] = deque(maxlen=maxlen)
-        self._logger = logging.getLogger(f"bridge.fmu.{instance_name.split('#')[0]}")
+        self._logger = logging.getLogger(f"bridge.fmu.{instance_name.split('#', maxsplit=1)[0]}")
         with _LOCK:
             _SINKS[self.id] = self
             _NAMES[instance_name.encode()] = self
@@ -64,7 +64,9 @@ class LogBuffer:
             _NAMES.pop(self.instance_name.encode(), None)
 
 
-def _dispatch_v1v2(env: Any, instance_name: bytes | None, status: int, category: bytes, message: bytes) -> None:
+def _dispatch_v1v2(
+    env: Any, instance_name: bytes | None, status: int, category: bytes, message: bytes
+) -> None:
     sink = _SINKS.get(env) if env else None
     if sink is None and instance_name:
         sink = _NAMES.get(instance_name)

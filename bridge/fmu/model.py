@@ -165,7 +165,9 @@ class Model:
         self._write(variables, values)
         if self.interface == "me":
             self._inputs_dirty = True
-            self._discrete_dirty = self._discrete_dirty or any(v.variability != "continuous" for v in variables)
+            self._discrete_dirty = self._discrete_dirty or any(
+                v.variability != "continuous" for v in variables
+            )
 
     def _lookup(self, name: str, role: str = "variable") -> Variable:
         var = self.info.variables.get(name)
@@ -372,7 +374,9 @@ class Model:
             f"{self.info.model_name}: doStep returned {STATUS_NAMES[status]} at step {self.step_index} "
             f"(t={self.time_s:g} s, h={self.step_size_s:g} s); reset() the model to continue, and see the "
             f"FMU log for the cause [{self.info.path}]",
-            step=self.step_index, time_s=self.time_s, log=self._backend.log.recent(),
+            step=self.step_index,
+            time_s=self.time_s,
+            log=self._backend.log.recent(),
         )
 
     def _refuse_step(self) -> None:
@@ -386,7 +390,9 @@ class Model:
             reason = f"the previous step failed ({STATUS_NAMES[self._failed_status]}): reset() first"
         raise StepError(
             f"{self.info.model_name}: cannot step at step {self.step_index}: {reason}",
-            step=self.step_index, time_s=self.time_s, log=self._backend.log.recent(),
+            step=self.step_index,
+            time_s=self.time_s,
+            log=self._backend.log.recent(),
         )
 
 
@@ -437,9 +443,9 @@ def _to_c(var: Variable, value: Any, model: Model) -> Any:
         if value not in items:
             raise VariableError(f"{where}: {value!r} is not one of {list(items)}")
         return items[value]
-    if var.type.startswith(("Int", "UInt")) or var.type == "Enumeration":
-        if isinstance(value, int | np.integer) and not isinstance(value, bool):
-            return int(value)  # exact: large 64-bit values must not pass through a float
+    is_integer = var.type.startswith(("Int", "UInt")) or var.type == "Enumeration"
+    if is_integer and isinstance(value, int | np.integer) and not isinstance(value, bool):
+        return int(value)  # exact: large 64-bit values must not pass through a float
     try:
         number = float(value)
     except (TypeError, ValueError):
@@ -449,14 +455,18 @@ def _to_c(var: Variable, value: Any, model: Model) -> Any:
     if var.type.startswith("Float"):
         return number
     if var.type == "Boolean":
-        if number not in (0.0, 1.0):
-            raise VariableError(f"{where} expects True/False (or 0/1), got {value!r}")
-        if model._backend.major == 1:
-            return b"\x01" if number else b"\x00"
-        return bool(number)
+        return _boolean(number, where, value, model._backend.major)
     if number != int(number):
         raise VariableError(f"{where} expects a whole number, got {value!r}")
     return int(number)
+
+
+def _boolean(number: float, where: str, value: Any, major: int) -> Any:
+    if number not in (0.0, 1.0):
+        raise VariableError(f"{where} expects True/False (or 0/1), got {value!r}")
+    if major == 1:  # FMI 1.0 booleans are chars
+        return b"\x01" if number else b"\x00"
+    return bool(number)
 
 
 def _from_c(raw: Any, var_type: str) -> Any:

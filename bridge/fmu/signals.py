@@ -28,7 +28,20 @@ _FLOAT, _INT, _BOOL = 0, 1, 2
 class _Block:
     """Variables of one FMI type: one get and one set call per sample."""
 
-    __slots__ = ("_vrs", "buf", "enums", "get", "index", "kind", "n", "nargs", "ptr", "set", "variables", "vrs")
+    __slots__ = (
+        "_vrs",
+        "buf",
+        "enums",
+        "get",
+        "index",
+        "kind",
+        "n",
+        "nargs",
+        "ptr",
+        "set",
+        "variables",
+        "vrs",
+    )
     # ``vrs`` and ``ptr`` are integer addresses of ``_vrs`` and ``buf``, which the block keeps alive.
 
     def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
@@ -85,7 +98,7 @@ class SignalGroup:
         self._direct = first is not None and first.buf.dtype == np.float64
         if self._direct and first is not None:
             self._values = first.buf
-            self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)
+            self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)  # type: ignore[arg-type]
         # Model exchange must know when discrete inputs change (event iteration before the next step).
         self._notify = model.interface == "me"
 
@@ -197,9 +210,11 @@ class SignalGroup:
             if not _valid(np.array([value]), block) or _bad_enum(value, i, block)
         ]
         expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
-        hint = "a NaN or inf usually comes from a diverged policy or controller" if not np.isfinite(
-            values
-        ).all() else "round or map the value before writing it"
+        hint = (
+            "a NaN or inf usually comes from a diverged policy or controller"
+            if not np.isfinite(values).all()
+            else "round or map the value before writing it"
+        )
         return VariableError(
             f"{self._model.info.model_name}: invalid value {', '.join(bad)} {self._where()}: expected "
             f"{expected}; {hint}"
@@ -215,7 +230,8 @@ class SignalGroup:
     def _fail(self, what: str, block: _Block, status: int) -> None:
         names = [v.name for v in block.variables]
         raise FmuError(
-            f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} {self._where()}",
+            f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} "
+            f"{self._where()}",
             log=self._model._backend.log.recent(),
         )
 
@@ -239,4 +255,3 @@ def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
     if block.enums and len(part) == block.n:
         return all(part[i] in allowed for i, allowed in block.enums)
     return True
-

@@ -22,7 +22,9 @@ from bridge.fmu.backend import Backend
 class _HeldInputs:
     """CVode's root function re-applies inputs; ours are set once per sample and held."""
 
-    def apply(self, time: float, continuous: bool = True, discrete: bool = True, after_event: bool = False) -> None:
+    def apply(
+        self, time: float, continuous: bool = True, discrete: bool = True, after_event: bool = False
+    ) -> None:
         return None
 
 
@@ -43,7 +45,12 @@ class MeStepper:
     """Integrates one model-exchange instance; the instance must be in continuous-time mode."""
 
     def __init__(
-        self, backend: Backend, start_s: float, tolerance: float, max_step_s: float, next_event_s: float | None
+        self,
+        backend: Backend,
+        start_s: float,
+        tolerance: float,
+        max_step_s: float,
+        next_event_s: float | None,
     ) -> None:
         self._backend = backend
         self._fmu: Any = backend.fmu
@@ -108,7 +115,9 @@ class MeStepper:
                 raise StepError(
                     f"{self._backend.info.model_name}: the ODE solver failed at t={time_s:g} s "
                     f"(step {step}): {exc}",
-                    step=step, time_s=time_s, log=self._backend.log.recent(),
+                    step=step,
+                    time_s=time_s,
+                    log=self._backend.log.recent(),
                 ) from exc
             self._fmu.setTime(time_s)
             step_event, terminate = self._completed()

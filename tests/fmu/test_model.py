@@ -37,8 +37,14 @@ def test_cartpole_cs_equals_fmpy_simulate_fmu(version: str) -> None:
         ours = run_model(model, 3.0, 50)
     signal = np.array([(0.0, 3.0), (1.0, 3.0)], dtype=[("time", np.float64), ("force", np.float64)])
     ref = simulate_fmu(
-        str(path), fmi_type="CoSimulation", start_values=start, input=signal, stop_time=1.0,
-        output_interval=0.02, step_size=0.02, output=CARTPOLE_OUT,
+        str(path),
+        fmi_type="CoSimulation",
+        start_values=start,
+        input=signal,
+        stop_time=1.0,
+        output_interval=0.02,
+        step_size=0.02,
+        output=CARTPOLE_OUT,
     )
     expected = np.column_stack([ref[name] for name in CARTPOLE_OUT])
     np.testing.assert_allclose(ours, expected[: len(ours)], rtol=0, atol=1e-12)
@@ -49,7 +55,9 @@ def test_fmi_versions_and_interfaces_agree() -> None:
     trajectories = {}
     for version, interface in [("1.0", "cs"), ("2.0", "cs"), ("3.0", "cs"), ("2.0", "me"), ("3.0", "me")]:
         tolerance = 1e-9 if interface == "me" else None  # CVode's default 1e-6 drifts ~1e-4 here
-        with Model(example_fmu("cartpole", version, interface), step_size_s=0.02, tolerance=tolerance) as model:
+        with Model(
+            example_fmu("cartpole", version, interface), step_size_s=0.02, tolerance=tolerance
+        ) as model:
             model.initialize({"theta0": 0.1})
             trajectories[(version, interface)] = run_model(model, -2.0, 40)
     cs = trajectories[("2.0", "cs")]
@@ -100,9 +108,18 @@ def test_dcmotor_step_response_matches_analytic(dcmotor_fmu: Path) -> None:
 
 def test_typed_variables_round_trip_with_their_own_types(typed_fmu3: Path) -> None:
     values = {
-        "real_in": 1.25, "float32_in": 0.5, "int8_in": -128, "uint8_in": 255, "int16_in": -32768,
-        "uint16_in": 65535, "integer_in": -2147483648, "uint32_in": 4294967295,
-        "int64_in": -(2**62) - 3, "uint64_in": 2**63 + 5, "boolean_in": True, "string_in": "hello fmi",
+        "real_in": 1.25,
+        "float32_in": 0.5,
+        "int8_in": -128,
+        "uint8_in": 255,
+        "int16_in": -32768,
+        "uint16_in": 65535,
+        "integer_in": -2147483648,
+        "uint32_in": 4294967295,
+        "int64_in": -(2**62) - 3,
+        "uint64_in": 2**63 + 5,
+        "boolean_in": True,
+        "string_in": "hello fmi",
         "enum_in": 3,
     }
     with Model(typed_fmu3, step_size_s=0.1) as model:
@@ -253,7 +270,7 @@ def test_zip_without_model_description(tmp_path: Path) -> None:
     bogus = tmp_path / "model.fmu"
     with zipfile.ZipFile(bogus, "w") as z:
         z.writestr("readme.txt", "hello")
-    with pytest.raises(FmuLoadError, match="no modelDescription.xml"):
+    with pytest.raises(FmuLoadError, match=r"no modelDescription\.xml"):
         Model(bogus)
 
 
@@ -275,19 +292,22 @@ def test_no_binary_for_this_platform(cartpole_fmu: Path, tmp_path: Path) -> None
 
 
 def test_unknown_variable_suggests_close_names(cartpole_fmu: Path) -> None:
-    with Model(cartpole_fmu) as model, pytest.raises(VariableError, match=r"'thetta'.*did you mean \['theta'"):
+    with (
+        Model(cartpole_fmu) as model,
+        pytest.raises(VariableError, match=r"'thetta'.*did you mean \['theta'"),
+    ):
         model.signals(["thetta"])
 
 
 def test_setting_constant_or_calculated_variables_is_refused(typed_fmu2: Path, cartpole_fmu: Path) -> None:
     with Model(typed_fmu2, step_size_s=0.1) as model:
-        with pytest.raises(VariableError, match="'double_gain'.*cannot be set.*calculatedParameter"):
+        with pytest.raises(VariableError, match=r"'double_gain'.*cannot be set.*calculatedParameter"):
             model.initialize({"double_gain": 3.0})
-        with pytest.raises(VariableError, match="'pi'.*constant"):
+        with pytest.raises(VariableError, match=r"'pi'.*constant"):
             model.initialize({"pi": 3.0})
     with Model(cartpole_fmu) as model:
         model.initialize()
-        with pytest.raises(VariableError, match="'x'.*cannot be set.*output"):
+        with pytest.raises(VariableError, match=r"'x'.*cannot be set.*output"):
             model.set({"x": 1.0})
 
 

@@ -22,7 +22,9 @@ def heater_reference(room0: float, ambient: float, power: float, factor: float, 
 
 
 @pytest.mark.parametrize("fixture", ["pythonfmu_heater2", "pythonfmu_heater3"])
-def test_exported_heater_steps_typed_inputs_and_matches_closed_form(fixture: str, request: pytest.FixtureRequest) -> None:
+def test_exported_heater_steps_typed_inputs_and_matches_closed_form(
+    fixture: str, request: pytest.FixtureRequest
+) -> None:
     path: Path = request.getfixturevalue(fixture)
     with Model(path, step_size_s=STEP) as model:
         model.initialize({"ambient": 15.0, "label": "kitchen", "mode": 3})
@@ -80,8 +82,13 @@ def test_fmi2_string_parameter_and_reset_restore_defaults(pythonfmu_heater2: Pat
 def test_dymola_export_cs_matches_fmpy_and_me_agrees(eta_ctrl_fmus: dict[str, Path]) -> None:
     path = eta_ctrl_fmus["damped_oscillator"]
     reference = simulate_fmu(
-        str(path), fmi_type="CoSimulation", start_values={"f": 3.0}, stop_time=2.0,
-        output_interval=0.01, step_size=0.01, output=["s", "v"],
+        str(path),
+        fmi_type="CoSimulation",
+        start_values={"f": 3.0},
+        stop_time=2.0,
+        output_interval=0.01,
+        step_size=0.01,
+        output=["s", "v"],
     )
     trajectories = {}
     for interface in ("cs", "me"):

@@ -32,13 +32,18 @@ class Heater2(Fmi2Slave):
         self.register_variable(Real("room", causality=Fmi2Causality.output))
         self.register_variable(Integer("steps", causality=Fmi2Causality.output, variability=discrete))
         self.register_variable(Boolean("heating", causality=Fmi2Causality.output, variability=discrete))
-        self.register_variable(Real("gain", causality=Fmi2Causality.parameter,
-                                    variability=Fmi2Variability.tunable))
-        self.register_variable(Real("loss", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed))
-        self.register_variable(Real("ambient", causality=Fmi2Causality.parameter,
-                                    variability=Fmi2Variability.fixed))
-        self.register_variable(String("label", causality=Fmi2Causality.parameter,
-                                      variability=Fmi2Variability.fixed))
+        self.register_variable(
+            Real("gain", causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable)
+        )
+        self.register_variable(
+            Real("loss", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
+        )
+        self.register_variable(
+            Real("ambient", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
+        )
+        self.register_variable(
+            String("label", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed)
+        )
 
     def do_step(self, current_time, step_size):
         factor = {1: 0.0, 2: 0.5, 3: 1.0}[int(self.mode)]

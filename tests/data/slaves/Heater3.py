@@ -41,37 +41,61 @@ class Heater3(Fmi3Slave):
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
         self.time = 0.0
-        self.power = 0.0          # input, W
-        self.enabled = True       # input
-        self.mode = 2             # input enumeration
-        self.room = 20.0          # output, degC
-        self.steps = 0            # output Int32
-        self.heating = False      # output Boolean
-        self.gain = 0.01          # tunable parameter, K/(W s)
-        self.loss = 0.1           # fixed parameter, 1/s
-        self.ambient = 10.0       # fixed parameter, degC
+        self.power = 0.0  # input, W
+        self.enabled = True  # input
+        self.mode = 2  # input enumeration
+        self.room = 20.0  # output, degC
+        self.steps = 0  # output Int32
+        self.heating = False  # output Boolean
+        self.gain = 0.01  # tunable parameter, K/(W s)
+        self.loss = 0.1  # fixed parameter, 1/s
+        self.ambient = 10.0  # fixed parameter, degC
         self.label = "living room"
-        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
-                                       variability=Fmi3Variability.continuous))
+        self.register_variable(
+            Float64("time", causality=Fmi3Causality.independent, variability=Fmi3Variability.continuous)
+        )
         self.register_variable(Float64("power", causality=Fmi3Causality.input, start=0.0))
-        self.register_variable(Boolean("enabled", causality=Fmi3Causality.input, start=True,
-                                       variability=Fmi3Variability.discrete))
-        mode = ScalarEnumeration("mode", causality=Fmi3Causality.input, start=2,
-                                 variability=Fmi3Variability.discrete, declared_type="Mode")
+        self.register_variable(
+            Boolean(
+                "enabled", causality=Fmi3Causality.input, start=True, variability=Fmi3Variability.discrete
+            )
+        )
+        mode = ScalarEnumeration(
+            "mode",
+            causality=Fmi3Causality.input,
+            start=2,
+            variability=Fmi3Variability.discrete,
+            declared_type="Mode",
+        )
         self.register_variable(mode, var_type=EnumerationType("Mode", values=Mode))
         self.register_variable(Float64("room", causality=Fmi3Causality.output))
-        self.register_variable(Int32("steps", causality=Fmi3Causality.output,
-                                     variability=Fmi3Variability.discrete))
-        self.register_variable(Boolean("heating", causality=Fmi3Causality.output,
-                                       variability=Fmi3Variability.discrete))
-        self.register_variable(Float64("gain", causality=Fmi3Causality.parameter,
-                                       variability=Fmi3Variability.tunable, start=0.01))
-        self.register_variable(Float64("loss", causality=Fmi3Causality.parameter,
-                                       variability=Fmi3Variability.fixed, start=0.1))
-        self.register_variable(Float64("ambient", causality=Fmi3Causality.parameter,
-                                       variability=Fmi3Variability.fixed, start=10.0))
-        self.register_variable(String("label", causality=Fmi3Causality.parameter,
-                                      variability=Fmi3Variability.fixed, start="living room"))
+        self.register_variable(
+            Int32("steps", causality=Fmi3Causality.output, variability=Fmi3Variability.discrete)
+        )
+        self.register_variable(
+            Boolean("heating", causality=Fmi3Causality.output, variability=Fmi3Variability.discrete)
+        )
+        self.register_variable(
+            Float64(
+                "gain", causality=Fmi3Causality.parameter, variability=Fmi3Variability.tunable, start=0.01
+            )
+        )
+        self.register_variable(
+            Float64("loss", causality=Fmi3Causality.parameter, variability=Fmi3Variability.fixed, start=0.1)
+        )
+        self.register_variable(
+            Float64(
+                "ambient", causality=Fmi3Causality.parameter, variability=Fmi3Variability.fixed, start=10.0
+            )
+        )
+        self.register_variable(
+            String(
+                "label",
+                causality=Fmi3Causality.parameter,
+                variability=Fmi3Variability.fixed,
+                start="living room",
+            )
+        )
 
     def do_step(self, current_time, step_size):
         factor = {1: 0.0, 2: 0.5, 3: 1.0}[int(self.mode)]
