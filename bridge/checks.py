@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from bridge.config import load_experiment
@@ -42,7 +43,7 @@ def check_and_report(path: Path, *, version: str | None, steps: int, console: Co
             console.print(f"[green]{name} env checker passed[/green]")
         for warning in caught:
             if "infinity" not in str(warning.message):  # unbounded observations are deliberate
-                console.print(f"[yellow]warning:[/yellow] {warning.message}")
+                console.print(f"[yellow]warning:[/yellow] {escape(str(warning.message))}")
         t = env.timing
         console.print(f"action space: {env.action_space}\nobservation space: {env.observation_space}")
         console.print(f"observation: {env.task.observer.names}")

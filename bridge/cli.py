@@ -16,6 +16,7 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.table import Table
 
 from bridge import __version__
@@ -80,7 +81,7 @@ def inspect_cmd(
         f"event indicators: {info['event_indicators']}  get/set state: {info['can_get_set_state']}"
     )
     for problem in info["problems"]:
-        err_console.print(f"[yellow]standard violation:[/yellow] {problem}")
+        err_console.print(f"[yellow]standard violation:[/yellow] {escape(problem)}")
     table = Table(*VARIABLE_COLUMNS, show_lines=False)
     for var in info["variables"]:
         table.add_row(*(_cell(var.get(col)) for col in VARIABLE_COLUMNS))
@@ -227,7 +228,8 @@ def main() -> None:
     try:
         app()
     except BridgeError as exc:
-        err_console.print(f"[bold red]error:[/bold red] {exc}", highlight=False, soft_wrap=True)
+        # Messages end with "[path]": escape them, or rich reads that as markup.
+        err_console.print(f"[bold red]error:[/bold red] {escape(str(exc))}", highlight=False, soft_wrap=True)
         raise SystemExit(2) from None
     except KeyboardInterrupt:
         err_console.print("interrupted")
