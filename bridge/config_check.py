@@ -135,7 +135,8 @@ def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: st
         var = _need("actions.inputs", name, variables, where)
         if var.causality != "input":
             raise ConfigError(
-                f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input'; the agent can only "
+                f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input'; "
+                f"the agent can only "
                 f"drive inputs ({[v.name for v in variables.values() if v.causality == 'input']}){where}"
             )
         if not var.is_numeric:
