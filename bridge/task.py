@@ -180,6 +180,13 @@ class Task:
             raise self._bad_action(action, sample)
         return self._table_rows[index]
 
+    def _bad_output(self, outputs: list[float], sample: int) -> BridgeError:
+        bad = [f"{n}={v}" for n, v in zip(self.output_names, outputs) if v - v != 0.0]
+        return BridgeError(
+            f"the FMU returned non-finite outputs {', '.join(bad)} at sample {sample}: the model diverged "
+            f"(check its parameters, the action bounds, or the step size {self.timing.step_size_s:g} s)"
+        )
+
     def _bad_action(self, action: Any, sample: int) -> BridgeError:
         return BridgeError(
             f"invalid action {action!r} at sample {sample}: expected an element of {self.action_space} "
@@ -195,18 +202,26 @@ class Task:
 
     # -- termination -------------------------------------------------------------------------------
     def _build_termination(self) -> None:
-        bounds = self.experiment.termination.bounds
-        self._term = [
-            (name, self._index[name], -np.inf if lo is None else lo, np.inf if hi is None else hi)
-            for name, (lo, hi) in bounds.items()
-        ]
+        """``termination_reason(signals)`` as one generated conditional over the bounds.
 
-    def termination_reason(self, signals: list[float]) -> str | None:
-        for name, i, lo, hi in self._term:
-            value = signals[i]
-            if not lo <= value <= hi:
-                return "bounds:" + name
-        return None
+        Built from indices and the validated float bounds only (a code template, no user text).
+        """
+        checks = []
+        for name, (lo, hi) in self.experiment.termination.bounds.items():
+            i = self._index[name]
+            # "not (lo <= x <= hi)" so that a NaN signal also counts as outside its bounds
+            if lo is not None and hi is not None:
+                checks.append((f"not ({float(lo)!r} <= s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
+            elif lo is not None:
+                checks.append((f"not (s[{i}] >= {float(lo)!r})", f"bounds:{name}"))
+            elif hi is not None:
+                checks.append((f"not (s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
+        body = "None"
+        for condition, reason in reversed(checks):
+            body = f"({reason!r} if {condition} else {body})"
+        self.termination_reason: Callable[[list[float]], str | None] = eval(
+            f"lambda s: {body}", {"__builtins__": {}}
+        )
 
     # -- episode life cycle --------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
@@ -254,6 +269,9 @@ class Task:
 
     def fill_signals(self, outputs: list[float], sample: int) -> list[float]:
         """The signal vector [outputs | inputs | references at t_sample] as a list."""
+        for value in outputs:
+            if value - value != 0.0:  # NaN or infinity from the FMU: never pass it on silently
+                raise self._bad_output(outputs, sample)
         s = outputs + self._inputs
         if self._has_refs:
             s += self._refs[min(sample, len(self._refs) - 1)].tolist()

@@ -387,3 +387,20 @@ def test_subproc_vec_env_opens_the_fmu_in_each_worker() -> None:
         assert ended >= 4 and np.isfinite(obs).all()
     finally:
         vec.close()
+
+
+def test_non_finite_fmu_output_is_a_clear_error_not_a_nan_observation() -> None:
+    with FmuEnv(example_experiment("cartpole_balance")) as env:
+        env.reset(seed=0)
+        with pytest.raises(
+            BridgeError, match=r"non-finite outputs theta=nan at sample 3: the model diverged"
+        ):
+            env.task.step_result([0.0, 0.0, float("nan"), 0.0], 3, False, env.np_random)
+
+
+def test_nan_signal_counts_as_outside_its_bounds() -> None:
+    with FmuEnv(example_experiment("cartpole_balance")) as env:
+        signals = [0.0, 0.0, float("nan"), 0.0, 10.0]
+        assert env.task.termination_reason(signals) == "bounds:theta"
+        assert env.task.termination_reason([0.0, 0.0, 0.1, 0.0, 10.0]) is None
+        assert env.task.termination_reason([-3.0, 0.0, 0.1, 0.0, 10.0]) == "bounds:x"
