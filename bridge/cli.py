@@ -201,6 +201,126 @@ def scenarios(
     scenario_report(experiment, sample=sample, seed=seed, console=console)
 
 
+ZenohConfigOpt = Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config file.")]
+ListenOpt = Annotated[
+    list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447.")
+]
+ConnectOpt = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")]
+PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
+
+
+def _zenoh_options(
+    config: Path | None, listen: list[str] | None, connect: list[str] | None, mode: str | None = None
+) -> Any:
+    from bridge.transport import ZenohOptions
+
+    return ZenohOptions(
+        config_file=config, mode=mode, listen=tuple(listen or ()), connect=tuple(connect or ())
+    )
+
+
+@app.command()
+def node(
+    experiment: ExperimentArg,
+    name: Annotated[str, typer.Option("--name", help="Node name (unique per prefix).")] = "fmu",
+    mode: Annotated[str, typer.Option("--mode", help="lockstep (training) or realtime.")] = "lockstep",
+    rate: Annotated[
+        float,
+        typer.Option(
+            "--rate", help="Real-time factor: 1 = real time, 2 = twice as fast, 0 = as fast as possible."
+        ),
+    ] = 1.0,
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
+    version: VersionOpt = None,
+) -> None:
+    """Serve an FMU over Zenoh until interrupted (Ctrl-C or SIGTERM)."""
+    import signal
+
+    from bridge.env import as_experiment
+    from bridge.node import FmuNode
+
+    if mode not in ("lockstep", "realtime"):
+        raise BridgeError(f"--mode {mode!r} is unknown; use lockstep or realtime")
+    server = FmuNode(
+        as_experiment(experiment, version),
+        name=name,
+        mode=mode,  # type: ignore[arg-type]
+        rate=rate,
+        options=_zenoh_options(zenoh_config, listen, connect),
+        prefix=prefix,
+    )
+    signal.signal(signal.SIGTERM, lambda *_: server.close())
+    err_console.print(
+        f"node {name!r} serving {server.info.model_name} ({mode}) on {server.keys.base}/*; Ctrl-C stops it",
+        highlight=False,
+    )
+    try:
+        server.serve_forever()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.close()
+
+
+@app.command()
+def nodes(
+    pattern: Annotated[str, typer.Argument(help="Glob over node names.")] = "*",
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
+    timeout_s: Annotated[float, typer.Option("--timeout", help="Seconds to wait for answers.")] = 2.0,
+) -> None:
+    """List live FMU nodes with their model and state."""
+    from bridge.remote import describe_nodes, list_nodes
+    from bridge.transport import open_session
+
+    session = open_session(_zenoh_options(zenoh_config, listen, connect))
+    try:
+        names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
+        table = Table(
+            "node",
+            "model",
+            "experiment",
+            "mode",
+            "episode",
+            "step",
+            "t [s]",
+            "steps",
+            "rejected",
+            "malformed",
+            "fmu errors",
+            "pid",
+            title=f"{len(names)} live node(s) under {prefix}/",
+        )
+        for entry in describe_nodes(session, names, prefix=prefix, timeout_s=timeout_s):
+            if "error" in entry:
+                table.add_row(entry["node"], f"[red]{escape(entry['error'])}[/red]")
+                continue
+            c = entry["counters"]
+            rejected = sum(v for k, v in c.items() if k.startswith("rejected_"))
+            table.add_row(
+                entry["node"],
+                entry["model"]["model_name"],
+                f"{entry['experiment']} {entry['version']}",
+                entry["mode"],
+                str(entry["episode"]),
+                str(entry["step"]),
+                f"{entry['time_s']:g}",
+                str(c.get("steps", 0)),
+                str(rejected),
+                str(c.get("malformed", 0)),
+                str(c.get("fmu_errors", 0)),
+                str(entry["pid"]),
+            )
+        console.print(table)
+    finally:
+        session.close()
+
+
 @app.command()
 def demo(
     model: Annotated[str, typer.Option(help="Bundled example model to simulate.")] = "cartpole",

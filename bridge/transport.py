@@ -1,0 +1,101 @@
+"""Zenoh sessions from command-line style options (peer/client/router, endpoints, config files).
+
+Nodes on one machine find each other by explicit endpoints or scouting; nodes on other machines
+connect to a router or to each other (``--connect tcp/host:7447``), optionally with TLS and
+user/password authentication as Zenoh configures them (see docs/zenoh.md).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from bridge.errors import TransportError
+
+_log = logging.getLogger(__name__)
+_LOG_ONCE = threading.Lock()
+_log_state = {"initialised": False}
+
+
+@dataclass(frozen=True)
+class ZenohOptions:
+    """How to open a Zenoh session.
+
+    Args:
+        config_file: a Zenoh JSON5 configuration file (applied first; the other options override it).
+        mode: ``peer`` (default), ``client`` (through a router) or ``router``.
+        listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
+        connect: endpoints to connect to.
+        scouting: multicast scouting; off whenever endpoints are given explicitly.
+    """
+
+    config_file: Path | None = None
+    mode: str | None = None
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    scouting: bool | None = None
+
+    def to_config(self) -> Any:
+        import zenoh
+
+        try:
+            config = zenoh.Config.from_file(str(self.config_file)) if self.config_file else zenoh.Config()
+        except Exception as exc:
+            raise TransportError(f"cannot read the Zenoh configuration {self.config_file}: {exc}") from exc
+        try:
+            if self.mode:
+                config.insert_json5("mode", json.dumps(self.mode))
+            if self.listen:
+                config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+            if self.connect:
+                config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+            scouting = self.scouting if self.scouting is not None else not (self.listen or self.connect)
+            if not scouting:
+                config.insert_json5("scouting/multicast/enabled", "false")
+        except Exception as exc:
+            raise TransportError(f"invalid Zenoh option: {exc}") from exc
+        return config
+
+    def describe(self) -> str:
+        parts = [f"mode={self.mode or 'peer'}"]
+        if self.listen:
+            parts.append(f"listen={list(self.listen)}")
+        if self.connect:
+            parts.append(f"connect={list(self.connect)}")
+        if self.config_file:
+            parts.append(f"config={self.config_file}")
+        return ", ".join(parts)
+
+
+def quiet_zenoh_logs(level: str = "error") -> None:
+    """Zenoh logs through its own logger; keep it to errors unless RUST_LOG says otherwise."""
+    with _LOG_ONCE:
+        if _log_state["initialised"]:
+            return
+        import zenoh
+
+        try:
+            zenoh.init_log_from_env_or(level)
+        except Exception:  # already initialised by the host application
+            _log.debug("zenoh logging was already initialised")
+        _log_state["initialised"] = True
+
+
+def open_session(options: ZenohOptions | None = None) -> Any:
+    """Open a Zenoh session; a bad endpoint or config is a TransportError naming it."""
+    import zenoh
+
+    options = options or ZenohOptions()
+    quiet_zenoh_logs()
+    config = options.to_config()
+    try:
+        return zenoh.open(config)
+    except Exception as exc:
+        raise TransportError(
+            f"cannot open a Zenoh session ({options.describe()}): {exc}; check that the endpoints are "
+            "free (listen) or reachable (connect)"
+        ) from exc
