@@ -138,7 +138,8 @@ class RemoteVecEnv:
     def step_wait(
         self,
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
-        actions, failed = self._actions, {}
+        actions = self._actions
+        failed: dict[int, TransportError] = {}
         for i, env in enumerate(self.envs):  # all actions out first: the nodes step in parallel
             try:
                 env.send(actions[i])
@@ -151,8 +152,8 @@ class RemoteVecEnv:
                     results[i] = env.receive()
                 except TransportError as exc:
                     failed[i] = exc
-        for i, exc in failed.items():
-            results[i] = self._dead_node_result(i, exc)
+        for i, error in failed.items():
+            results[i] = self._dead_node_result(i, error)
         return self._collect(results)
 
     def _dead_node_result(self, index: int, error: TransportError) -> tuple[Any, ...]:
