@@ -266,6 +266,29 @@ def node(
 
 
 @app.command()
+def router(
+    listen: ListenOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
+) -> None:
+    """Run a Zenoh router (no zenohd needed): nodes, trainers and tools connect to it."""
+    import threading
+
+    from bridge.transport import open_session
+
+    endpoints = listen or ["tcp/0.0.0.0:7447"]
+    session = open_session(_zenoh_options(zenoh_config, endpoints, None, mode="router"))
+    err_console.print(
+        f"Zenoh router {session.zid()} listening on {endpoints}; Ctrl-C stops it", highlight=False
+    )
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+
+
+@app.command()
 def nodes(
     pattern: Annotated[str, typer.Argument(help="Glob over node names.")] = "*",
     zenoh_config: ZenohConfigOpt = None,
@@ -276,10 +299,11 @@ def nodes(
 ) -> None:
     """List live FMU nodes with their model and state."""
     from bridge.remote import describe_nodes, list_nodes
-    from bridge.transport import open_session
+    from bridge.transport import open_session, wait_connected
 
     session = open_session(_zenoh_options(zenoh_config, listen, connect))
     try:
+        wait_connected(session, timeout_s)
         names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
         table = Table(
             "node",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import fnmatch
 import logging
 import threading
+import time
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -55,9 +56,17 @@ class NodeClient:
         self._n_inputs = len(self.description["input_names"])
 
     def _query_info(self) -> dict[str, Any]:
-        for reply in self._session.get(self.keys.info, timeout=self.timeout_s):
-            if reply.ok is not None:
-                return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {self.name!r}")
+        # A query sent before routes exist finds no queryable and returns at once: retry until the
+        # timeout, so a just-opened session or a node that is still starting is found.
+        deadline = time.monotonic() + self.timeout_s
+        while True:
+            remaining = deadline - time.monotonic()
+            for reply in self._session.get(self.keys.info, timeout=max(0.05, min(remaining, 1.0))):
+                if reply.ok is not None:
+                    return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {self.name!r}")
+            if remaining <= 0:
+                break
+            time.sleep(min(0.1, max(remaining, 0.0)))
         raise TransportError(
             f"no FMU node named {self.name!r} answers on {self.keys.info} within {self.timeout_s:g} s; "
             f"start one with `fmu-bridge node EXPERIMENT --name {self.name}` and check the Zenoh endpoints "

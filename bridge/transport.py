@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -83,6 +84,18 @@ def quiet_zenoh_logs(level: str = "error") -> None:
         except Exception:  # already initialised by the host application
             _log.debug("zenoh logging was already initialised")
         _log_state["initialised"] = True
+
+
+def wait_connected(session: Any, timeout_s: float = 2.0, settle_s: float = 0.2) -> bool:
+    """Wait until the session has a router or peer, then ``settle_s`` for declarations to arrive."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        info = session.info
+        if list(info.routers_zid()) or list(info.peers_zid()):
+            time.sleep(settle_s)
+            return True
+        time.sleep(0.02)
+    return False
 
 
 def open_session(options: ZenohOptions | None = None) -> Any:

@@ -116,3 +116,112 @@ def eta_ctrl_fmus() -> dict[str, Path]:
     if missing:
         pytest.skip(f"eta-ctrl's source distribution no longer ships {missing}")
     return found
+
+
+# -- Zenoh on loopback: explicit endpoints, no multicast scouting, a unique prefix per test -------
+import contextlib  # noqa: E402
+import os as _os  # noqa: E402
+import socket  # noqa: E402
+import time  # noqa: E402
+import uuid  # noqa: E402
+from collections.abc import Iterator  # noqa: E402
+from dataclasses import dataclass  # noqa: E402
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@dataclass
+class Loopback:
+    endpoint: str
+    prefix: str
+    session: object
+
+    def options(self) -> object:
+        from bridge.transport import ZenohOptions
+
+        return ZenohOptions(connect=(self.endpoint,))
+
+
+@pytest.fixture
+def loopback() -> Iterator[Loopback]:
+    """A Zenoh router session on a free 127.0.0.1 port: nodes and CLI sessions connect to it."""
+    from bridge.transport import ZenohOptions, open_session
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
+    try:
+        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
+    finally:
+        session.close()  # type: ignore[attr-defined]
+
+
+@contextlib.contextmanager
+def node_process(
+    experiment: Path | str, name: str, net: Loopback, *extra: str
+) -> Iterator[subprocess.Popen[str]]:
+    """``fmu-bridge node`` as a real subprocess, stopped (and reaped) at the end."""
+    cmd = [
+        sys.executable,
+        "-m",
+        "bridge.cli",
+        "node",
+        str(experiment),
+        "--name",
+        name,
+        "--connect",
+        net.endpoint,
+        "--prefix",
+        net.prefix,
+        *extra,
+    ]
+    process = subprocess.Popen(
+        cmd,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={**_os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        _wait_for_line(process, "serving", timeout_s=60)
+        _wait_for_node(net, name, timeout_s=10)
+        yield process
+    finally:
+        if process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(timeout=10)
+        if process.stdout is not None:
+            process.stdout.close()
+
+
+def _wait_for_line(process: subprocess.Popen[str], text: str, timeout_s: float) -> None:
+    assert process.stdout is not None
+    deadline = time.monotonic() + timeout_s
+    seen = []
+    while time.monotonic() < deadline:
+        line = process.stdout.readline()
+        if not line:
+            break
+        seen.append(line)
+        if text in line:
+            return
+    process.kill()
+    pytest.fail(f"node did not start within {timeout_s} s:\n{''.join(seen)}")
+
+
+def _wait_for_node(net: Loopback, name: str, timeout_s: float) -> None:
+    from bridge.remote import list_nodes
+
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if name in list_nodes(net.session, prefix=net.prefix, timeout_s=0.5):
+            return
+        time.sleep(0.05)
+    pytest.fail(f"node {name!r} did not appear under {net.prefix}/ within {timeout_s} s")
