@@ -275,8 +275,9 @@ def router(
 
     from bridge.transport import open_session
 
-    endpoints = listen or ["tcp/0.0.0.0:7447"]
-    session = open_session(_zenoh_options(zenoh_config, endpoints, None, mode="router"))
+    endpoints = listen or ([] if zenoh_config else ["tcp/0.0.0.0:7447"])
+    mode = None if zenoh_config else "router"  # a config file says its own mode
+    session = open_session(_zenoh_options(zenoh_config, endpoints, None, mode=mode))
     err_console.print(
         f"Zenoh router {session.zid()} listening on {endpoints}; Ctrl-C stops it", highlight=False
     )

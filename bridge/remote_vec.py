@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -84,12 +85,14 @@ class RemoteVecEnv:
     def _discover(self, nodes: Sequence[str] | str, n_envs: int | None, timeout_s: float) -> list[str]:
         if not isinstance(nodes, str):
             names = list(nodes)
-        else:
-            names = list_nodes(
-                self._session, prefix=self._prefix, pattern=nodes, timeout_s=min(timeout_s, 2.0)
-            )
-            if n_envs is not None and len(names) < n_envs:
-                names = list_nodes(self._session, prefix=self._prefix, pattern=nodes, timeout_s=timeout_s)
+        else:  # nodes may still be starting: poll until enough are up or the timeout passes
+            deadline = time.monotonic() + timeout_s
+            while True:
+                names = list_nodes(self._session, prefix=self._prefix, pattern=nodes, timeout_s=1.0)
+                enough = len(names) >= n_envs if n_envs is not None else bool(names)
+                if enough or time.monotonic() > deadline:
+                    break
+                time.sleep(0.2)
         wanted = n_envs or len(names)
         if wanted < 1 or len(names) < wanted:
             raise ConfigError(

@@ -330,3 +330,34 @@ def test_node_serving_another_experiment_is_refused(loopback: Loopback) -> None:
         pytest.raises(Exception, match=r"outputs \['x'\] vs the node's"),
     ):
         RemoteFmuEnv(other, "cp", session=loopback.session, prefix=loopback.prefix)
+
+
+@pytest.mark.slow
+def test_launch_script_starts_nodes_and_trains(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from conftest import free_port
+
+    script = Path(__file__).resolve().parent.parent / "launch_scripts" / "train_remote.py"
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--nodes",
+            "2",
+            "--timesteps",
+            "512",
+            "--port",
+            str(free_port()),
+            "--save",
+            str(tmp_path / "model.zip"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "on 2 nodes" in result.stdout and (tmp_path / "model.zip").is_file()
