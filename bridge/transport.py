@@ -106,9 +106,31 @@ def open_session(options: ZenohOptions | None = None) -> Any:
     quiet_zenoh_logs()
     config = options.to_config()
     try:
-        return zenoh.open(config)
+        session = zenoh.open(config)
     except Exception as exc:
         raise TransportError(
             f"cannot open a Zenoh session ({options.describe()}): {exc}; check that the endpoints are "
             "free (listen) or reachable (connect)"
         ) from exc
+    _close_at_exit(session)
+    return session
+
+
+def _close_at_exit(session: Any) -> None:
+    """Zenoh's callback threads are not daemons: a session left open would hang interpreter exit.
+
+    ``threading._register_atexit`` runs before non-daemon threads are joined (``atexit`` runs too
+    late for that), so an unclosed session is closed there; closing twice is harmless.
+    """
+    register = getattr(threading, "_register_atexit", None)
+    if register is None:
+        return
+
+    def close() -> None:
+        if not session.is_closed():
+            session.close()
+
+    try:
+        register(close)
+    except RuntimeError:  # the interpreter is already shutting down
+        pass
