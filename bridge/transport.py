@@ -7,6 +7,7 @@ user/password authentication as Zenoh configures them (see docs/zenoh.md).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import threading
@@ -130,7 +131,5 @@ def _close_at_exit(session: Any) -> None:
         if not session.is_closed():
             session.close()
 
-    try:
+    with contextlib.suppress(RuntimeError):  # the interpreter is already shutting down
         register(close)
-    except RuntimeError:  # the interpreter is already shutting down
-        pass
