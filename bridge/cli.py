@@ -358,6 +358,9 @@ def demo(
 
 
 def _load_plugins() -> None:
+    from bridge import cli_recording
+
+    cli_recording.register(app)
     for entry in entry_points(group="fmu_bridge.commands"):
         try:
             register = entry.load()
