@@ -348,13 +348,14 @@ def nodes(
 
 @app.command()
 def demo(
-    model: Annotated[str, typer.Option(help="Bundled example model to simulate.")] = "cartpole",
-    duration_s: Annotated[float, typer.Option("--duration", help="Simulated seconds.")] = 2.0,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="Only balance with a controller (seconds, no training).")
+    ] = False,
 ) -> None:
-    """Run the main job on the embedded default example (no server, no files needed)."""
+    """The main job on the bundled cart-pole FMU: train PPO, evaluate against baselines, report, record."""
     from bridge.demo import run_demo
 
-    run_demo(model=model, duration_s=duration_s, console=console)
+    run_demo(console=console, quick=quick)
 
 
 def _load_plugins() -> None:

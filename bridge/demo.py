@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from importlib.metadata import entry_points
+
 import numpy as np
 from rich.console import Console
 from rich.table import Table
@@ -12,9 +14,25 @@ from bridge.examples import example_experiment
 GAINS = np.array([1.0, 1.5, 30.0, 5.0])  # a stabilising state feedback for the cart-pole
 
 
-def run_demo(*, model: str = "cartpole", duration_s: float = 2.0, console: Console) -> None:
-    """Balance the bundled cart-pole with a state-feedback controller and print the trajectory."""
-    del model, duration_s
+def run_demo(*, console: Console, quick: bool = False) -> None:
+    """The main job: with the ``train`` extra installed, train PPO, evaluate, report and record
+    (``agents.demo``, found through the ``fmu_bridge.demo`` entry point); without it, or with
+    ``quick``, balance the cart-pole with a state-feedback controller and print the trajectory."""
+    if not quick:
+        for entry in entry_points(group="fmu_bridge.demo"):
+            try:
+                full = entry.load()
+            except ImportError:
+                continue
+            full(console=console)
+            return
+        console.print(
+            "(training needs the train extra: pip install 'fmu-bridge[train]'; showing a controller)"
+        )
+    balance_with_controller(console)
+
+
+def balance_with_controller(console: Console) -> None:
     with FmuEnv(example_experiment("cartpole_continuous")) as env:
         _, info = env.reset(seed=0)
         table = Table("t [s]", "x [m]", "theta [rad]", "force [N]", title="cart-pole FMU, state feedback")

@@ -33,16 +33,7 @@ class EpisodeResult:
 
 def physical_action(task: Task, value: float) -> Any:
     """The action whose physical input value is nearest ``value`` on every action input."""
-    space = task.action_space
-    if isinstance(space, gym.spaces.Box):
-        centre = np.asarray(task._a_centre)
-        half = np.asarray(task._a_half_list)
-        return np.clip((value - centre) / half, -1.0, 1.0).astype(np.float32)
-    if isinstance(space, gym.spaces.Discrete):
-        rows = np.asarray(task._table_rows)
-        return int(np.argmin(np.abs(rows - value).sum(axis=1)))
-    assert isinstance(space, gym.spaces.MultiDiscrete)
-    return np.array([int(np.argmin(np.abs(levels - value))) for levels in task._levels])
+    return task.action_for_inputs([value] * len(task.action_inputs))
 
 
 def make_policy(spec: str, task: Task, seed: int | None) -> Policy:

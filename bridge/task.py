@@ -171,6 +171,22 @@ class Task:
             u[n:] = self._profile_inputs[min(sample, len(self._profile_inputs) - 1)].tolist()
         return u
 
+    def action_for_inputs(self, values: Any) -> Any:
+        """The agent action whose physical input values are nearest ``values`` (one per action input).
+
+        The inverse of the action mapping: continuous values are scaled into [-1, 1] (clipped),
+        discrete ones pick the nearest level or table row. Baselines such as PID controllers
+        compute physical inputs and use this to act through the same action space as agents.
+        """
+        u = np.asarray(values, dtype=np.float64).reshape(-1)
+        if self._kind == "continuous":
+            centre, half = np.asarray(self._a_centre), np.asarray(self._a_half_list)
+            return np.clip((u - centre) / half, -1.0, 1.0).astype(np.float32)
+        if self._kind == "discrete":
+            rows = np.asarray(self._table_rows)
+            return int(np.argmin(np.abs(rows - u).sum(axis=1)))
+        return np.array([int(np.argmin(np.abs(levels - v))) for levels, v in zip(self._levels, u)])
+
     def _discrete_row(self, action: Any, sample: int) -> list[float]:
         try:
             index = int(action)

@@ -19,3 +19,8 @@ def heavier_rotor(spec: EpisodeSpec, rng: np.random.Generator) -> EpisodeSpec:
 
 def load_after_5(step: int, time_s: float, signals: dict[str, Any]) -> dict[str, float] | None:
     return {"load_torque": 0.25} if step >= 5 else None
+
+
+def half_voltage(obs: Any, signals: dict[str, float]) -> Any:
+    """A scripted policy: always +12 V on a +-24 V motor (action 0.5)."""
+    return np.array([0.5], dtype=np.float32)

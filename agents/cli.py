@@ -1,0 +1,156 @@
+"""``fmu-bridge train / evaluate / compare``: added to the bridge CLI through an entry point."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+console = Console()
+
+
+def register(app: typer.Typer) -> None:
+    """Entry point ``fmu_bridge.commands``: add the training and evaluation commands."""
+    app.command("train")(train_cmd)
+    app.command("evaluate")(evaluate_cmd)
+    app.command("compare")(compare_cmd)
+
+
+def train_cmd(
+    experiment: Annotated[Path, typer.Argument(help="An experiment YAML file.")],
+    algo: Annotated[str | None, typer.Option(help="PPO, SAC, TD3, A2C or DQN.")] = None,
+    timesteps: Annotated[int | None, typer.Option(help="Environment steps to train for.")] = None,
+    n_envs: Annotated[int | None, typer.Option("--n-envs", help="Parallel environments.")] = None,
+    vec: Annotated[str | None, typer.Option(help="dummy, subproc or remote.")] = None,
+    seed: Annotated[int | None, typer.Option()] = None,
+    run_dir: Annotated[Path | None, typer.Option("--run-dir", help="Where the run goes.")] = None,
+    resume: Annotated[Path | None, typer.Option(help="A run directory to continue.")] = None,
+    version: Annotated[str | None, typer.Option("--version", help="Env version.")] = None,
+    nodes: Annotated[str | None, typer.Option(help="Remote node name pattern (with --vec remote).")] = None,
+    connect: Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint (remote).")] = None,
+    zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config")] = None,
+    progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
+) -> None:
+    """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes)."""
+    from agents.train import train
+
+    overrides: dict[str, Any] = {
+        "algo": algo.upper() if algo else None,
+        "timesteps": timesteps,
+        "n_envs": n_envs,
+        "vec": vec,
+        "seed": seed,
+    }
+    if nodes or connect or zenoh_config:
+        overrides["remote"] = {
+            "nodes": nodes or "*",
+            "connect": list(connect or []),
+            "zenoh_config": str(zenoh_config) if zenoh_config else None,
+        }
+    result = train(
+        experiment, overrides=overrides, run_dir=run_dir, resume=resume, version=version, progress=progress
+    )
+    console.print(
+        f"trained {result.timesteps:,} steps in {result.wall_time_s:.1f} s "
+        f"({result.timesteps / max(result.wall_time_s, 1e-9):,.0f} steps/s)"
+    )
+    console.print(f"run: {result.run_dir}\nmodel: {result.model_path}")
+
+
+def evaluate_cmd(
+    agents: Annotated[
+        list[str],
+        typer.Argument(
+            help="Models/run dirs, baselines (zero, random, constant:V, "
+            "names in evaluation.baselines) or python:module:function."
+        ),
+    ],
+    config: Annotated[Path, typer.Option("--config", help="The experiment YAML file.")],
+    scenarios: Annotated[
+        list[str] | None, typer.Option("--scenarios", help="Scenario names (repeat).")
+    ] = None,
+    episodes: Annotated[int | None, typer.Option(help="Episodes per scenario and agent.")] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes.")] = 1,
+    seed: Annotated[int, typer.Option()] = 1000,
+    out: Annotated[Path | None, typer.Option("--out", help="Directory for results and report.")] = None,
+    record: Annotated[
+        bool, typer.Option("--record/--no-record", help="MCAP recordings of every episode.")
+    ] = True,
+    version: Annotated[str | None, typer.Option("--version")] = None,
+) -> None:
+    """Evaluate agents and baselines over scenarios: metrics table, results.csv/json, report."""
+    import time
+
+    from agents.evaluate import evaluate
+    from agents.report import headline_columns, summary, write
+
+    out = out or Path("runs") / f"eval-{time.strftime('%Y%m%d-%H%M%S')}"
+    result = evaluate(
+        agents,
+        config,
+        version=version,
+        scenarios=scenarios,
+        episodes=episodes,
+        workers=workers,
+        seed=seed,
+        record_dir=Path("recordings") / out.name if record else None,
+    )
+    paths = write(result, out, title=f"Evaluation of {config.stem}")
+    rows = summary(result)
+    columns = headline_columns(rows)
+    table = Table("agent", "scenario", "episodes", *columns, "end", title=f"evaluation ({config.name})")
+    for row in rows:
+        table.add_row(
+            row["agent"],
+            row["scenario"],
+            str(row["episodes"]),
+            *(f"{row.get(c, float('nan')):.4g}" for c in columns),
+            row["end"],
+        )
+    console.print(table)
+    console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
+    for recording in result.recordings:
+        console.print(f"recording: {recording}")
+
+
+def compare_cmd(
+    runs: Annotated[list[Path], typer.Argument(help="Run directories from `fmu-bridge train`.")],
+    plot: Annotated[Path | None, typer.Option(help="Write learning curves to this PNG.")] = None,
+) -> None:
+    """Training runs side by side: settings, time, and evaluation results during training."""
+    from agents.compare import compare_runs
+
+    rows, curves = compare_runs(runs)
+    table = Table(
+        "run",
+        "algo",
+        "seed",
+        "timesteps",
+        "wall [s]",
+        "steps/s",
+        "best eval",
+        "last eval",
+        "status",
+        title="training runs",
+    )
+    for r in rows:
+        table.add_row(
+            r["run"],
+            r["algo"],
+            str(r["seed"]),
+            f"{r['timesteps']:,}",
+            f"{r['wall_time_s']:.0f}",
+            f"{r['steps_per_s']:,.0f}",
+            f"{r['best_eval']:.1f}",
+            f"{r['last_eval']:.1f}",
+            r["status"],
+        )
+    console.print(table)
+    if plot is not None:
+        from agents.compare import plot_curves
+
+        plot_curves(curves, plot)
+        console.print(f"learning curves: {plot}")

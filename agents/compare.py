@@ -1,0 +1,61 @@
+"""``fmu-bridge compare``: training runs side by side, from their run directories."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.errors import ConfigError
+
+
+def load_evaluations(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(timesteps, mean episode return) of the periodic evaluations during training."""
+    file = run_dir / "evaluations.npz"
+    if not file.is_file():
+        return np.zeros(0), np.zeros(0)
+    data = np.load(file)
+    return data["timesteps"], data["results"].mean(axis=1)
+
+
+def compare_runs(runs: list[Path]) -> tuple[list[dict[str, Any]], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    rows, curves = [], {}
+    for run in runs:
+        info_file = run / "run.json"
+        if not info_file.is_file():
+            raise ConfigError(f"{run} is not a run directory (no run.json); `fmu-bridge train` writes them")
+        info = json.loads(info_file.read_text())
+        steps, returns = load_evaluations(run)
+        curves[run.name] = (steps, returns)
+        wall = float(info.get("wall_time_s", math.nan))
+        timesteps = int(info.get("timesteps", 0))
+        rows.append(
+            {
+                "run": run.name,
+                "algo": info.get("algo", "?"),
+                "seed": info.get("seed", "?"),
+                "timesteps": timesteps,
+                "wall_time_s": wall,
+                "steps_per_s": timesteps / wall if wall and wall > 0 else math.nan,
+                "best_eval": float(returns.max()) if returns.size else math.nan,
+                "last_eval": float(returns[-1]) if returns.size else math.nan,
+                "status": info.get("status", "?"),
+            }
+        )
+    return rows, curves
+
+
+def plot_curves(curves: dict[str, tuple[np.ndarray, np.ndarray]], path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    ax = fig.subplots()
+    for name, (steps, returns) in curves.items():
+        ax.plot(steps, returns, marker="o", markersize=3, label=name)
+    ax.set_xlabel("timesteps")
+    ax.set_ylabel("mean evaluation return")
+    ax.legend(fontsize=7)
+    fig.savefig(path, dpi=110)

@@ -1,0 +1,196 @@
+"""Evaluation: the grid scenario x agent x episode, in parallel worker processes.
+
+Every agent sees the same seeds on the same scenarios, so differences are the agents'. Each
+cell (agent, scenario) runs in a worker process with its own env (the FMU opened there) and
+returns one metrics row per episode plus the traces for plots.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.metrics import MetricSpec, Trace, compute
+from agents.policies import Policy, make_policy
+from bridge.config import Experiment, load_experiment
+from bridge.env import FmuEnv
+from bridge.errors import ConfigError
+
+_log = logging.getLogger(__name__)
+
+
+@dataclass
+class EvaluationResult:
+    rows: list[dict[str, Any]]
+    traces: dict[tuple[str, str], list[Trace]] = field(default_factory=dict)
+    agents: list[str] = field(default_factory=list)
+    scenarios: list[str] = field(default_factory=list)
+    recordings: list[Path] = field(default_factory=list)
+
+
+def metric_spec(experiment: Experiment) -> MetricSpec:
+    """Metrics from ``evaluation.metrics``; tracking pairs default to the reward's tracking terms."""
+    config = experiment.evaluation.get("metrics", {})
+    tracking = [tuple(pair) for pair in config.get("tracking", [])] or [
+        (t.tracking.output, t.tracking.reference) for t in experiment.reward.terms if t.tracking
+    ]
+    from bridge.task import load_callable
+
+    return MetricSpec(
+        tracking=tracking,  # type: ignore[arg-type]
+        effort=list(config.get("effort", experiment.actions.inputs)),
+        constraints={k: (v[0], v[1]) for k, v in config.get("constraints", {}).items()},
+        success=config.get("success"),
+        user=[load_callable(path, "evaluation.metrics.user") for path in config.get("user", [])],
+        band=float(config.get("settling_band", 0.02)),
+    )
+
+
+def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Trace:
+    """One episode of ``policy``; the trace holds every task signal in physical units."""
+    task = env.unwrapped.task
+    obs, info = env.reset(seed=seed, options={"scenario": scenario} if scenario else None)
+    policy.reset(task, seed)
+    times, rows, inputs, rewards = [info["time_s"]], [list(task.signal_dict().values())], [], []
+    terminated, reason = False, None
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, task.signal_dict()))
+        inputs.append(list(task._inputs[: len(task.action_inputs)]))
+        rewards.append(float(reward))
+        times.append(info["time_s"])
+        rows.append(list(task.signal_dict().values()))
+        if terminated or truncated:
+            reason = info.get("reason")
+            break
+    table = np.array(rows)
+    u = np.array(inputs)
+    return Trace(
+        time_s=np.array(times),
+        signals={name: table[:, i] for i, name in enumerate(task.signal_names)},
+        inputs={name: u[:, i] for i, name in enumerate(task.action_inputs)},
+        rewards=np.array(rewards),
+        reason=reason,
+        terminated=terminated,
+        scenario=info.get("scenario", scenario or ""),
+    )
+
+
+@dataclass(frozen=True)
+class Cell:
+    experiment: Path
+    version: str | None
+    agent: str
+    agent_name: str
+    scenario: str | None
+    seeds: tuple[int, ...]
+    record_dir: Path | None
+
+
+def run_cell(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], Path | None]:
+    """Worker entry point: every episode of one agent on one scenario."""
+    experiment = load_experiment(cell.experiment, version=cell.version)
+    policy = make_policy(cell.agent, experiment.evaluation.get("baselines", {}), name=cell.agent_name)
+    spec = metric_spec(experiment)
+    env: Any = FmuEnv(experiment)
+    recording = None
+    if cell.record_dir is not None:
+        env, recording = _record(env, cell)
+    rows, traces = [], []
+    try:
+        for episode, seed in enumerate(cell.seeds):
+            trace = run_episode(env, policy, seed, cell.scenario)
+            rows.append(
+                {
+                    "agent": cell.agent_name,
+                    "scenario": trace.scenario,
+                    "episode": episode,
+                    "seed": seed,
+                    **compute(trace, spec),
+                }
+            )
+            traces.append(trace)
+    finally:
+        env.close()
+    return rows, traces, recording
+
+
+def _record(env: Any, cell: Cell) -> tuple[Any, Path | None]:
+    try:
+        from bridge.recording import record_env
+    except ImportError:  # recording support not available in this installation
+        return env, None
+    assert cell.record_dir is not None
+    wrapped = record_env(
+        env,
+        directory=cell.record_dir,
+        run_name=f"{cell.agent_name}__{cell.scenario or 'mixed'}",
+        agent=cell.agent,
+    )
+    return wrapped, Path(getattr(wrapped, "path", cell.record_dir))
+
+
+def evaluate(
+    agents: Sequence[str],
+    experiment_path: Path,
+    *,
+    version: str | None = None,
+    scenarios: Sequence[str] | None = None,
+    episodes: int | None = None,
+    workers: int = 1,
+    seed: int = 0,
+    record_dir: Path | None = None,
+) -> EvaluationResult:
+    """Evaluate every agent on every scenario for ``episodes`` seeded episodes."""
+    experiment = load_experiment(experiment_path, version=version)
+    config = experiment.evaluation
+    names = _agent_names(agents)
+    chosen = list(
+        scenarios or config.get("scenarios") or experiment.schedule.evaluation or experiment.scenarios
+    )
+    unknown = [s for s in chosen if s not in experiment.scenarios]
+    if unknown:
+        raise ConfigError(
+            f"scenarios {unknown} are not defined in {experiment_path}; "
+            f"defined: {sorted(experiment.scenarios) or 'none'}"
+        )
+    n = episodes or int(config.get("episodes", 5))
+    seeds = tuple(seed + i for i in range(n))
+    cells = [
+        Cell(experiment_path.resolve(), version, spec, name, sc, seeds, record_dir)
+        for spec, name in zip(agents, names)
+        for sc in (chosen or [None])
+    ]
+    result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
+    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers)):
+        result.rows += rows
+        result.traces[(cell.agent_name, cell.scenario or "")] = traces
+        if recording is not None:
+            result.recordings.append(recording)
+    return result
+
+
+def _map(cells: list[Cell], workers: int) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
+    if workers <= 1 or len(cells) == 1:
+        return [run_cell(c) for c in cells]
+    context = multiprocessing.get_context("spawn")  # a fresh process per worker: no inherited FMU state
+    with ProcessPoolExecutor(max_workers=min(workers, len(cells)), mp_context=context) as pool:
+        return list(pool.map(run_cell, cells))
+
+
+def _agent_names(agents: Sequence[str]) -> list[str]:
+    names: list[str] = []
+    for spec in agents:
+        path = Path(spec)
+        base = path.name if path.is_dir() else path.stem if path.suffix == ".zip" else spec
+        name, i = base, 2
+        while name in names:
+            name, i = f"{base}-{i}", i + 1
+        names.append(name)
+    return names

@@ -1,0 +1,266 @@
+"""Agents for evaluation: trained SB3 models and baselines, all behind one small interface.
+
+A policy sees the observation (as the agent does) and the task's named signals in physical
+units (outputs, inputs, references), so a PID controller is configured by variable names.
+Baselines compute physical input values and act through the task's action space
+(``Task.action_for_inputs``), so they run in exactly the env an agent runs in.
+"""
+
+from __future__ import annotations
+
+import copy
+import importlib
+import json
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from bridge.errors import ConfigError
+from bridge.task import Task
+
+ALGOS = ("PPO", "SAC", "TD3", "A2C", "DQN")
+
+
+class Policy(Protocol):
+    name: str
+
+    def reset(self, task: Task, seed: int | None) -> None: ...
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any: ...
+
+
+class PidSpec(BaseModel):
+    """A discrete PID controller on one output/reference pair driving one input."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    type: str = "pid"
+    output: str
+    reference: str
+    input: str
+    kp: float = 1.0
+    ki: float = 0.0
+    kd: float = 0.0
+    limits: tuple[float, float] | None = None
+    anti_windup: str = Field(default="clamp", pattern="^(clamp|back_calculation|none)$")
+    tracking_time_s: float | None = None
+    feedforward: float = 0.0
+
+
+class Pid:
+    """u = kp e + ki sum(e dt) + kd de/dt, saturated to ``limits``, with anti-windup.
+
+    ``clamp`` freezes the integrator while the output saturates in the direction of the error;
+    ``back_calculation`` bleeds the saturation excess back into the integrator with time
+    constant ``tracking_time_s`` (default sqrt(Ti*Td), or Ti without a D part).
+    """
+
+    def __init__(self, spec: PidSpec, name: str = "pid") -> None:
+        self.spec, self.name = spec, name
+        self._dt = 0.0
+        self._integral = 0.0
+        self._previous: float | None = None
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        for key, role in ((self.spec.output, "output"), (self.spec.reference, "reference")):
+            if key not in task.signal_names:
+                raise ConfigError(
+                    f"baseline {self.name}: {role} {key!r} is not a signal of the task; "
+                    f"signals: {list(task.signal_names)}"
+                )
+        if self.spec.input not in task.action_inputs:
+            raise ConfigError(
+                f"baseline {self.name}: input {self.spec.input!r} is not an action input "
+                f"{list(task.action_inputs)}"
+            )
+        self._task = task
+        self._index = task.action_inputs.index(self.spec.input)
+        self._dt = task.timing.sampling_time_s
+        self._integral, self._previous = 0.0, None
+
+    def control(self, signals: Mapping[str, float]) -> float:
+        s = self.spec
+        error = signals[s.reference] - signals[s.output]
+        derivative = 0.0 if self._previous is None else (error - self._previous) / self._dt
+        self._previous = error
+        unsaturated = s.feedforward + s.kp * error + self._integral + s.kd * derivative
+        u = unsaturated if s.limits is None else float(np.clip(unsaturated, *s.limits))
+        step = s.ki * error * self._dt
+        if s.anti_windup == "clamp":
+            saturating = u != unsaturated and np.sign(error) == np.sign(unsaturated - u)
+            if not saturating:
+                self._integral += step
+        elif s.anti_windup == "back_calculation" and s.ki:
+            tracking = s.tracking_time_s or (np.sqrt((s.kp / s.ki) * (s.kd / s.kp)) if s.kd else s.kp / s.ki)
+            self._integral += step + (u - unsaturated) * self._dt / tracking
+        else:
+            self._integral += step
+        return u
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        inputs = [signals[name] for name in self._task.action_inputs]
+        inputs[self._index] = self.control(signals)
+        return self._task.action_for_inputs(inputs)
+
+
+@dataclass
+class FixedPolicy:
+    """``zero`` / ``constant:V`` (physical value on every action input) / ``random`` (seeded)."""
+
+    name: str
+    value: float | None = None
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        self._task = task
+        if self.value is not None:
+            self._action = task.action_for_inputs([self.value] * len(task.action_inputs))
+        else:  # its own copy: policies sharing the task's space must not share its generator
+            self._space = copy.deepcopy(task.action_space)
+            self._space.seed(seed)
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self._action if self.value is not None else self._space.sample()
+
+
+@dataclass
+class PythonPolicy:
+    """Any callable ``fn(obs, signals) -> action`` given as ``module:function``."""
+
+    name: str
+    fn: Callable[[Any, Mapping[str, float]], Any]
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        reset = getattr(self.fn, "reset", None)
+        if callable(reset):
+            reset(task, seed)
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self.fn(obs, signals)
+
+
+class Sb3Policy:
+    """A trained model, deterministic, with the VecNormalize observation statistics it was trained with."""
+
+    def __init__(self, path: Path, name: str | None = None) -> None:
+        self.path = path
+        run_dir = path if path.is_dir() else path.parent
+        model_file = _model_file(path)
+        self.name = name or (run_dir.name if path.is_dir() else path.stem)
+        self.run = _run_info(run_dir)
+        algo = self.run.get("algo")
+        self.model = load_model(model_file, algo)
+        self._obs_rms = None
+        stats = run_dir / "vecnormalize.pkl"
+        if stats.is_file():
+            import pickle
+
+            with stats.open("rb") as handle:
+                normalizer = pickle.load(handle)
+            self._obs_rms, self._clip, self._eps = normalizer.obs_rms, normalizer.clip_obs, normalizer.epsilon
+        self.residual: dict[str, Any] | None = self.run.get("residual")
+        self._baseline: Policy | None = None
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        self._task = task
+        if self.residual:
+            from agents.residual import baseline_from_run
+
+            self._baseline = baseline_from_run(self.residual, task.experiment)
+            self._baseline.reset(task, seed)
+
+    def normalise(self, obs: Any) -> Any:
+        if self._obs_rms is None:
+            return obs
+        return np.clip(
+            (obs - self._obs_rms.mean) / np.sqrt(self._obs_rms.var + self._eps), -self._clip, self._clip
+        )
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        action, _ = self.model.predict(self.normalise(obs), deterministic=True)
+        if self._baseline is not None and self.residual is not None:
+            from agents.residual import combine
+
+            return combine(self._task, self._baseline, signals, action, float(self.residual["scale"]))
+        return action
+
+
+def _model_file(path: Path) -> Path:
+    if path.is_file():
+        return path
+    for name in ("best_model.zip", "model.zip"):
+        if (path / name).is_file():
+            return path / name
+    raise ConfigError(
+        f"{path} holds no model: expected best_model.zip or model.zip (a run directory from "
+        "`fmu-bridge train`) or a .zip saved by stable-baselines3"
+    )
+
+
+def _run_info(run_dir: Path) -> dict[str, Any]:
+    file = run_dir / "run.json"
+    return json.loads(file.read_text()) if file.is_file() else {}
+
+
+def load_model(path: Path, algo: str | None) -> Any:
+    """Load an SB3 model; without a known algorithm, try each one."""
+    import stable_baselines3 as sb3
+
+    candidates = [algo] if algo else list(ALGOS)
+    errors = []
+    for name in candidates:
+        try:
+            return getattr(sb3, name).load(str(path), device="cpu")
+        except Exception as exc:  # a wrong algorithm class fails while loading its parameters
+            errors.append(f"{name}: {exc}")
+    raise ConfigError(f"cannot load {path} as a stable-baselines3 model ({'; '.join(errors)[:400]})")
+
+
+def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str | None = None) -> Policy:
+    """An agent from a command-line word: a model path or run dir, ``zero``, ``random``,
+    ``constant:V``, a baseline named in ``evaluation.baselines``, or ``python:module:function``."""
+    if spec in experiment_baselines:
+        return baseline(spec, experiment_baselines[spec])
+    if spec == "zero":
+        return FixedPolicy(name or "zero", 0.0)
+    if spec == "random":
+        return FixedPolicy(name or "random")
+    if spec.startswith("constant:"):
+        try:
+            return FixedPolicy(name or spec, float(spec.partition(":")[2]))
+        except ValueError:
+            raise ConfigError(f"agent {spec!r}: expected constant:NUMBER") from None
+    if spec.startswith("python:"):
+        return PythonPolicy(name or spec, _import(spec.partition(":")[2], spec))
+    path = Path(spec)
+    if path.exists():
+        return Sb3Policy(path, name)
+    raise ConfigError(
+        f"agent {spec!r} is not a model file or run directory, not a baseline of the experiment "
+        f"({sorted(experiment_baselines) or 'none defined'}), and not zero, random, constant:V or "
+        "python:module:function"
+    )
+
+
+def baseline(name: str, config: Mapping[str, Any]) -> Policy:
+    kind = config.get("type", "pid")
+    if kind == "pid":
+        return Pid(PidSpec.model_validate(config), name)
+    if kind == "constant":
+        return FixedPolicy(name, float(config["value"]))
+    if kind == "python":
+        return PythonPolicy(name, _import(str(config["callable"]), f"evaluation.baselines.{name}"))
+    raise ConfigError(f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, constant or python")
+
+
+def _import(path: str, key: str) -> Callable[..., Any]:
+    module, _, attr = path.partition(":")
+    try:
+        fn = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as exc:
+        raise ConfigError(f"{key}: cannot import {path!r} ({exc})") from exc
+    if not callable(fn):
+        raise ConfigError(f"{key}: {path!r} is not callable")
+    return fn  # type: ignore[no-any-return]

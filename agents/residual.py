@@ -1,0 +1,77 @@
+"""Residual RL: the agent's action is added to a baseline controller's (a config switch).
+
+The agent acts in [-1, 1]; its action times ``scale`` (physical units) is added to the
+baseline's physical inputs, and the sum goes through the task's action mapping. Trained and
+evaluated like any other agent; the run directory records the baseline so evaluation rebuilds it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from agents.policies import Pid, PidSpec
+from bridge.config import Experiment
+from bridge.errors import ConfigError
+from bridge.task import Task
+
+
+def physical_inputs(baseline: Pid, task: Task, signals: Mapping[str, float]) -> list[float]:
+    inputs = [signals[name] for name in task.action_inputs]
+    inputs[task.action_inputs.index(baseline.spec.input)] = baseline.control(signals)
+    return inputs
+
+
+def combine(task: Task, baseline: Any, signals: Mapping[str, float], residual: Any, scale: float) -> Any:
+    """The env action for baseline inputs plus ``scale`` times the residual action."""
+    base = np.asarray(physical_inputs(baseline, task, signals))
+    return task.action_for_inputs(base + scale * np.clip(np.asarray(residual, dtype=np.float64), -1.0, 1.0))
+
+
+def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Pid:
+    del experiment
+    return Pid(PidSpec.model_validate(residual["config"]), str(residual["baseline"]))
+
+
+def residual_setup(experiment: Experiment, residual: Mapping[str, Any]) -> dict[str, Any]:
+    """Resolve ``training.residual`` ({baseline: NAME, scale: S}) against ``evaluation.baselines``."""
+    baselines = experiment.evaluation.get("baselines", {})
+    name = residual.get("baseline")
+    if name not in baselines:
+        raise ConfigError(
+            f"training.residual.baseline: {name!r} is not in evaluation.baselines "
+            f"({sorted(baselines) or 'none defined'})"
+        )
+    if experiment.actions.type != "continuous":
+        raise ConfigError("training.residual needs continuous actions (actions.type: continuous)")
+    scale = float(residual.get("scale", 1.0))
+    if not scale > 0:
+        raise ConfigError(
+            f"training.residual.scale must be > 0 (physical units per unit action), got {scale}"
+        )
+    return {"baseline": name, "config": dict(baselines[name]), "scale": scale}
+
+
+class ResidualWrapper(gym.Wrapper[Any, Any, Any, Any]):
+    """Wraps an FmuEnv (or RemoteFmuEnv): the agent learns a correction on top of the baseline."""
+
+    def __init__(self, env: gym.Env[Any, Any], residual: Mapping[str, Any]) -> None:
+        super().__init__(env)
+        self._residual = residual
+        self._scale = float(residual["scale"])
+        self._baseline = Pid(PidSpec.model_validate(residual["config"]), str(residual["baseline"]))
+        self._task: Task = env.unwrapped.task  # type: ignore[attr-defined]
+        n = len(self._task.action_inputs)
+        self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._baseline.reset(self._task, None)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        signals = self._task.signal_dict()
+        return self.env.step(combine(self._task, self._baseline, signals, action, self._scale))
