@@ -47,7 +47,7 @@ class TrainingSettings(BaseModel):
     checkpoint_every: int = Field(default=50_000, ge=1)
     eval_every: int = Field(default=10_000, ge=1)
     eval_episodes: int = Field(default=5, ge=1)
-    eval_scenarios_: list[str] | None = Field(default=None, alias="eval_scenarios")
+    eval_scenarios: list[str] | None = None
     residual: dict[str, Any] | None = None
     remote: RemoteSettings = RemoteSettings()
 
@@ -61,8 +61,8 @@ class TrainingSettings(BaseModel):
                 format_validation_error(exc, experiment.source).replace("  ", "  training.")
             ) from None
 
-    def eval_scenarios(self, experiment: Experiment) -> list[str]:
-        return list(self.eval_scenarios_ or experiment.schedule.evaluation)
+    def evaluation_scenarios(self, experiment: Experiment) -> list[str]:
+        return list(self.eval_scenarios or experiment.schedule.evaluation)
 
     def normalize_kwargs(self, eval_env: bool = False) -> dict[str, Any]:
         kwargs = dict(self.normalize) if isinstance(self.normalize, dict) else {}

@@ -151,7 +151,7 @@ def train(
                 experiment_path,
                 experiment.version,
                 residual,
-                settings.eval_scenarios(experiment),
+                settings.evaluation_scenarios(experiment),
                 monitor=True,
             )
         ]
