@@ -11,6 +11,7 @@ from bridge.ros2.names import (
     demangle,
     domain_id_from_env,
     mangle,
+    name_token,
     normalize_namespace,
     resolve_name,
     ros_type_name,
@@ -118,3 +119,12 @@ def test_domain_id_comes_from_the_environment(monkeypatch: pytest.MonkeyPatch) -
         domain_id_from_env()
     with pytest.raises(ConfigError, match="domain id"):
         data_key(-1, "/x", "std_msgs/msg/Float64", "RIHS01_x")
+
+
+@pytest.mark.parametrize(
+    ("label", "expected"),
+    [("x_dot", "x_dot"), ("body.position", "body_position"), ("der(x)", "der_x_"), ("3d", "_3d"), ("", "_")],
+)
+def test_name_token_turns_variable_names_into_valid_topic_tokens(label: str, expected: str) -> None:
+    assert name_token(label) == expected
+    assert resolve_name(f"~/{name_token(label)}", "/", "sim") == f"/sim/{expected}"

@@ -12,9 +12,9 @@ from bridge.errors import ConfigError, TransportError
 from bridge.ros2.attachment import Attachment
 from bridge.ros2.qos import (
     DEFAULT,
+    DURATION_INFINITE_NS,
     LATCHED,
     SENSOR_DATA,
-    DURATION_INFINITE_NS,
     Durability,
     History,
     Liveliness,
@@ -67,7 +67,7 @@ def test_attachment_bytes_match_the_documented_layout() -> None:
     attachment = Attachment(1, 1_700_000_000_000_000_000, bytes(range(16)))
     assert attachment.encode() == VECTOR
     assert len(VECTOR) == 33 and VECTOR[16] == 0x10
-    assert VECTOR == struct.pack("<qqB16s", 1, 1_700_000_000_000_000_000, 16, bytes(range(16)))
+    assert struct.pack("<qqB16s", 1, 1_700_000_000_000_000_000, 16, bytes(range(16))) == VECTOR
 
 
 def test_attachment_equals_zenoh_ext_serialization_as_zenoh_cpp_writes_it() -> None:

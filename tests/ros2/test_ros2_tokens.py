@@ -44,24 +44,27 @@ def test_node_token_matches_design_document() -> None:
     assert token.key == DESIGN_TOKENS["listener node"]
 
 
+CHATTER = Endpoint("/chatter", STRING, STRING_HASH, QoS(depth=10))
+ADD_TWO_INTS_SERVICE = Endpoint("/add_two_ints", ADD_TWO_INTS, ADD_TWO_INTS_HASH, QoS(depth=10))
+
+
 @pytest.mark.parametrize(
-    ("example", "zid", "kind", "node", "name", "dds", "type_hash", "depth"),
+    ("example", "zid", "kind", "node", "endpoint"),
     [
         ("listener subscription", "aac3178e146ba6f1fc6e6a4085e77f21", EntityKind.SUBSCRIPTION, "listener",
-         "/chatter", STRING, STRING_HASH, 10),
+         CHATTER),
         ("talker publisher", "8b20917502ee955ac4476e0266340d5c", EntityKind.PUBLISHER, "talker",
-         "/chatter", STRING, STRING_HASH, 7),
+         Endpoint("/chatter", STRING, STRING_HASH, QoS(depth=7))),
         ("service server", "f9980ee0495eaafb3e38f0d19e2eae12", EntityKind.SERVICE, "add_two_ints_server",
-         "/add_two_ints", ADD_TWO_INTS, ADD_TWO_INTS_HASH, 10),
+         ADD_TWO_INTS_SERVICE),
         ("service client", "e1dc8d1b45ae8717fce78689cc655685", EntityKind.CLIENT, "add_two_ints_client",
-         "/add_two_ints", ADD_TWO_INTS, ADD_TWO_INTS_HASH, 10),
+         ADD_TWO_INTS_SERVICE),
     ],
 )  # fmt: skip
 def test_entity_tokens_match_design_document(
-    example: str, zid: str, kind: EntityKind, node: str, name: str, dds: str, type_hash: str, depth: int
+    example: str, zid: str, kind: EntityKind, node: str, endpoint: Endpoint
 ) -> None:
-    token = _token(zid, 10, kind, node, Endpoint(name, dds, type_hash, QoS(depth=depth)))
-    assert token.key == DESIGN_TOKENS[example]
+    assert _token(zid, 10, kind, node, endpoint).key == DESIGN_TOKENS[example]
 
 
 @pytest.mark.parametrize("example", sorted(DESIGN_TOKENS))

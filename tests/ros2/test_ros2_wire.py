@@ -17,9 +17,10 @@ import pytest
 import xxhash
 import zenoh
 from mcap_ros2._dynamic import generate_dynamic
+from ros2_fixtures import eventually_fixture, peer_session_fixture, ros_session_fixture  # noqa: F401
 from rosbags.typesys import Stores, get_typestore
 
-from bridge.ros2 import RosContext, interfaces
+from bridge.ros2 import RosContext, graph, interfaces
 
 pytestmark = pytest.mark.integration
 
@@ -54,19 +55,21 @@ def live_tokens(session: Any) -> set[str]:
 
 
 def joint_state(names: list[str], positions: list[float], stamp_ns: int) -> bytes:
-    time_type = interfaces.message_class("builtin_interfaces/msg/Time")
-    header = interfaces.message_class("std_msgs/msg/Header")(
-        stamp=time_type(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9), frame_id=""
+    """JointState CDR straight from rosbags (the peer's own serializer)."""
+    types = JAZZY.types
+    header = types["std_msgs/msg/Header"](
+        stamp=types["builtin_interfaces/msg/Time"](sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9),
+        frame_id="",
     )
     empty = np.array([], dtype=np.float64)
-    return interfaces.encode(
-        "sensor_msgs/msg/JointState",
+    message = types["sensor_msgs/msg/JointState"](
         header=header,
         name=names,
         position=np.array(positions, dtype=np.float64),
         velocity=empty,
         effort=empty,
     )
+    return bytes(JAZZY.serialize_cdr(message, "sensor_msgs/msg/JointState"))
 
 
 def test_independent_subscriber_receives_joint_states(
@@ -97,7 +100,9 @@ def test_independent_subscriber_receives_joint_states(
         last = step
         eventually(lambda: received and parse_attachment(received[-1][1])[0] == last, what="the last sample")
         after_ns = time.time_ns()
-        mp_token = next(t for t in live_tokens(peer_session) if "/MP/" in t)
+        mp_tokens = eventually(
+            lambda: [t for t in live_tokens(peer_session) if "/MP/" in t], what="the MP token"
+        )
     subscriber.undeclare()
 
     sequences = []
@@ -105,7 +110,7 @@ def test_independent_subscriber_receives_joint_states(
         seq, stamp_ns, gid = parse_attachment(raw)
         sequences.append(seq)
         assert before_ns <= stamp_ns <= after_ns
-        assert gid == xxh3_gid(mp_token)
+        assert gid == xxh3_gid(mp_tokens[0])
         message = JAZZY.deserialize_cdr(payload, "sensor_msgs/msg/JointState")
         assert message.name == ["x", "theta"]
         assert message.position.tolist() == pytest.approx([0.1 * seq, -seq])
@@ -132,6 +137,13 @@ def test_liveliness_tokens_describe_node_and_endpoints(
         f"@ros2_lv/0/{zid}/0/4/SC/%/%/sim/%other%reset/{TRIGGER}/{TRIGGER_HASH}/::,10:,:,:,,",
     }
     eventually(lambda: live_tokens(peer_session) == expected, what="the five tokens")
+    tokens = graph.discover(peer_session, 0)
+    assert graph.node_names(tokens) == ["/sim"]
+    assert graph.topic_names_and_types(tokens) == {
+        "/joint_states": {"sensor_msgs/msg/JointState"},
+        "/actions": {"sensor_msgs/msg/JointState"},
+    }
+    assert {t.key for t in tokens} == expected  # parsing and rebuilding is lossless
     ros.close()
     eventually(lambda: not live_tokens(peer_session), what="all tokens withdrawn after close()")
 
@@ -221,7 +233,7 @@ def test_client_calls_a_design_document_queryable(
         with query:
             seq, _, gid = parse_attachment(query.attachment.to_bytes())
             seen.append((seq, gid, query.payload.to_bytes()))
-            response = bytes.fromhex("00010000" "01000000" "03000000" "6f6b00")  # success, "ok"
+            response = bytes.fromhex("0001000001000000030000006f6b00")  # success, "ok"
             query.reply(RESET_KEY, response, attachment=attachment(seq, gid))
 
     queryable = peer_session.declare_queryable(RESET_KEY, on_query, complete=True)
@@ -232,13 +244,15 @@ def test_client_calls_a_design_document_queryable(
         client = ros.create_node("caller").create_client("/sim/reset", "std_srvs/srv/Trigger")
         assert client.wait_for_service(timeout_s=5.0)
         first = client.call(TRIGGER_REQUEST, timeout_s=5.0)
-        second = client.call_message(interfaces.message_class("std_srvs/srv/Trigger_Request")(), timeout_s=5.0)
+        second = client.call_message(
+            interfaces.message_class("std_srvs/srv/Trigger_Request")(), timeout_s=5.0
+        )
         sc_tokens = eventually(
             lambda: [t for t in live_tokens(peer_session) if "/SC/" in t], what="the SC token"
         )
     server_token.undeclare()
     queryable.undeclare()
-    assert first.hex() == "00010000" "01000000" "03000000" "6f6b00"
+    assert first.hex() == "0001000001000000030000006f6b00"
     assert (second.success, second.message) == (True, "ok")
     assert [s for s, _, _ in seen] == [1, 2]  # client sequence numbers start at 1
     assert all(gid == xxh3_gid(sc_tokens[0]) for _, gid, _ in seen)

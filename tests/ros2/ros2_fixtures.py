@@ -1,4 +1,9 @@
-"""Two Zenoh sessions on the loopback router: one for our ROS side, one for an independent peer."""
+"""Fixtures of the ROS 2 wire tests: two Zenoh sessions on the loopback router, and polling.
+
+Not a conftest.py: tests/test_remote.py imports the top-level ``conftest`` by name, and a second
+module of that name on sys.path would shadow it. Test modules import these fixtures explicitly
+(``*_fixture``; pytest knows them as ``ros_session``, ``peer_session`` and ``eventually``).
+"""
 
 from __future__ import annotations
 
@@ -15,12 +20,14 @@ def _session(endpoint: str) -> Any:
     from bridge.transport import ZenohOptions, open_session, wait_connected
 
     session = open_session(ZenohOptions(connect=(endpoint,)))
-    assert wait_connected(session, timeout_s=5.0), f"no connection to the test router at {endpoint}"
+    assert wait_connected(session, timeout_s=5.0, settle_s=0.05), (
+        f"no connection to the test router at {endpoint}"
+    )
     return session
 
 
-@pytest.fixture
-def ros_session(loopback: Any) -> Iterator[Any]:
+@pytest.fixture(name="ros_session")
+def ros_session_fixture(loopback: Any) -> Iterator[Any]:
     """The session our RosContext runs on."""
     session = _session(loopback.endpoint)
     try:
@@ -29,8 +36,8 @@ def ros_session(loopback: Any) -> Iterator[Any]:
         session.close()
 
 
-@pytest.fixture
-def peer_session(loopback: Any) -> Iterator[Any]:
+@pytest.fixture(name="peer_session")
+def peer_session_fixture(loopback: Any) -> Iterator[Any]:
     """A second session standing in for a ROS 2 machine, written from the design document alone."""
     session = _session(loopback.endpoint)
     try:
@@ -51,7 +58,7 @@ def _eventually(probe: Callable[[], T], timeout_s: float = 5.0, what: str = "con
         time.sleep(0.02)
 
 
-@pytest.fixture
-def eventually() -> Callable[..., Any]:
-    """``eventually(probe, timeout_s, what)``: poll until ``probe()`` is truthy, fail with ``what`` otherwise."""
+@pytest.fixture(name="eventually")
+def eventually_fixture() -> Callable[..., Any]:
+    """``eventually(probe, timeout_s, what)``: poll until ``probe()`` is truthy; fail naming ``what``."""
     return _eventually
