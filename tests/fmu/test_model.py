@@ -225,7 +225,10 @@ def test_auto_policy_snapshots_recurring_values_only(cartpole_fmu: Path) -> None
         assert sum(s is not None for s in model._snapshots.values()) <= 2
 
 
-def test_reinstantiation_never_re_extracts(cartpole_fmu: Path) -> None:
+def test_reinstantiation_never_re_extracts(cartpole_fmu: Path, tmp_path: Path) -> None:
+    private = tmp_path / "cartpole.fmu"  # a file no other open instance shares
+    private.write_bytes(cartpole_fmu.read_bytes())
+    cartpole_fmu = private
     before = archive.extraction_count()
     with Model(cartpole_fmu, step_size_s=0.02, reset_policy="reinstantiate") as model:
         model.initialize()
