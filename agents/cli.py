@@ -17,6 +17,83 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("compare")(compare_cmd)
+    agent_app = typer.Typer(help="Deployed agents: run a trained policy as a node.", no_args_is_help=True)
+    agent_app.command("run")(agent_run_cmd)
+    app.add_typer(agent_app, name="agent")
+
+
+def agent_run_cmd(
+    model: Annotated[Path, typer.Argument(help="A run directory or model .zip from `fmu-bridge train`.")],
+    config: Annotated[
+        Path | None, typer.Option("--config", help="Experiment (default: the run's copy).")
+    ] = None,
+    transport: Annotated[
+        str, typer.Option(help="zenoh (native frames), ros2 (rmw_zenoh wire) or rclpy.")
+    ] = "zenoh",
+    node: Annotated[
+        str, typer.Option("--node", help="The FMU node (zenoh) or ROS namespace of its topics.")
+    ] = "fmu",
+    observation_topic: Annotated[str | None, typer.Option(help="ROS: JointState topic to observe.")] = None,
+    action_topic: Annotated[str | None, typer.Option(help="ROS: JointState topic to act on.")] = None,
+    missing: Annotated[
+        str, typer.Option(help="hold (the last action) or safe, when observations stop.")
+    ] = "hold",
+    safe_value: Annotated[
+        float, typer.Option(help="The safe physical input value (with --missing safe).")
+    ] = 0.0,
+    timeout_s: Annotated[
+        float, typer.Option("--timeout", help="Seconds without observation before the rule.")
+    ] = 0.5,
+    scenario: Annotated[str | None, typer.Option(help="Scenario whose references the agent tracks.")] = None,
+    duration_s: Annotated[
+        float | None, typer.Option("--duration", help="Stop after this many seconds.")
+    ] = None,
+    prefix: Annotated[str, typer.Option("--prefix")] = "fmu_bridge",
+    connect: Annotated[list[str] | None, typer.Option("--connect")] = None,
+    listen: Annotated[list[str] | None, typer.Option("--listen")] = None,
+    zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config")] = None,
+    ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID (ros2 transport).")] = None,
+) -> None:
+    """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
+    import signal
+    import threading
+
+    from agents.deploy import DeploySettings
+    from agents.deploy_io import AgentNode
+    from bridge.errors import ConfigError
+    from bridge.transport import ZenohOptions
+
+    if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
+        raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
+    settings = DeploySettings(
+        transport=transport,  # type: ignore[arg-type]  # checked above
+        node=node,
+        prefix=prefix,
+        observation_topic=observation_topic,
+        action_topic=action_topic,
+        missing=missing,  # type: ignore[arg-type]  # checked above
+        safe_inputs=None,
+        timeout_s=timeout_s,
+        scenario=scenario,
+        domain_id=ros_domain,
+    )
+    if missing == "safe":
+        settings.safe_inputs = [safe_value]
+    options = ZenohOptions(config_file=zenoh_config, listen=tuple(listen or ()), connect=tuple(connect or ()))
+    agent = AgentNode(model, config, settings, options)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    console.print(f"agent {model} acting on {node!r} over {transport}; Ctrl-C stops it")
+    try:
+        stats = agent.run(duration_s, stop)
+    finally:
+        agent.close()
+    summary = stats.summary()
+    console.print(
+        f"{summary['observations']:.0f} observations, {summary['actions']:.0f} actions, "
+        f"{summary['missing_events']:.0f} missing-observation events; inference latency median "
+        f"{summary['latency_median_us']:.0f} us, p99 {summary['latency_p99_us']:.0f} us"
+    )
 
 
 def train_cmd(

@@ -23,7 +23,8 @@ from bridge.config import Experiment, load_experiment
 from bridge.config_check import resolve_fmu
 from bridge.env import FmuEnv
 from bridge.errors import ConfigError
-from bridge.fmu import sha256
+from bridge.fmu import read_model_info, sha256
+from bridge.inspect import summary_of
 
 _log = logging.getLogger(__name__)
 
@@ -144,6 +145,10 @@ def train(
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    # the variables the Task was built from: a deployed agent needs them, not the FMU
+    (run_dir / "model.json").write_text(
+        json.dumps(summary_of(read_model_info(resolve_fmu(experiment))), indent=2)
+    )
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
     eval_env: Any = DummyVecEnv(
         [

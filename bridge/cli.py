@@ -235,6 +235,13 @@ def node(
     connect: ConnectOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     version: VersionOpt = None,
+    ros: Annotated[
+        bool, typer.Option("--ros/--no-ros", help="Also serve the ROS 2 view (see docs/ros2.md).")
+    ] = False,
+    ros_backend: Annotated[
+        str | None, typer.Option(help="zenoh (rmw_zenoh wire, no ROS install) or rclpy.")
+    ] = None,
+    ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID for the ROS view.")] = None,
 ) -> None:
     """Serve an FMU over Zenoh until interrupted (Ctrl-C or SIGTERM)."""
     import signal
@@ -244,13 +251,21 @@ def node(
 
     if mode not in ("lockstep", "realtime"):
         raise BridgeError(f"--mode {mode!r} is unknown; use lockstep or realtime")
+    loaded = as_experiment(experiment, version)
+    view = None
+    if ros or ros_backend:
+        from bridge.ros_view import settings_from
+
+        section = {**loaded.ros, **({"domain_id": ros_domain} if ros_domain is not None else {})}
+        view = settings_from(section, backend=ros_backend)
     server = FmuNode(
-        as_experiment(experiment, version),
+        loaded,
         name=name,
         mode=mode,  # type: ignore[arg-type]
         rate=rate,
         options=_zenoh_options(zenoh_config, listen, connect),
         prefix=prefix,
+        ros=view,
     )
     signal.signal(signal.SIGTERM, lambda *_: server.close())
     err_console.print(

@@ -34,8 +34,9 @@ from bridge.env import as_experiment
 from bridge.errors import BridgeError, FmuError, TransportError
 from bridge.fmu import Model, read_model_info, sha256
 from bridge.inspect import summary_of
+from bridge.ros_view import RosView, RosViewSettings
 from bridge.task import Task
-from bridge.transport import ZenohOptions, open_session
+from bridge.transport import ZenohOptions, open_session, undeclare
 
 _log = logging.getLogger(__name__)
 Mode = Literal["lockstep", "realtime"]
@@ -54,6 +55,7 @@ class FmuNode:
         options: ZenohOptions | None = None,
         prefix: str = proto.DEFAULT_PREFIX,
         session: Any = None,
+        ros: RosViewSettings | None = None,
     ) -> None:
         if mode not in ("lockstep", "realtime"):
             raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
@@ -88,6 +90,8 @@ class FmuNode:
         self._session = session if session is not None else open_session(options)
         self._declared: list[Any] = []
         self._thread: threading.Thread | None = None
+        self._ros_settings = ros
+        self._ros: RosView | None = None
         self._declare()
 
     # -- life cycle --------------------------------------------------------------------------------
@@ -103,6 +107,17 @@ class FmuNode:
             s.declare_queryable(k.info, self._on_info, complete=True),
             s.liveliness().declare_token(k.alive),
         ]
+        if self._ros_settings is not None:
+            self._ros = RosView(
+                s,
+                self._ros_settings,
+                name=self.name,
+                output_names=self.output_names,
+                input_names=self.input_names,
+                on_actions=self._ros_actions,
+                on_reset=self._ros_reset,
+                realtime=self.mode == "realtime",
+            )
         if self.mode == "realtime":
             # A real-time node runs from the start with the experiment's nominal values.
             model = self.experiment.model
@@ -128,9 +143,11 @@ class FmuNode:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=5.0)
+        if self._ros is not None:
+            self._ros.close()
         for entity in reversed(self._declared):
             try:
-                entity.undeclare()
+                undeclare(entity)
             except Exception:
                 _log.debug("undeclare failed", exc_info=True)
         if self._own_session:
@@ -189,6 +206,8 @@ class FmuNode:
             proto.OUTPUTS, self.episode, self.step, round(model.time_s * 1e9), outputs, flags=flags
         )
         self._pub.put(self._last_frame)
+        if self._ros is not None:
+            self._ros.publish(round(model.time_s * 1e9), outputs.tolist())
 
     def _fail(self, exc: BridgeError) -> None:
         self.counters["fmu_errors"] += 1
@@ -243,6 +262,27 @@ class FmuNode:
             )
             self._next_tick = time.monotonic()
             return self._last_frame
+
+    def _ros_actions(self, values: dict[str, float]) -> None:
+        """Input values by name from the ROS view: held in real time, one sample each in lockstep."""
+        with self._lock:
+            current = self._latest_inputs or [float(v) for v in self._inputs_now()]
+            merged = [values.get(name, current[i]) for i, name in enumerate(self.input_names)]
+            if self.mode == "realtime":
+                self._latest_inputs = merged
+            elif not self._ended:
+                self._advance(merged)
+
+    def _inputs_now(self) -> list[Any]:
+        return list(self.model.get(self.input_names).values())
+
+    def _ros_reset(self) -> tuple[bool, str]:
+        model = self.experiment.model
+        try:
+            self.reset({**model.parameters, **model.start_values}, None, self.episode + 1)
+        except BridgeError as exc:
+            return False, f"reset failed: {exc}"
+        return True, f"reset to t0 (episode {self.episode})"
 
     def _on_info(self, query: Any) -> None:
         query.reply(self.keys.info, proto.encode_json(self.describe()))

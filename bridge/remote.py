@@ -26,7 +26,7 @@ from bridge.env import as_experiment
 from bridge.errors import BridgeError, ConfigError, StepTimeout, TransportError
 from bridge.inspect import info_from_summary
 from bridge.task import Task
-from bridge.transport import ZenohOptions, open_session
+from bridge.transport import ZenohOptions, open_session, undeclare
 
 _log = logging.getLogger(__name__)
 ObsType = npt.NDArray[np.float32]
@@ -140,7 +140,7 @@ class NodeClient:
     def close(self) -> None:
         for entity in reversed(self._declared):
             try:
-                entity.undeclare()
+                undeclare(entity)
             except Exception:
                 _log.debug("undeclare failed", exc_info=True)
         self._declared = []

@@ -87,6 +87,20 @@ def quiet_zenoh_logs(level: str = "error") -> None:
         _log_state["initialised"] = True
 
 
+def undeclare(entity: Any, attempts: int = 100) -> None:
+    """Undeclare a Zenoh entity; while one of its callbacks is running, zenoh-python answers
+    "Already borrowed": wait for the callback to finish and try again."""
+    for _ in range(attempts):
+        try:
+            entity.undeclare()
+            return
+        except RuntimeError as exc:
+            if "borrowed" not in str(exc):
+                raise
+            time.sleep(0.01)
+    _log.warning("could not undeclare %r: a callback kept it busy", entity)
+
+
 def wait_connected(session: Any, timeout_s: float = 2.0, settle_s: float = 0.2) -> bool:
     """Wait until the session has a router or peer, then ``settle_s`` for declarations to arrive."""
     deadline = time.monotonic() + timeout_s

@@ -25,6 +25,7 @@ from bridge.ros2.names import data_key, dds_type_name, split_type_name
 from bridge.ros2.qos import History, QoS
 from bridge.ros2.tokens import Endpoint, EntityKind, Token, gid
 from bridge.ros2.typehash import type_hash
+from bridge.transport import undeclare
 
 if TYPE_CHECKING:
     from bridge.ros2.node import RosNode
@@ -93,7 +94,7 @@ class RosEndpoint:
         self._closed = True
         for declared in reversed(self._declared):
             try:
-                declared.undeclare()
+                undeclare(declared)
             except zenoh.ZError:
                 _log.debug("undeclare of %s failed (session closed?)", self.name, exc_info=True)
         self._declared.clear()

@@ -1,0 +1,193 @@
+"""A trained agent as a node: ``fmu-bridge agent run MODEL --config experiment.yaml``.
+
+It subscribes to an observation source (an FMU node's outputs over the native protocol, or any
+``sensor_msgs/msg/JointState`` topic over the ROS 2 view: a real robot's too), applies exactly
+the training-time Task observation processing (selection, scaling, history, VecNormalize
+statistics), runs deterministic inference on the CPU and publishes the actions. Sensor and
+actuator noise of the experiment are training-time randomisation and are left out here.
+Missing or late observations trigger a configured rule (hold the last action, or a safe one).
+"""
+
+from __future__ import annotations
+
+import logging
+import statistics
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from agents.policies import Sb3Policy
+from bridge import protocol as proto
+from bridge.config import Experiment, Noise, load_experiment
+from bridge.config_check import check_experiment, resolve_fmu, timing
+from bridge.errors import BridgeError, ConfigError
+from bridge.fmu import ModelInfo, read_model_info
+from bridge.task import Task
+
+_log = logging.getLogger(__name__)
+Transport = Literal["zenoh", "ros2", "rclpy"]
+
+
+@dataclass
+class DeploySettings:
+    transport: Transport = "zenoh"
+    node: str = "fmu"
+    prefix: str = proto.DEFAULT_PREFIX
+    observation_topic: str | None = None  # ROS: default /<node>/outputs
+    action_topic: str | None = None  # ROS: default /<node>/actions
+    missing: Literal["hold", "safe"] = "hold"
+    safe_inputs: list[float] | None = None
+    timeout_s: float = 0.5
+    scenario: str | None = None
+    domain_id: int | None = None
+    namespace: str = "/"
+
+
+@dataclass
+class Stats:
+    observations: int = 0
+    actions: int = 0
+    missing_events: int = 0
+    latencies_s: list[float] = field(default_factory=list)
+
+    def summary(self) -> dict[str, float]:
+        lat = sorted(self.latencies_s) or [float("nan")]
+        return {
+            "observations": self.observations,
+            "actions": self.actions,
+            "missing_events": self.missing_events,
+            "latency_median_us": statistics.median(lat) * 1e6,
+            "latency_p99_us": lat[int(0.99 * (len(lat) - 1))] * 1e6,
+        }
+
+
+def deployment_experiment(run_or_model: Path, config: Path | None) -> tuple[Experiment, Path]:
+    """The experiment the agent was trained on (the run's frozen copy unless --config is given)."""
+    run_dir = run_or_model if run_or_model.is_dir() else run_or_model.parent
+    path = config or run_dir / "experiment.yaml"
+    if not path.is_file():
+        raise ConfigError(f"no experiment for {run_or_model}: pass --config experiment.yaml")
+    experiment = load_experiment(path)
+    return experiment.model_copy(update={"noise": Noise()}), path
+
+
+def model_info_for(
+    experiment: Experiment, run_dir: Path, node_description: dict[str, Any] | None
+) -> ModelInfo:
+    """Variable metadata for the Task: the local FMU, else the run's snapshot, else the node's report."""
+    from bridge.inspect import info_from_summary
+
+    try:
+        return read_model_info(resolve_fmu(experiment))
+    except BridgeError:
+        pass
+    snapshot = run_dir / "model.json"
+    if snapshot.is_file():
+        import json
+
+        return info_from_summary(json.loads(snapshot.read_text()))
+    if node_description is not None:
+        return info_from_summary(node_description["model"])
+    raise ConfigError(
+        "the FMU of the experiment is not on this machine and the run has no model.json: "
+        "copy the FMU here, or deploy with --transport zenoh against its node"
+    )
+
+
+class DeployedAgent:
+    """Receives observations, acts, publishes; thread-safe; ``close()`` stops it."""
+
+    def __init__(
+        self,
+        policy: Sb3Policy,
+        experiment: Experiment,
+        info: ModelInfo,
+        settings: DeploySettings,
+        publish: Any,
+    ) -> None:
+        check_experiment(experiment, info)
+        self.task = Task(experiment, info.variables, timing(experiment, info))
+        self.policy, self.settings, self._publish = policy, settings, publish
+        self.stats = Stats()
+        self._rng = np.random.default_rng(0)
+        self._lock = threading.Lock()
+        self._episode_key: Any = None
+        self._sample = 0
+        self._last_inputs: list[float] | None = None
+        self._last_time = time.monotonic()
+        self._stop = threading.Event()
+        self._warm_up()
+        self._watchdog = threading.Thread(target=self._watch, name="agent-watchdog", daemon=True)
+        self._watchdog.start()
+
+    def _warm_up(self) -> None:
+        """The first inference of a torch model is slow (allocations, kernel choice): do it before
+        observations arrive, so the first real action is on time. One thread: lower latency."""
+        import torch
+
+        torch.set_num_threads(1)
+        space = self.task.observation_space
+        for _ in range(3):
+            self.policy.act(np.zeros(space.shape, dtype=np.float32), {})
+
+    def observe(
+        self, outputs: Sequence[float], *, episode: Any = None, step: int | None = None
+    ) -> list[float]:
+        """One observation in, one action out (physical input values, also published)."""
+        if self._stop.is_set():  # closing: late messages are ignored
+            return []
+        start = time.perf_counter()
+        with self._lock:
+            values = [float(v) for v in outputs]
+            if episode != self._episode_key or step == 0 or self._last_inputs is None:
+                self._start_episode(episode)
+                obs = self.task.first_observation(values, self._rng)
+            else:
+                self._sample = self._sample + 1 if step is None else step
+                signals = self.task.fill_signals(values, self._sample)
+                obs = self.task.observer.observe(signals, self.task._inputs, self._rng)
+            action = self.policy.act(obs, self.task.signal_dict())
+            # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
+            inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))
+            self._last_inputs, self._last_time = inputs, time.monotonic()
+            self.stats.observations += 1
+        self._publish(inputs, self._sample)
+        self.stats.actions += 1
+        self.stats.latencies_s.append(time.perf_counter() - start)
+        return inputs
+
+    def _start_episode(self, episode: Any) -> None:
+        self._episode_key, self._sample = episode, 0
+        self.task.new_episode(self._rng, self.settings.scenario)
+        self.policy.reset(self.task, None)
+
+    def _watch(self) -> None:
+        while not self._stop.wait(self.settings.timeout_s / 4):
+            with self._lock:
+                late = time.monotonic() - self._last_time > self.settings.timeout_s
+                if not late or self._last_inputs is None:
+                    continue
+                inputs = self._last_inputs if self.settings.missing == "hold" else self._safe()
+                self._last_time = time.monotonic()
+                self.stats.missing_events += 1
+            _log.warning(
+                "no observation for %.0f ms: %s action %s",
+                self.settings.timeout_s * 1e3,
+                "holding the last" if self.settings.missing == "hold" else "publishing the safe",
+                inputs,
+            )
+            self._publish(inputs, self._sample)
+
+    def _safe(self) -> list[float]:
+        n = len(self.task.action_inputs)
+        safe = list(self.settings.safe_inputs) if self.settings.safe_inputs is not None else [0.0] * n
+        return safe + (self._last_inputs or [])[n:]
+
+    def close(self) -> None:
+        self._stop.set()
+        self._watchdog.join(timeout=2.0)
