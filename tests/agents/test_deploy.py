@@ -1,0 +1,142 @@
+"""Deployed agents: the same actions as model.predict, closed loops over Zenoh and the ROS 2 view,
+missing-observation rules, and the CLI as a real subprocess."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Loopback, node_process
+
+from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
+from agents.deploy_io import AgentNode
+from agents.policies import Sb3Policy
+from agents.train import train
+from bridge import protocol as proto
+from bridge.env import FmuEnv
+from bridge.examples import example_experiment
+
+pytestmark = pytest.mark.slow
+CARTPOLE = example_experiment("cartpole_balance")
+
+
+@pytest.fixture(scope="module")
+def balancer(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A PPO agent that balances the cart-pole FMU (RL Zoo settings; 500/500 from about 20k steps)."""
+    run = tmp_path_factory.mktemp("deploy") / "ppo"
+    train(CARTPOLE, overrides={"timesteps": 60_000, "eval_every": 1_000_000}, run_dir=run, progress=False)
+    return run
+
+
+def test_deployed_agent_acts_exactly_like_model_predict(balancer: Path) -> None:
+    policy = Sb3Policy(balancer)
+    experiment, _ = deployment_experiment(balancer, None)
+    sent: list[list[float]] = []
+    agent = DeployedAgent(
+        policy,
+        experiment,
+        model_info_for(experiment, balancer, None),
+        DeploySettings(),
+        lambda inputs, step: sent.append(inputs),
+    )
+    try:
+        with FmuEnv(CARTPOLE) as env:
+            obs, info = env.reset(seed=4)
+            for step in range(200):
+                expected_action, _ = policy.model.predict(obs, deterministic=True)
+                inputs = agent.observe(info["outputs"].tolist(), episode=1, step=step)
+                assert inputs == [10.0 if int(expected_action) == 1 else -10.0]
+                obs, _, terminated, truncated, info = env.step(expected_action)
+                assert not terminated
+        assert len(sent) == 200 and agent.stats.summary()["latency_median_us"] > 0
+    finally:
+        agent.close()
+
+
+def outputs_of(net: Loopback, node: str) -> tuple[list[proto.Frame], Any]:
+    frames: list[proto.Frame] = []
+    sub = net.session.declare_subscriber(  # type: ignore[attr-defined]
+        proto.Keys(net.prefix, node).outputs, lambda s: frames.append(proto.decode(s.payload.to_bytes()))
+    )
+    return frames, sub
+
+
+@pytest.mark.parametrize("transport", ["zenoh", "ros2"])
+def test_closed_loop_keeps_the_pole_up_for_a_whole_episode(
+    balancer: Path, loopback: Loopback, transport: str
+) -> None:
+    with node_process(CARTPOLE, "plant", loopback, "--mode", "realtime", "--rate", "4", "--ros"):
+        settings = DeploySettings(transport=transport, node="plant", prefix=loopback.prefix)  # type: ignore[arg-type]
+        agent = AgentNode(balancer, None, settings, session=loopback.session)
+        frames, sub = outputs_of(loopback, "plant")
+        try:
+            for _ in loopback.session.get(
+                proto.Keys(loopback.prefix, "plant").reset,  # type: ignore[attr-defined]
+                payload=proto.encode_json({"episode": 9, "values": {"theta0": 0.04}}),
+            ):
+                pass
+            start = len(frames)
+            while len([f for f in frames[start:] if f.episode == 9]) < 520:  # 500 samples = 10 s simulated
+                time.sleep(0.05)
+        finally:
+            stats = agent.agent.stats.summary()
+            agent.close()
+            sub.undeclare()
+    episode = [f for f in frames if f.episode == 9 and f.kind == proto.OUTPUTS][:500]
+    theta = np.array([f.values[2] for f in episode])
+    x = np.array([f.values[0] for f in episode])
+    assert len(episode) == 500
+    assert np.abs(theta).max() < 0.2094 and np.abs(x).max() < 2.4  # inside the task's bounds throughout
+    assert stats["actions"] >= 500 and stats["latency_median_us"] < 5000
+
+
+def test_missing_observations_hold_or_go_safe(balancer: Path) -> None:
+    policy = Sb3Policy(balancer)
+    experiment, _ = deployment_experiment(balancer, None)
+    info = model_info_for(experiment, balancer, None)
+    for rule, expected in (("hold", [10.0]), ("safe", [2.5])):
+        sent: list[list[float]] = []
+        settings = DeploySettings(missing=rule, safe_inputs=[2.5], timeout_s=0.1)  # type: ignore[arg-type]
+        agent = DeployedAgent(policy, experiment, info, settings, lambda inputs, step: sent.append(inputs))
+        try:
+            agent._last_inputs = [10.0]  # as if the last observation led to a push right
+            agent._last_time = time.monotonic()
+            time.sleep(0.5)  # no observations at all
+        finally:
+            agent.close()
+        assert agent.stats.missing_events >= 2 and sent and all(s == expected for s in sent)
+
+
+def test_agent_run_command_as_a_subprocess(balancer: Path, loopback: Loopback) -> None:
+    with node_process(CARTPOLE, "plant", loopback, "--mode", "realtime", "--rate", "2"):
+        result = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "bridge.cli",
+                "agent",
+                "run",
+                str(balancer),
+                "--node",
+                "plant",
+                "--prefix",
+                loopback.prefix,
+                "--connect",
+                loopback.endpoint,
+                "--duration",
+                "2",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+            env={**os.environ, "COLUMNS": "200"},
+        )
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert "inference latency median" in result.stdout and " 0 missing-observation events" in result.stdout
