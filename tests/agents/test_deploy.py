@@ -140,3 +140,42 @@ def test_agent_run_command_as_a_subprocess(balancer: Path, loopback: Loopback) -
         )
     assert result.returncode == 0, result.stderr[-2000:]
     assert "inference latency median" in result.stdout and " 0 missing-observation events" in result.stdout
+
+
+def test_closed_loop_launcher_runs_node_agent_and_recorder(balancer: Path, tmp_path: Path) -> None:
+    from conftest import free_port
+
+    script = Path(__file__).resolve().parents[2] / "launch_scripts" / "closed_loop.py"
+    recording = tmp_path / "loop.mcap"
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            str(balancer),
+            "--rate",
+            "4",
+            "--duration",
+            "4",
+            "--record",
+            str(recording),
+            "--port",
+            str(free_port()),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=180,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "inference latency median" in " ".join(result.stdout.split())  # rich wraps long lines
+    assert recording.is_file() and recording.stat().st_size > 1000
+
+
+def test_ros2_launch_file_describes_both_nodes() -> None:
+    launch = pytest.importorskip("launch", reason="the ROS 2 launch system comes with a ROS 2 install")
+    import runpy
+
+    path = Path(__file__).resolve().parents[2] / "launch_scripts" / "fmu_agent.launch.py"
+    description = runpy.run_path(str(path))["generate_launch_description"]()
+    assert isinstance(description, launch.LaunchDescription)
