@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
+MAX_STEPS = 10  # more reference changes than this: a moving reference, not a step sequence
 
 
 @dataclass
@@ -67,8 +68,17 @@ def step_response(
     """Overshoot [%], rise time (10-90 %), settling time (into +-band of the final reference) and
     steady-state error (mean over the last ``tail`` fraction) for the response to the reference's
     last change; for a reference that never changes, to the step from the initial output to the
-    reference. NaN where undefined (no step at all, never reached, never settled)."""
+    reference. NaN where undefined (no step at all, never reached, never settled, or a reference
+    that keeps moving, such as a sine, where a step response means nothing)."""
     change = np.flatnonzero(np.abs(np.diff(reference)) > 0)
+    if change.size > MAX_STEPS:
+        n_tail = max(1, round(tail * len(output)))
+        return {
+            "steady_state_error": float(np.mean(reference[-n_tail:] - output[-n_tail:])),
+            "overshoot_pct": math.nan,
+            "rise_time_s": math.nan,
+            "settling_time_s": math.nan,
+        }
     start = int(change[-1]) + 1 if change.size else 0
     initial = float(reference[start - 1]) if change.size else float(output[0])
     final = float(reference[-1])

@@ -47,6 +47,9 @@ def test_step_response_overshoot_rise_settling_steady_state() -> None:
     assert math.isnan(stuck["rise_time_s"]) and math.isnan(stuck["settling_time_s"])
     same = step_response(np.full(5, 2.0), np.full(5, 2.0), t[:5])
     assert math.isnan(same["overshoot_pct"])  # no step at all
+    t50 = np.arange(50) * 0.1
+    moving = step_response(np.zeros(50), np.sin(t50), t50)
+    assert math.isnan(moving["overshoot_pct"]) and math.isnan(moving["settling_time_s"])
 
 
 def test_effort_and_constraints() -> None:
