@@ -150,7 +150,7 @@ class DeployedAgent:
             else:
                 self._sample = self._sample + 1 if step is None else step
                 signals = self.task.fill_signals(values, self._sample)
-                obs = self.task.observer.observe(signals, self.task._inputs, self._rng)
+                obs = self.task.observer.observe(signals, self.task.applied_inputs, self._rng)
             action = self.policy.act(obs, self.task.signal_dict())
             # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
             inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))

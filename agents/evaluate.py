@@ -62,7 +62,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
     terminated, reason = False, None
     while True:
         obs, reward, terminated, truncated, info = env.step(policy.act(obs, task.signal_dict()))
-        inputs.append(list(task._inputs[: len(task.action_inputs)]))
+        inputs.append(list(task.applied_inputs[: len(task.action_inputs)]))
         rewards.append(float(reward))
         times.append(info["time_s"])
         rows.append(list(task.signal_dict().values()))

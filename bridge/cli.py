@@ -158,19 +158,32 @@ def simulate(
     policy: Annotated[str, typer.Option(help="zero | random | constant:VALUE")] = "zero",
     episodes: Annotated[int, typer.Option(min=1)] = 1,
     seed: Annotated[int | None, typer.Option()] = 0,
+    record: Annotated[
+        bool, typer.Option("--record/--no-record", help="Record to MCAP (recordings/).")
+    ] = True,
+    recordings: Annotated[Path, typer.Option(help="Directory for recordings.")] = Path("recordings"),
 ) -> None:
-    """Run open-loop episodes and print a table."""
+    """Run open-loop episodes, print a table, and record them (MCAP) unless --no-record."""
+    from bridge.errors import ConfigError
+
+    if policy not in ("zero", "random") and not policy.startswith("constant:"):
+        raise ConfigError(f"--policy {policy!r} is unknown; use zero, random or constant:VALUE")
     from bridge.env import FmuEnv
     from bridge.simulate import make_policy, run_episodes
 
-    with FmuEnv(experiment, version=version) as env:
+    env: Any = FmuEnv(experiment, version=version)
+    if record:
+        from bridge.recording import record_env
+
+        env = record_env(env, directory=recordings, agent=f"policy:{policy}", seed=seed)
+    with env:
         results = run_episodes(
             env,
-            make_policy(policy, env.task, seed),
+            make_policy(policy, env.unwrapped.task, seed),
             episodes,
             seed=seed,
             scenario=scenario,
-            output_names=env.output_names,
+            output_names=env.unwrapped.output_names,
         )
     names = list(results[0].final_outputs) if results else []
     table = Table(
@@ -187,6 +200,8 @@ def simulate(
             *(f"{r.final_outputs[n]:.4g}" for n in names),
         )
     console.print(table)
+    if record:
+        console.print(f"recording: {getattr(env, 'path', recordings)}")
 
 
 @app.command()

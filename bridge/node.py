@@ -260,6 +260,10 @@ class FmuNode:
             self._last_frame = proto.encode_values(
                 proto.OUTPUTS, episode, 0, round(self.model.time_s * 1e9), outputs
             )
+            # step 0 goes on the outputs key too: recorders and deployed agents see every sample
+            self._pub.put(self._last_frame)
+            if self._ros is not None:
+                self._ros.publish(round(self.model.time_s * 1e9), outputs.tolist())
             self._next_tick = time.monotonic()
             return self._last_frame
 

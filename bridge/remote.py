@@ -255,7 +255,7 @@ class RemoteFmuEnv(gym.Env[ObsType, Any]):
         info: dict[str, Any] = {"time_s": frame.sim_time_ns / 1e9, "step": self._sample}
         if frame.kind == proto.ERROR:  # the FMU failed: the episode is truncated, the node lives on
             self._done = True
-            obs = self.task.observer.observe(self.task._signals, self.task._inputs, self.np_random)
+            obs = self.task.observer.observe(self.task._signals, self.task.applied_inputs, self.np_random)
             info.update(reason="fmu-error", fmu_error=frame.message, outputs=np.zeros(len(self.output_names)))
             return obs, 0.0, False, True, info
         outputs = frame.values

@@ -276,6 +276,14 @@ class Task:
         return float(var.start) if isinstance(var.start, int | float) else 0.0
 
     @property
+    def applied_inputs(self) -> list[float]:
+        """The FMU input values of the current sample (physical units), live: read, do not modify.
+
+        Filled by ``action_to_inputs`` (actions, actuator noise, scenario profiles); recorders and
+        evaluation read it after each step without a copy."""
+        return self._inputs
+
+    @property
     def n_samples(self) -> int:
         return self.episode.n_samples if self.episode is not None else 0
 

@@ -76,10 +76,19 @@ def test_init_writes_a_config_that_check_accepts(tmp_path: Path, cartpole_fmu: P
     assert refused.exit_code != 0 and "--force" in str(refused.exception)
 
 
-def test_simulate_prints_one_row_per_episode() -> None:
+def test_simulate_prints_one_row_per_episode_and_records(tmp_path: Path) -> None:
     out = invoke(
-        "simulate", str(example_experiment("cartpole_balance")), "--episodes", "3", "--policy", "random"
+        "simulate",
+        str(example_experiment("cartpole_balance")),
+        "--episodes",
+        "3",
+        "--policy",
+        "random",
+        "--recordings",
+        str(tmp_path),
     )
+    recordings = list(tmp_path.glob("*.mcap"))
+    assert len(recordings) == 1 and "recording:" in out
     rows = [line for line in out.splitlines() if "bounds:" in line or "time" in line]
     assert len(rows) >= 3
 
@@ -87,6 +96,7 @@ def test_simulate_prints_one_row_per_episode() -> None:
 def test_simulate_constant_policy_on_a_named_scenario() -> None:
     out = invoke(
         "simulate",
+        "--no-record",
         str(example_experiment("dcmotor_tracking")),
         "--scenario",
         "heavy_load",

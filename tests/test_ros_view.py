@@ -18,7 +18,7 @@ from bridge.remote import RemoteFmuEnv
 
 pytestmark = pytest.mark.integration
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
-JOINT_STATE = "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"
+JOINT_STATE = "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"  # noqa: E501
 TRIGGER = (
     "std_srvs::srv::dds_::Trigger_/RIHS01_eeff2cd6fa5ad9d27cdf4dec64818317839b62f212a91e6b5304b634b2062c5f"
 )
@@ -74,19 +74,19 @@ def test_outputs_as_joint_states_stamped_with_simulation_time(loopback: Loopback
             for _ in range(5):
                 _, _, _, _, info = env.step(1)
                 sent.append(info["outputs"])
-            wait_for(lambda: len(received) >= 5)
+            wait_for(lambda: len(received) >= 6)  # step 0 (at reset) and five steps
         finally:
             env.close()
             sub.undeclare()
         messages = [
-            JAZZY.deserialize_cdr(payload, "sensor_msgs/msg/JointState") for payload, _ in received[-5:]
+            JAZZY.deserialize_cdr(payload, "sensor_msgs/msg/JointState") for payload, _ in received[-6:]
         ]
-        for k, message in enumerate(messages, start=1):
+        for k, message in enumerate(messages):
             assert list(message.name) == ["x", "x_dot", "theta", "theta_dot"]
             np.testing.assert_array_equal(message.position, sent[k])
             assert message.header.stamp.sec * 10**9 + message.header.stamp.nanosec == round(k * 0.02 * 1e9)
-        sequence = [struct.unpack_from("<q", attachment)[0] for _, attachment in received[-5:]]
-        assert sequence == list(range(sequence[0], sequence[0] + 5))
+        sequence = [struct.unpack_from("<q", attachment)[0] for _, attachment in received[-6:]]
+        assert sequence == list(range(sequence[0], sequence[0] + 6))
         assert all(len(a) == 33 and a[16] == 16 for _, a in received)
 
 
@@ -153,7 +153,7 @@ def test_per_variable_float64_topics(loopback: Loopback, tmp_path: Any) -> None:
         try:
             env.reset(seed=0)
             _, _, _, _, info = env.step(0)
-            wait_for(lambda: theta)
+            wait_for(lambda: len(theta) >= 2)  # step 0 (published at reset) and step 1
             value = JAZZY.deserialize_cdr(theta[-1][0], "std_msgs/msg/Float64").data
             assert value == info["outputs"][2]
         finally:

@@ -52,7 +52,7 @@ def test_deployed_agent_acts_exactly_like_model_predict(balancer: Path) -> None:
                 expected_action, _ = policy.model.predict(obs, deterministic=True)
                 inputs = agent.observe(info["outputs"].tolist(), episode=1, step=step)
                 assert inputs == [10.0 if int(expected_action) == 1 else -10.0]
-                obs, _, terminated, truncated, info = env.step(expected_action)
+                obs, _, terminated, _, info = env.step(expected_action)
                 assert not terminated
         assert len(sent) == 200 and agent.stats.summary()["latency_median_us"] > 0
     finally:
@@ -103,7 +103,9 @@ def test_missing_observations_hold_or_go_safe(balancer: Path) -> None:
     for rule, expected in (("hold", [10.0]), ("safe", [2.5])):
         sent: list[list[float]] = []
         settings = DeploySettings(missing=rule, safe_inputs=[2.5], timeout_s=0.1)  # type: ignore[arg-type]
-        agent = DeployedAgent(policy, experiment, info, settings, lambda inputs, step: sent.append(inputs))
+        agent = DeployedAgent(
+            policy, experiment, info, settings, lambda inputs, step, sent=sent: sent.append(inputs)
+        )
         try:
             agent._last_inputs = [10.0]  # as if the last observation led to a push right
             agent._last_time = time.monotonic()

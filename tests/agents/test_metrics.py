@@ -92,5 +92,5 @@ def test_compute_from_a_trace_with_success_and_user_metric() -> None:
 def test_success_condition_uses_the_safe_evaluator() -> None:
     assert success("episode_return >= 475", {"return": 480.0}) is True
     assert success("episode_return >= 475 and not terminated", {"return": 480.0, "terminated": True}) is False
-    with pytest.raises(Exception, match="__import__|not allowed|unknown"):
+    with pytest.raises(Exception, match=r"__import__|not allowed|unknown"):
         success("__import__('os')", {"return": 1.0})

@@ -89,14 +89,14 @@ def test_residual_over_pid_with_normalised_observations(tmp_path: Path) -> None:
 
 
 def test_bad_hyperparameter_is_a_config_error(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="training.hyperparams: .*n_stepz"):
+    with pytest.raises(ConfigError, match=r"training\.hyperparams: .*n_stepz"):
         train(
             CARTPOLE,
             overrides={"timesteps": 64, "hyperparams": {"n_stepz": 3}},
             run_dir=tmp_path / "r",
             progress=False,
         )
-    with pytest.raises(ConfigError, match="training.algo"):
+    with pytest.raises(ConfigError, match=r"training\.algo"):
         train(CARTPOLE, overrides={"algo": "XYZ"}, run_dir=tmp_path / "s", progress=False)
 
 
