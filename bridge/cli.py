@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import signal
 import sys
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -101,18 +102,39 @@ def _cell(value: Any) -> str:
 def models(
     build: Annotated[bool, typer.Option("--build/--no-build", help="Build missing archives.")] = True,
     rebuild: Annotated[bool, typer.Option("--rebuild", help="Rebuild even if cached.")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ) -> None:
     """List the bundled example models, build them with gcc, and print their paths."""
     from bridge.models import example_fmu, list_variants
 
-    table = Table("model", "FMI", "interface", "path", "description")
+    rows = []
     for variant in list_variants():
         path = (
             str(example_fmu(variant.name, variant.fmi_version, variant.interface, rebuild=rebuild))
             if build or rebuild
-            else "(not built)"
+            else None
         )
-        table.add_row(variant.name, variant.fmi_version, variant.interface.upper(), path, variant.description)
+        rows.append(
+            {
+                "model": variant.name,
+                "fmi_version": variant.fmi_version,
+                "interface": variant.interface,
+                "path": path,
+                "description": variant.description,
+            }
+        )
+    if as_json:
+        sys.stdout.write(json.dumps(rows, indent=2) + "\n")
+        return
+    table = Table("model", "FMI", "interface", "path", "description")
+    for row in rows:
+        table.add_row(
+            row["model"],
+            row["fmi_version"],
+            row["interface"].upper(),
+            row["path"] or "(not built)",
+            row["description"],
+        )
     console.print(table)
 
 
@@ -403,6 +425,9 @@ def _load_plugins() -> None:
 
 def main() -> None:
     """Console entry point: turns every BridgeError into a one-paragraph message and exit code 2."""
+    # Ctrl-C (SIGINT) always stops a command cleanly: a process started in the background of a
+    # non-interactive shell inherits SIGINT ignored, which would leave recorders and nodes deaf.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     _load_plugins()
     try:
         app()

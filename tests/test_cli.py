@@ -58,10 +58,10 @@ def test_inspect_a_broken_file_exits_2_with_a_clear_message(tmp_path: Path) -> N
 
 
 def test_models_lists_and_builds_every_variant() -> None:
-    out = invoke("models")
-    for name in ("cartpole", "dcmotor", "bouncing_ball", "typed"):
-        assert name in out
-    assert out.count(".fmu") >= 13
+    rows = json.loads(invoke("models", "--json"))
+    assert {r["model"] for r in rows} == {"cartpole", "dcmotor", "bouncing_ball", "typed"}
+    assert len(rows) == 13 and all(Path(r["path"]).is_file() for r in rows)
+    assert "cartpole" in invoke("models")  # and the table for people
 
 
 def test_init_writes_a_config_that_check_accepts(tmp_path: Path, cartpole_fmu: Path) -> None:

@@ -278,8 +278,10 @@ def test_an_existing_or_unfinished_recording_is_never_overwritten(tmp_path: Path
 # -- crash safety ---------------------------------------------------------------------------------------
 CHILD = textwrap.dedent(
     """
-    import json, sys
+    import json, signal, sys
     import numpy as np
+    # a user's program gets Ctrl-C; started from a background job it would inherit SIGINT ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from bridge.env import FmuEnv
     from bridge.recording import RecordMcap
     env = RecordMcap(FmuEnv(sys.argv[1]), sys.argv[2], chunk_size=16384)
@@ -401,7 +403,11 @@ def test_record_node_gives_the_outputs_a_remote_env_received(loopback: Loopback,
             time.sleep(0.3)
         finally:
             recorder.send_signal(signal.SIGINT)
-            out, err = recorder.communicate(timeout=30)
+            try:
+                out, err = recorder.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                recorder.kill()  # never leave a recorder behind
+                raise
     assert recorder.returncode == 0, err
     assert "wrote" in out and target.is_file()
     messages = rosbags_messages(target)
