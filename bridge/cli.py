@@ -107,7 +107,7 @@ def models(
     """List the bundled example models, build them with gcc, and print their paths."""
     from bridge.models import example_fmu, list_variants
 
-    rows = []
+    rows: list[dict[str, Any]] = []
     for variant in list_variants():
         path = (
             str(example_fmu(variant.name, variant.fmi_version, variant.interface, rebuild=rebuild))
