@@ -44,6 +44,8 @@ from scipy.linalg import expm
 
 from bridge import models
 from bridge.errors import BridgeError, ConfigError, DependencyMissing
+from bridge.models import build as model_build
+from bridge.models import sources as model_sources
 
 VARIANTS = [(v.name, v.fmi_version, v.interface) for v in models.list_variants()]
 Fmus = dict[tuple[str, str, str], Path]
@@ -744,11 +746,11 @@ def test_changed_sources_change_the_cache_key_and_gcc_errors_are_reported(
     private_cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     root = tmp_path / "models"
-    shutil.copytree(models._models_root(), root)
-    monkeypatch.setattr(models, "_models_root", lambda: root)
+    shutil.copytree(model_sources.models_root(), root)
+    monkeypatch.setattr(model_sources, "models_root", lambda: root)
 
     def key() -> str:
-        return models._cache_key(models._load_spec("typed"), "2.0", "cs")
+        return model_build.cache_key(model_sources.load_spec("typed"), "2.0", "cs")
 
     original = key()
     source = root / "typed" / "model.c"

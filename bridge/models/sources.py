@@ -1,0 +1,169 @@
+"""Finding the model sources and reading ``model.json`` into a checked :class:`~bridge.models.spec.Spec`.
+
+The sources are ``models/`` of a source checkout, or ``bridge/_models`` of an installed wheel
+(pyproject.toml force-includes the top-level ``models/`` there).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Final
+
+from bridge.errors import BridgeError
+from bridge.models.spec import (
+    ALL_TYPES,
+    CAUSALITIES,
+    FLOAT_TYPES,
+    FMI2_TYPES,
+    FMI_VERSIONS,
+    INTERFACES,
+    TIME,
+    VARIABILITIES,
+    VARIABLE_KEYS,
+    EnumType,
+    Spec,
+    Variable,
+)
+
+_SPEC_KEYS: Final = frozenset(
+    {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
+    | {"type_definitions", "variables"}
+)
+
+
+def models_root() -> Path:
+    """models/ of a source checkout, or bridge/_models of an installed wheel."""
+    bridge_dir = Path(__file__).resolve().parent.parent  # this file is bridge/models/sources.py
+    candidates = (bridge_dir / "_models", bridge_dir.parent / "models")
+    for candidate in candidates:
+        if (candidate / "common" / "fmu_core.h").is_file():
+            return candidate
+    raise BridgeError(
+        "the example model sources were not found: expected common/fmu_core.h under bridge/_models (wheel) "
+        "or models/ (source checkout); reinstall fmu-bridge or run from a checkout; looked in: "
+        + ", ".join(str(c) for c in candidates)
+    )
+
+
+def model_names() -> list[str]:
+    """Names of the example models (directories of ``models/`` with a ``model.json``)."""
+    root = models_root()
+    return sorted(p.name for p in root.iterdir() if (p / "model.json").is_file())
+
+
+def load_spec(name: str) -> Spec:
+    """Read and check ``models/<name>/model.json``; any problem is a :class:`BridgeError` naming the file."""
+    directory = models_root() / name
+    path = directory / "model.json"
+    try:
+        raw = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError) as exc:
+        raise BridgeError(f"cannot read the model specification: {exc}; {path}") from exc
+    try:
+        return _parse_spec(name, directory, raw)
+    except (KeyError, TypeError, ValueError, StopIteration) as exc:
+        raise BridgeError(f"invalid model specification ({type(exc).__name__}: {exc}); fix {path}") from exc
+
+
+def units() -> dict[str, dict[str, int]]:
+    """The unit table of ``common/units.json``: unit name -> SI base-unit exponents."""
+    raw = json.loads((models_root() / "common" / "units.json").read_text(encoding="utf-8"))
+    return {name: dict(exponents) for name, exponents in raw.items() if not name.startswith("_")}
+
+
+def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> Spec:
+    _reject_unknown(raw, _SPEC_KEYS, "model")
+    variants = tuple((version, iface) for version, ifaces in raw["variants"].items() for iface in ifaces)
+    for version, interface in variants:
+        if version not in FMI_VERSIONS or interface not in INTERFACES:
+            raise ValueError(f"variant {version!r}/{interface!r}: expected {FMI_VERSIONS} and {INTERFACES}")
+    max_step = raw.get("max_communication_step")
+    spec = Spec(
+        name=name,
+        directory=directory,
+        description=str(raw["description"]),
+        variants=variants,
+        default_experiment={str(k): float(v) for k, v in raw["default_experiment"].items()},
+        max_step_s=None if max_step is None else float(max_step),
+        event_indicators=tuple(str(n) for n in raw.get("event_indicators", [])),
+        enums={k: _parse_enum(k, v) for k, v in raw.get("type_definitions", {}).items()},
+        variables=(TIME, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1))),
+    )
+    _check_spec(spec)
+    return spec
+
+
+def _reject_unknown(raw: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:
+    unknown = sorted(set(raw) - allowed)
+    if unknown:
+        raise ValueError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+
+
+def _parse_variable(vr: int, raw: dict[str, Any]) -> Variable:
+    """A model.json variable with the FMI defaults filled in; value references count from 1 in file order."""
+    _reject_unknown(raw, VARIABLE_KEYS, f"variable {raw.get('name')!r}")
+    values = dict(raw)
+    values.setdefault("type", "Float64")
+    values.setdefault("causality", "local")
+    values.setdefault("variability", _default_variability(values["causality"], values["type"]))
+    values.setdefault("initial", _default_initial(values["causality"], values["variability"]))
+    for key in ("min", "max", "nominal"):
+        if key in values:
+            values[key] = float(values[key])
+    for key in ("fmi_versions", "interfaces"):
+        if key in values:
+            values[key] = tuple(values[key])
+    return Variable(vr=vr, **values)
+
+
+def _default_variability(causality: str, type_: str) -> str:
+    if causality in ("parameter", "calculatedParameter"):
+        return "fixed"
+    return "continuous" if type_ in FLOAT_TYPES else "discrete"
+
+
+def _default_initial(causality: str, variability: str) -> str | None:
+    if causality in ("input", "independent"):
+        return None
+    if causality == "parameter" or variability == "constant":
+        return "exact"
+    return "calculated"
+
+
+def _parse_enum(name: str, raw: dict[str, Any]) -> EnumType:
+    items = tuple((str(i["name"]), int(i["value"]), str(i.get("description", ""))) for i in raw["items"])
+    return EnumType(name, str(raw.get("description", "")), items)
+
+
+def _check_spec(spec: Spec) -> None:
+    names = [v.name for v in spec.variables]
+    if len(set(names)) != len(names):
+        raise ValueError(f"variable names are not unique: {names}")
+    table = units()
+    for v in spec.variables:
+        _check_variable(spec, v, table)
+    for name in spec.event_indicators:
+        if spec.variable(name).type != "Float64":
+            raise ValueError(f"event indicator {name} must be a Float64 variable")
+
+
+def _check_variable(spec: Spec, v: Variable, table: Mapping[str, object]) -> None:
+    if v.type not in ALL_TYPES or v.causality not in CAUSALITIES or v.variability not in VARIABILITIES:
+        raise ValueError(
+            f"{v.name}: type/causality/variability {v.type}/{v.causality}/{v.variability} unknown"
+        )
+    if not v.c_name.isidentifier():
+        raise ValueError(f"{v.name}: not usable as a C identifier ({v.c_name})")
+    if (v.type == "Enumeration") != (v.declared_type in spec.enums):
+        raise ValueError(f"{v.name}: Enumeration variables need a declared_type from type_definitions")
+    if v.derivative is not None and spec.variable(v.derivative).type != "Float64":
+        raise ValueError(f"{v.name}: the derivative of {v.derivative} must belong to a Float64 state")
+    if v.unit is not None and v.unit not in table:
+        raise ValueError(f"{v.name}: unit {v.unit!r} is not defined in common/units.json")
+    for version in v.fmi_versions:
+        if version != "3.0" and v.type not in FMI2_TYPES:
+            raise ValueError(
+                f"{v.name}: type {v.type} does not exist in FMI {version}; restrict fmi_versions"
+            )

@@ -1,0 +1,110 @@
+"""The in-memory form of a ``model.json``: variables, enumeration types and the variants to build.
+
+These frozen dataclasses are what the C and XML generators read; :mod:`bridge.models.sources`
+fills them from the files. Type, causality and variability names are the FMI 3.0 ones; the
+FMI 1.0/2.0 element names are mapped where the XML is written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Final
+
+FMI_VERSIONS: Final = ("1.0", "2.0", "3.0")
+INTERFACES: Final = ("cs", "me")
+
+FLOAT_TYPES: Final = frozenset({"Float32", "Float64"})
+UNSIGNED_TYPES: Final = frozenset({"UInt8", "UInt16", "UInt32", "UInt64"})
+INT_TYPES: Final = frozenset({"Int8", "Int16", "Int32", "Int64"}) | UNSIGNED_TYPES
+ALL_TYPES: Final = FLOAT_TYPES | INT_TYPES | {"Boolean", "String", "Enumeration"}
+#: FMI 1.0/2.0 element names of the types that exist there (model.json uses the FMI 3.0 names).
+FMI2_TYPES: Final = dict(
+    Float64="Real", Int32="Integer", Boolean="Boolean", String="String", Enumeration="Enumeration"
+)
+CAUSALITIES: Final = ("parameter", "calculatedParameter", "input", "output", "local", "independent")
+VARIABILITIES: Final = ("constant", "fixed", "tunable", "discrete", "continuous")
+
+Scalar = float | int | bool | str
+
+
+@dataclass(frozen=True)
+class Variable:
+    """One model variable; value references count from 1 in file order (0 is ``time``)."""
+
+    vr: int
+    name: str
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    description: str
+    start: Scalar | None = None
+    unit: str | None = None
+    min: float | None = None
+    max: float | None = None
+    nominal: float | None = None
+    declared_type: str | None = None
+    derivative: str | None = None
+    fmi_versions: tuple[str, ...] = FMI_VERSIONS
+    interfaces: tuple[str, ...] = INTERFACES
+
+    @property
+    def c_name(self) -> str:
+        return "der_" + self.name[4:-1] if self.name.startswith("der(") else self.name
+
+    def present_in(self, fmi_version: str, interface: str) -> bool:
+        """Whether the variable appears in this variant's modelDescription.xml (the C struct has all)."""
+        in_interface = interface in self.interfaces and (self.derivative is None or interface == "me")
+        return fmi_version in self.fmi_versions and in_interface
+
+
+VARIABLE_KEYS: Final = frozenset(f.name for f in fields(Variable)) - {"vr"}
+
+#: The independent variable every model has; FMI 1.0 has no ``time`` variable.
+TIME: Final = Variable(
+    vr=0,
+    name="time",
+    type="Float64",
+    causality="independent",
+    variability="continuous",
+    initial=None,
+    description="Simulation time",
+    unit="s",
+    fmi_versions=("2.0", "3.0"),
+)
+
+
+@dataclass(frozen=True)
+class EnumType:
+    """An enumeration from ``type_definitions``."""
+
+    name: str
+    description: str
+    items: tuple[tuple[str, int, str], ...]  # (name, value, description)
+
+
+@dataclass(frozen=True)
+class Spec:
+    """A parsed ``model.json`` and the directory it came from."""
+
+    name: str
+    directory: Path
+    description: str
+    variants: tuple[tuple[str, str], ...]
+    default_experiment: Mapping[str, float]
+    max_step_s: float | None
+    event_indicators: tuple[str, ...]
+    enums: Mapping[str, EnumType]
+    variables: tuple[Variable, ...]
+
+    def variable(self, name: str) -> Variable:
+        return next(v for v in self.variables if v.name == name)
+
+    def states(self) -> list[tuple[Variable, Variable]]:
+        """(state, derivative) pairs in derivative declaration order."""
+        return [(self.variable(d.derivative), d) for d in self.variables if d.derivative is not None]
+
+    def variant_variables(self, fmi_version: str, interface: str) -> list[Variable]:
+        return [v for v in self.variables if v.present_in(fmi_version, interface)]
