@@ -11,6 +11,7 @@ import json
 import logging
 import signal
 import sys
+import time
 from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Annotated, Any
@@ -358,6 +359,9 @@ def nodes(
     try:
         wait_connected(session, timeout_s)
         names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
+        if not names:  # declarations may still be propagating from the router: look once more
+            time.sleep(0.5)
+            names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
         table = Table(
             "node",
             "model",
