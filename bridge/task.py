@@ -66,7 +66,6 @@ class Task:
         self.reference_names, self.output_names = self._signal_sets(exp, variables)
         self.signal_names = self.output_names + self.input_names + self.reference_names
         self._index = {name: i for i, name in enumerate(self.signal_names)}
-        self._n_out, self._n_in = len(self.output_names), len(self.input_names)
         self._signals: list[float] = [0.0] * len(self.signal_names)
         self._has_refs = False
         self.sampler = ScenarioSampler(exp, self.sample_times)

@@ -234,9 +234,6 @@ class Fmi1Backend(Backend):
             self.fmu.fmi1FreeSlaveInstance(self.component)
             self.component = None
 
-    def do_step(self, t: float, h: float) -> int:
-        return self.stepper()(t, h)
-
     def stepper(self) -> Callable[[float, float], int]:
         # FMPy 0.3 declares fmiDoStep as returning a string; re-bind it with the FMI 1.0 prototype.
         fn = rebind(
@@ -298,9 +295,6 @@ class Fmi2Backend(Backend):
         if self.component:
             self.fmu.fmi2FreeInstance(self.component)
             self.component = None
-
-    def do_step(self, t: float, h: float) -> int:
-        return int(self.functions["fmi2DoStep"](self.component, t, h, fmi2.fmi2True))
 
     def stepper(self) -> Callable[[float, float], int]:
         fn, backend, true = self.functions["fmi2DoStep"], self, fmi2.fmi2True
