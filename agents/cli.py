@@ -61,7 +61,7 @@ def agent_run_cmd(
     from agents.deploy import DeploySettings
     from agents.deploy_io import AgentNode
     from bridge.errors import ConfigError
-    from bridge.transport import ZenohOptions
+    from bridge.net.transport import ZenohOptions
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")

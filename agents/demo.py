@@ -15,7 +15,7 @@ from rich.table import Table
 from agents.evaluate import evaluate
 from agents.report import summary, write
 from agents.train import train
-from bridge.examples import example_experiment
+from bridge.experiment.examples import example_experiment
 
 
 def run_demo(
@@ -62,7 +62,7 @@ def _replay(recordings: list[Path], target: Path, console: Console) -> Path | No
     if not ppo:
         return None
     try:
-        from bridge.replay import replay
+        from bridge.recording.replay import replay
     except ImportError:
         console.print("    (replay is not available in this installation)")
         return None

@@ -22,12 +22,12 @@ from typing import Any, Literal
 import numpy as np
 
 from agents.policies import Sb3Policy
-from bridge import protocol as proto
-from bridge.config import Experiment, Noise, load_experiment
-from bridge.config_check import check_experiment, resolve_fmu, timing
 from bridge.errors import BridgeError, ConfigError
+from bridge.experiment.config import Experiment, Noise, load_experiment
+from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import ModelInfo, read_model_info
-from bridge.task import Task
+from bridge.net import protocol as proto
+from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
 Transport = Literal["zenoh", "ros2", "rclpy"]
@@ -80,7 +80,7 @@ def model_info_for(
     experiment: Experiment, run_dir: Path, node_description: dict[str, Any] | None
 ) -> ModelInfo:
     """Variable metadata for the Task: the local FMU, else the run's snapshot, else the node's report."""
-    from bridge.inspect import info_from_summary
+    from bridge.cli.inspect import info_from_summary
 
     try:
         return read_model_info(resolve_fmu(experiment))

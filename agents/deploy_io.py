@@ -10,10 +10,10 @@ from typing import Any, Literal
 
 from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_experiment, model_info_for
 from agents.policies import Sb3Policy
-from bridge import cdr
-from bridge import protocol as proto
 from bridge.errors import TransportError
-from bridge.transport import ZenohOptions, open_session, undeclare
+from bridge.net import protocol as proto
+from bridge.net.transport import ZenohOptions, open_session, undeclare
+from bridge.recording import cdr
 
 _log = logging.getLogger(__name__)
 
@@ -60,7 +60,7 @@ class AgentNode:
 
     # -- native Zenoh -------------------------------------------------------------------------------
     def _node_description(self) -> dict[str, Any]:
-        from bridge.remote import NodeClient
+        from bridge.net.remote import NodeClient
 
         client = NodeClient(self._session, self.settings.node, prefix=self.settings.prefix, timeout_s=5.0)
         description = client.description
@@ -91,7 +91,7 @@ class AgentNode:
 
     # -- ROS 2 view ----------------------------------------------------------------------------------
     def _ros_publisher(self, experiment: Any) -> Any:
-        from bridge.ros_view import RosViewSettings, open_backend_node, qos_profile
+        from bridge.net.ros2.view import RosViewSettings, open_backend_node, qos_profile
 
         backend: Literal["zenoh", "rclpy"] = "rclpy" if self.settings.transport == "rclpy" else "zenoh"
         view = RosViewSettings(

@@ -19,9 +19,9 @@ import numpy as np
 
 from agents.metrics import MetricSpec, Trace, compute
 from agents.policies import Policy, make_policy
-from bridge.config import Experiment, load_experiment
-from bridge.env import FmuEnv
+from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment, load_experiment
 
 _log = logging.getLogger(__name__)
 
@@ -41,7 +41,7 @@ def metric_spec(experiment: Experiment) -> MetricSpec:
     tracking = [tuple(pair) for pair in config.get("tracking", [])] or [
         (t.tracking.output, t.tracking.reference) for t in experiment.reward.terms if t.tracking
     ]
-    from bridge.task import load_callable
+    from bridge.task.core import load_callable
 
     return MetricSpec(
         tracking=tracking,  # type: ignore[arg-type]
@@ -123,7 +123,7 @@ def run_cell(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], Path | None
 
 def _record(env: Any, cell: Cell) -> tuple[Any, Path | None]:
     try:
-        from bridge.recording import record_env
+        from bridge.recording.env_recorder import record_env
     except ImportError:  # recording support not available in this installation
         return env, None
     assert cell.record_dir is not None

@@ -177,7 +177,7 @@ def metric_alias(name: str) -> str:
 def success(expression: str, row: Mapping[str, Any]) -> bool:
     """Evaluate a success condition (e.g. ``episode_return >= 475 and not terminated``) over the
     numeric metrics of ``row`` with bridge's safe expression evaluator."""
-    from bridge.expr import compile_expression
+    from bridge.task.expr import compile_expression
 
     numeric = {metric_alias(k): float(v) for k, v in row.items() if isinstance(v, int | float)}
     compiled = compile_expression(expression, list(numeric), where="evaluation.metrics.success")

@@ -20,7 +20,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.errors import ConfigError
-from bridge.task import Task
+from bridge.task.core import Task
 
 ALGOS = ("PPO", "SAC", "TD3", "A2C", "DQN")
 

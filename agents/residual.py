@@ -14,9 +14,9 @@ import gymnasium as gym
 import numpy as np
 
 from agents.policies import Pid, PidSpec
-from bridge.config import Experiment
 from bridge.errors import ConfigError
-from bridge.task import Task
+from bridge.experiment.config import Experiment
+from bridge.task.core import Task
 
 
 def physical_inputs(baseline: Pid, task: Task, signals: Mapping[str, float]) -> list[float]:

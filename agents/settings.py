@@ -7,9 +7,9 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from bridge.config import Experiment, format_validation_error
 from bridge.errors import ConfigError
-from bridge.transport import ZenohOptions
+from bridge.experiment.config import Experiment, format_validation_error
+from bridge.net.transport import ZenohOptions
 
 Algo = Literal["PPO", "SAC", "TD3", "A2C", "DQN"]
 

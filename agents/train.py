@@ -19,12 +19,12 @@ from typing import Any
 import gymnasium as gym
 
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
-from bridge.config import Experiment, load_experiment
-from bridge.config_check import resolve_fmu
-from bridge.env import FmuEnv
+from bridge.cli.inspect import summary_of
+from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment, load_experiment
+from bridge.experiment.validate import resolve_fmu
 from bridge.fmu import read_model_info, sha256
-from bridge.inspect import summary_of
 
 _log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ def build_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
     if settings.vec == "remote":
-        from bridge.remote_vec import RemoteVecEnv
+        from bridge.net.vec import RemoteVecEnv
 
         if residual:
             raise ConfigError("residual training runs in-process (--vec dummy or subproc)")

@@ -17,8 +17,8 @@ import time
 import numpy as np
 from common import RawFmpyLoop, fmt_us, interleaved, table
 
-from bridge.env import FmuEnv
-from bridge.examples import example_experiment
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.examples import example_experiment
 from bridge.models import example_fmu
 
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]

@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 from common import interleaved, table
 
-from bridge.env import FmuEnv
-from bridge.examples import example_experiment
-from bridge.mcap_read import read_recording
-from bridge.recording import RecordMcap
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.examples import example_experiment
+from bridge.recording.env_recorder import RecordMcap
+from bridge.recording.reader import read_recording
 
 GAINS = (1.0, 1.5, 30.0, 5.0)  # a stabilising state feedback for the cart-pole
 

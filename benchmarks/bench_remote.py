@@ -21,12 +21,12 @@ from pathlib import Path
 import numpy as np
 from common import table
 
-from bridge import protocol as proto
-from bridge.env import FmuEnv
-from bridge.examples import example_experiment
-from bridge.remote import RemoteFmuEnv
-from bridge.remote_vec import RemoteVecEnv
-from bridge.transport import ZenohOptions, open_session
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
+from bridge.net.remote import RemoteFmuEnv
+from bridge.net.transport import ZenohOptions, open_session
+from bridge.net.vec import RemoteVecEnv
 
 ECHO = """
 import sys, threading, zenoh

@@ -17,8 +17,8 @@ from common import table
 from stable_baselines3 import PPO
 from stable_baselines3.common.env_util import make_vec_env
 
-from bridge.env import FmuEnv
-from bridge.examples import example_experiment
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.examples import example_experiment
 
 HYPERPARAMS = {
     "n_steps": 32,

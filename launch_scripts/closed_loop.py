@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from bridge.transport import ZenohOptions, open_session
+from bridge.net.transport import ZenohOptions, open_session
 
 
 def spawn(*args: str) -> subprocess.Popen[bytes]:

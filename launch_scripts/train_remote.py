@@ -19,8 +19,8 @@ from pathlib import Path
 
 from stable_baselines3 import PPO
 
-from bridge.remote_vec import RemoteVecEnv
-from bridge.transport import ZenohOptions, open_session
+from bridge.net.transport import ZenohOptions, open_session
+from bridge.net.vec import RemoteVecEnv
 
 ROOT = Path(__file__).resolve().parent.parent
 

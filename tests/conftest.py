@@ -141,7 +141,7 @@ class Loopback:
     session: object
 
     def options(self) -> object:
-        from bridge.transport import ZenohOptions
+        from bridge.net.transport import ZenohOptions
 
         return ZenohOptions(connect=(self.endpoint,))
 
@@ -149,7 +149,7 @@ class Loopback:
 @pytest.fixture
 def loopback() -> Iterator[Loopback]:
     """A Zenoh router session on a free 127.0.0.1 port: nodes and CLI sessions connect to it."""
-    from bridge.transport import ZenohOptions, open_session
+    from bridge.net.transport import ZenohOptions, open_session
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
@@ -217,7 +217,7 @@ def _wait_for_line(process: subprocess.Popen[str], text: str, timeout_s: float) 
 
 
 def _wait_for_node(net: Loopback, name: str, timeout_s: float) -> None:
-    from bridge.remote import list_nodes
+    from bridge.net.remote import list_nodes
 
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

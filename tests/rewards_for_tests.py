@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.scenario import EpisodeSpec
+from bridge.task.scenario import EpisodeSpec
 
 
 def half_current(signals: dict[str, float]) -> float:

@@ -18,9 +18,9 @@ from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, 
 from agents.deploy_io import AgentNode
 from agents.policies import Sb3Policy
 from agents.train import train
-from bridge import protocol as proto
-from bridge.env import FmuEnv
-from bridge.examples import example_experiment
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
 
 pytestmark = pytest.mark.slow
 CARTPOLE = example_experiment("cartpole_balance")

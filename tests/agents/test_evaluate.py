@@ -99,7 +99,7 @@ def test_workers_give_the_same_rows_as_one_process(experiment: Path) -> None:
 
 
 def test_every_agent_sees_the_same_seeds(tmp_path: Path) -> None:
-    from bridge.examples import example_experiment
+    from bridge.experiment.examples import example_experiment
 
     result = evaluate(["zero", "random"], example_experiment("cartpole_continuous"), episodes=3, seed=11)
     seeds = {(r["agent"], r["episode"]): r["seed"] for r in result.rows}

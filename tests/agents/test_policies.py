@@ -7,9 +7,9 @@ import pytest
 
 from agents.policies import FixedPolicy, Pid, PidSpec, make_policy
 from agents.residual import combine
-from bridge.env import FmuEnv
+from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
-from bridge.examples import example_experiment
+from bridge.experiment.examples import example_experiment
 
 
 @pytest.fixture(scope="module")

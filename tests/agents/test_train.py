@@ -15,9 +15,9 @@ from typer.testing import CliRunner
 from agents.evaluate import evaluate
 from agents.policies import Sb3Policy
 from agents.train import train
-from bridge.cli import _load_plugins, app
+from bridge.cli.main import _load_plugins, app
 from bridge.errors import ConfigError
-from bridge.examples import example_experiment
+from bridge.experiment.examples import example_experiment
 
 pytestmark = pytest.mark.slow
 CARTPOLE = example_experiment("cartpole_balance")

@@ -1,0 +1,127 @@
+"""``fmu-bridge check`` and ``fmu-bridge scenarios``: reports a person reads before training."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from bridge.cli.simulate import make_policy
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.config import load_experiment
+from bridge.experiment.validate import check_experiment, resolve_fmu, timing
+from bridge.fmu import read_model_info
+from bridge.task.core import Task
+from bridge.task.scenario import describe
+
+
+def check_and_report(path: Path, *, version: str | None, steps: int, console: Console) -> None:
+    """Validate, run both env checkers, and print spaces and a few steps."""
+    from gymnasium.utils.env_checker import check_env as gym_check
+
+    experiment = load_experiment(path, version=version)
+    info = check_experiment(experiment)
+    console.print(
+        f"[green]config ok[/green]: {path} (version {experiment.version}) against {info.model_name}"
+    )
+    with FmuEnv(experiment) as env, warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        gym_check(env, skip_render_check=True)
+        console.print("[green]gymnasium env checker passed[/green]")
+        checkers = _plugin_checkers()
+        if not checkers:
+            console.print("stable-baselines3's env checker is not available: pip install 'fmu-bridge[train]'")
+        for name, checker in checkers:
+            checker(env)
+            console.print(f"[green]{name} env checker passed[/green]")
+        for warning in caught:
+            if "infinity" not in str(warning.message):  # unbounded observations are deliberate
+                console.print(f"[yellow]warning:[/yellow] {escape(str(warning.message))}")
+        t = env.timing
+        console.print(f"action space: {env.action_space}\nobservation space: {env.observation_space}")
+        console.print(f"observation: {env.task.observer.names}")
+        console.print(
+            f"FMU step {t.step_size_s:g} s x {t.steps_per_sample} = sample {t.sampling_time_s:g} s; "
+            f"episode {env.task.episode_duration_s:g} s"
+        )
+        _few_steps(env, steps, console)
+
+
+def _plugin_checkers() -> list[tuple[str, Callable[[Any], None]]]:
+    """Env checkers contributed by other packages (``agents`` adds stable-baselines3's)."""
+    found = []
+    for entry in entry_points(group="fmu_bridge.env_checkers"):
+        try:
+            found.append((entry.name, entry.load()))
+        except ImportError:
+            continue
+    return found
+
+
+def _few_steps(env: FmuEnv, steps: int, console: Console) -> None:
+    policy = make_policy("zero", env.task, 0)
+    obs, info = env.reset(seed=0)
+    table = Table(
+        "step",
+        "t [s]",
+        *env.output_names,
+        "reward",
+        title=f"first steps (zero action, scenario {info['scenario']})",
+    )
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        table.add_row(
+            str(info["step"]),
+            f"{info['time_s']:g}",
+            *(f"{v:.4g}" for v in info["outputs"]),
+            f"{float(reward):.4g}",
+        )
+        if terminated or truncated:
+            break
+    console.print(table)
+
+
+def scenario_report(path: Path, *, sample: int, seed: int, console: Console) -> None:
+    experiment = load_experiment(path)
+    info = check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
+    task = Task(experiment, info.variables, timing(experiment, info))
+    table = Table("scenario", "use", "description", "parameters", "references", "inputs")
+    sampler = task.sampler
+    for name in sampler.names:
+        sc = experiment.scenarios.get(name)
+        use = "evaluation" if name in sampler.evaluation else "training" if name in sampler.training else "-"
+        table.add_row(
+            name,
+            use,
+            sc.description if sc else "",
+            str(dict(sc.parameters)) if sc else "",
+            ", ".join(sc.references) if sc else "",
+            ", ".join(sc.inputs) if sc else "",
+        )
+    console.print(table)
+    console.print(f"schedule: {experiment.schedule.mode}")
+    if sample:
+        rng = np.random.default_rng(seed)
+        drawn = Table(
+            "episode",
+            "scenario",
+            "drawn values",
+            "references (t0 -> end)",
+            title=f"{sample} sampled episodes (seed {seed})",
+        )
+        for i in range(sample):
+            d = describe(task.new_episode(rng))
+            drawn.add_row(
+                str(i),
+                d["scenario"],
+                ", ".join(f"{k}={v:.4g}" for k, v in d["drawn"].items()),
+                ", ".join(f"{k}: {a:g} -> {b:g}" for k, (a, b) in d["references"].items()),
+            )
+        console.print(drawn)

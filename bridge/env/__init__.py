@@ -1,0 +1,10 @@
+"""The Gymnasium side: one env that runs a ``Task`` over any plant, rendering, and the ids of
+the bundled examples.
+
+May import every lower package (plant, task, experiment, fmu through the in-process plant);
+only the CLI imports it.
+"""
+
+from bridge.env.fmu_env import FmuEnv, as_experiment, make
+
+__all__ = ["FmuEnv", "as_experiment", "make"]

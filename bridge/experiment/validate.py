@@ -1,0 +1,239 @@
+"""Checks of an experiment against its FMU: names exist, causality fits the role, steps divide.
+
+These run before any episode, so a typo in a YAML file fails in milliseconds with the key,
+the bad value, what is allowed, and the file, instead of deep inside training.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment, known_references, sampling_ratio, scenario_inputs
+from bridge.fmu import ModelInfo, Variable, read_model_info
+
+
+def resolve_fmu(experiment: Experiment) -> Path:
+    """The FMU of ``model.fmu``: a path (relative to the experiment file) or ``example:NAME[:VER][:IF]``."""
+    spec = experiment.model.fmu
+    if spec.startswith("example:"):
+        from bridge.models import example_fmu
+
+        parts = spec.split(":")[1:]
+        name = parts[0]
+        version = parts[1] if len(parts) > 1 and parts[1] else "2.0"
+        interface = parts[2] if len(parts) > 2 else ("me" if experiment.model.interface == "me" else "cs")
+        return example_fmu(name, version, interface)
+    path = Path(spec).expanduser()
+    if not path.is_absolute():
+        path = experiment.base_dir / path
+    if not path.exists():
+        raise ConfigError(
+            f"model.fmu: {spec!r} does not exist (looked at {path}); give a path relative to the "
+            f"experiment file or example:NAME [{experiment.source}]"
+        )
+    return path
+
+
+@dataclass(frozen=True)
+class Timing:
+    step_size_s: float
+    steps_per_sample: int
+    sampling_time_s: float
+    start_time_s: float
+
+
+def timing(experiment: Experiment, info: ModelInfo) -> Timing:
+    model = experiment.model
+    h = model.step_size or info.default_experiment.step_size_s
+    if h is None:
+        raise ConfigError(
+            f"model.step_size: {info.model_name} declares no default step size; set model.step_size "
+            f"(seconds) [{experiment.source}]"
+        )
+    ts = model.sampling_time or h
+    n = sampling_ratio(ts, h)
+    return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=model.start_time)
+
+
+def check_experiment(experiment: Experiment, info: ModelInfo | None = None) -> ModelInfo:
+    """Check every name and role in ``experiment`` against the FMU; returns its ModelInfo."""
+    info = info or read_model_info(resolve_fmu(experiment))
+    where = f" [{experiment.source}]" if experiment.source else ""
+    variables = info.variables
+    timing(experiment, info)
+    _check_values(experiment, variables, where)
+    _check_actions(experiment, variables, where)
+    _check_observations(experiment, variables, where)
+    signals = set(variables) | known_references(experiment)
+    _check_reward_and_termination(experiment, variables, signals, where)
+    return info
+
+
+def _unknown(
+    key: str, name: str, names: Iterable[str], where: str, what: str = "a variable of the FMU"
+) -> ConfigError:
+    names = sorted(names)
+    close = difflib.get_close_matches(name, names, n=4, cutoff=0.5)
+    hint = (
+        f"did you mean {close}?" if close else f"{len(names)} are available; `fmu-bridge inspect` lists them"
+    )
+    return ConfigError(f"{key}: {name!r} is not {what}; {hint}{where}")
+
+
+def _need(key: str, name: str, variables: Mapping[str, Variable], where: str) -> Variable:
+    if name not in variables:
+        raise _unknown(key, name, variables, where)
+    return variables[name]
+
+
+def _check_values(exp: Experiment, variables: Mapping[str, Variable], where: str) -> None:
+    sections: list[tuple[str, Iterable[str]]] = [
+        ("model.parameters", exp.model.parameters),
+        ("model.start_values", exp.model.start_values),
+        ("randomization.parameters", exp.randomization.parameters),
+        ("randomization.start_values", exp.randomization.start_values),
+    ]
+    for name, sc in exp.scenarios.items():
+        sections += [
+            (f"scenarios.{name}.parameters", sc.parameters),
+            (f"scenarios.{name}.start_values", sc.start_values),
+            (f"scenarios.{name}.randomization.parameters", sc.randomization.parameters),
+            (f"scenarios.{name}.randomization.start_values", sc.randomization.start_values),
+        ]
+    for key, names in sections:
+        for var_name in names:
+            var = _need(key, var_name, variables, where)
+            if not var.settable_at_init:
+                raise ConfigError(
+                    f"{key}: {var_name!r} is a {var.variability} {var.causality} and cannot be set; "
+                    f"only parameters, inputs and variables with initial exact/approx can{where}"
+                )
+    for name, sc in exp.scenarios.items():
+        for var_name in sc.inputs:
+            var = _need(f"scenarios.{name}.inputs", var_name, variables, where)
+            if var.causality != "input":
+                raise ConfigError(
+                    f"scenarios.{name}.inputs: {var_name!r} is a {var.causality}, not an input of the FMU; "
+                    f"time profiles drive inputs (use parameters for constants){where}"
+                )
+            if var_name in exp.actions.inputs:
+                raise ConfigError(
+                    f"scenarios.{name}.inputs: {var_name!r} is driven by the agent (actions.inputs); "
+                    f"a profile cannot drive it too{where}"
+                )
+
+
+def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: str) -> None:
+    actions = exp.actions
+    for name in actions.inputs:
+        var = _need("actions.inputs", name, variables, where)
+        if var.causality != "input":
+            raise ConfigError(
+                f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input'; "
+                f"the agent can only "
+                f"drive inputs ({[v.name for v in variables.values() if v.causality == 'input']}){where}"
+            )
+        if not var.is_numeric:
+            raise ConfigError(f"actions.inputs: {name!r} is a {var.type} input; actions are numeric{where}")
+        if actions.type == "continuous":
+            low, high = action_bounds(exp, var)
+            for side, bound, key in (("low", low, "actions.low"), ("high", high, "actions.high")):
+                if bound is None or not math.isfinite(bound):
+                    raise ConfigError(
+                        f"{key}.{name}: the {side} bound is {bound}; continuous actions need finite bounds "
+                        f"(the FMU declares min={var.min}, max={var.max}): set {key}.{name}{where}"
+                    )
+            if not low < high:  # type: ignore[operator]
+                raise ConfigError(f"actions: bounds of {name!r} need low < high, got [{low}, {high}]{where}")
+    for name in exp.noise.actions:
+        if name not in actions.inputs:
+            raise _unknown("noise.actions", name, actions.inputs, where, "an action input")
+
+
+def action_bounds(exp: Experiment, var: Variable) -> tuple[float | None, float | None]:
+    return exp.actions.low.get(var.name, var.min), exp.actions.high.get(var.name, var.max)
+
+
+def _check_observations(exp: Experiment, variables: Mapping[str, Variable], where: str) -> None:
+    obs = exp.observations
+    for name in [*obs.outputs, *obs.errors.values()]:
+        var = _need("observations.outputs", name, variables, where)
+        if var.causality == "input":
+            raise ConfigError(
+                f"observations.outputs: {name!r} is an input of the FMU; FMUs do not report inputs as "
+                f"measurements: observe an output, or set observations.include_action: true{where}"
+            )
+        if not var.is_numeric:
+            raise ConfigError(
+                f"observations.outputs: {name!r} is a {var.type} variable; observations are numeric{where}"
+            )
+    references = known_references(exp)
+    for name in [*obs.references, *obs.errors]:
+        if name not in references:
+            raise _unknown(
+                "observations.references",
+                name,
+                references,
+                where,
+                "a reference defined by a scenario or randomization.references",
+            )
+        _every_scenario_defines(exp, name, where)
+    for name in exp.noise.observations:
+        if name not in obs.outputs:
+            raise _unknown("noise.observations", name, obs.outputs, where, "an observed output")
+    if isinstance(obs.scale, dict):
+        known = set(obs.outputs) | set(obs.references) | set(obs.errors.values())
+        for name in obs.scale:
+            if name not in known:
+                raise _unknown("observations.scale", name, known, where, "an observed signal")
+
+
+def _every_scenario_defines(exp: Experiment, reference: str, where: str) -> None:
+    if reference in exp.randomization.references:
+        return
+    missing = [
+        n
+        for n, sc in exp.scenarios.items()
+        if reference not in sc.references and reference not in sc.randomization.references
+    ]
+    if missing or not exp.scenarios:
+        raise ConfigError(
+            f"reference {reference!r} is used but scenarios {missing or ['(none defined)']} do not define "
+            f"it; give every scenario a references.{reference} profile or draw it in "
+            f"randomization.references{where}"
+        )
+
+
+def _check_reward_and_termination(
+    exp: Experiment, variables: Mapping[str, Variable], signals: set[str], where: str
+) -> None:
+    for i, term in enumerate(exp.reward.terms):
+        key = f"reward.terms[{i}]"
+        if term.tracking is not None:
+            _need(f"{key}.tracking.output", term.tracking.output, variables, where)
+            if term.tracking.reference not in known_references(exp):
+                raise _unknown(
+                    f"{key}.tracking.reference",
+                    term.tracking.reference,
+                    known_references(exp),
+                    where,
+                    "a reference defined by the scenarios",
+                )
+            _every_scenario_defines(exp, term.tracking.reference, where)
+        for kind in ("effort", "rate"):
+            spec = getattr(term, kind)
+            if spec is not None and spec.name not in exp.actions.inputs:
+                raise _unknown(f"{key}.{kind}.name", spec.name, exp.actions.inputs, where, "an action input")
+        if term.signal is not None and term.signal.name not in signals:
+            raise _unknown(f"{key}.signal.name", term.signal.name, signals, where, "a signal")
+    for name in exp.termination.bounds:
+        if name not in signals:
+            raise _unknown("termination.bounds", name, signals, where, "a signal (FMU variable or reference)")
+    extra_inputs = [n for n in scenario_inputs(exp) if n not in variables]
+    if extra_inputs:
+        raise _unknown("scenarios.inputs", extra_inputs[0], variables, where)

@@ -1,0 +1,178 @@
+"""The ROS 2 view of an FMU node: what ``ros2 topic echo`` and ``ros2 service call`` see.
+
+Over rmw_zenoh's wire format (``bridge.net.ros2``, no ROS install) or, where ``rclpy`` imports,
+through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
+
+- ``~/outputs``: ``sensor_msgs/msg/JointState``, one per sample: names = the FMU outputs, position =
+  their values, header.stamp = simulation time;
+- ``~/actions``: ``sensor_msgs/msg/JointState`` in: names = FMU inputs (any subset), position =
+  values; held (real time) or one sample per message (lockstep);
+- ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time);
+- ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
+- with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
+  way fmi_adapter users know them.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from bridge.errors import ConfigError
+from bridge.recording import cdr
+
+_log = logging.getLogger(__name__)
+
+
+class RosViewSettings(BaseModel):
+    """The ``ros:`` section of an experiment (all optional)."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+    domain_id: int | None = Field(default=None, ge=0, le=232)
+    namespace: str = "/"
+    node_name: str | None = None
+    outputs_topic: str = "~/outputs"
+    actions_topic: str = "~/actions"
+    reset_service: str = "~/reset"
+    clock: bool = True
+    per_variable: bool = False
+    reliability: Literal["reliable", "best_effort"] = "reliable"
+    depth: int = Field(default=10, ge=1)
+    backend: Literal["zenoh", "rclpy"] = "zenoh"
+
+
+def settings_from(section: dict[str, Any], *, backend: str | None = None) -> RosViewSettings:
+    from pydantic import ValidationError
+
+    from bridge.experiment.config import format_validation_error
+
+    data = {**section, **({"backend": backend} if backend else {})}
+    try:
+        return RosViewSettings.model_validate(data)
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, None).replace("  ", "  ros.")) from None
+
+
+def ros_node_name(name: str) -> str:
+    """A valid ROS node name from an fmu-bridge node name (``worker-1`` -> ``worker_1``)."""
+    from bridge.net.ros2.names import name_token
+
+    return name_token(name)
+
+
+def open_backend_node(session: Any, settings: RosViewSettings, name: str) -> Any:
+    """A node with ``create_publisher/create_subscription/create_service/close`` taking CDR bytes."""
+    if settings.backend == "rclpy":
+        from bridge.net.ros2.rclpy_backend import RclpyNode
+
+        return RclpyNode(name, settings.namespace, domain_id=settings.domain_id)
+    from bridge.net.ros2 import RosContext
+
+    context = RosContext(session, domain_id=settings.domain_id, namespace=settings.namespace)
+    return context.create_node(name)
+
+
+def qos_profile(settings: RosViewSettings) -> Any:
+    if settings.backend == "rclpy":
+        return settings
+    from bridge.net.ros2 import QoS, Reliability
+
+    reliability = Reliability.RELIABLE if settings.reliability == "reliable" else Reliability.BEST_EFFORT
+    return QoS(reliability=reliability, depth=settings.depth)
+
+
+class RosView:
+    """Publishes a node's samples as ROS messages and feeds ROS actions and resets back to it."""
+
+    def __init__(
+        self,
+        session: Any,
+        settings: RosViewSettings,
+        *,
+        name: str,
+        output_names: Sequence[str],
+        input_names: Sequence[str],
+        on_actions: Callable[[dict[str, float]], None],
+        on_reset: Callable[[], tuple[bool, str]],
+        realtime: bool,
+    ) -> None:
+        self.settings = settings
+        self._output_names, self._input_names = tuple(output_names), tuple(input_names)
+        self._layout = cdr.JointStateLayout.of(list(output_names))
+        self._on_actions, self._on_reset = on_actions, on_reset
+        self.node = open_backend_node(session, settings, ros_node_name(settings.node_name or name))
+        qos = qos_profile(settings)
+        self._outputs = self.node.create_publisher(settings.outputs_topic, "sensor_msgs/msg/JointState", qos)
+        self.node.create_subscription(
+            settings.actions_topic, "sensor_msgs/msg/JointState", self._actions, qos
+        )
+        self.node.create_service(settings.reset_service, "std_srvs/srv/Trigger", self._reset)
+        self._clock = (
+            self.node.create_publisher("/clock", "rosgraph_msgs/msg/Clock", qos)
+            if (realtime and settings.clock)
+            else None
+        )
+        self._per_variable: list[Any] = []
+        if settings.per_variable:
+            self._declare_per_variable(qos)
+        self.dropped = 0
+
+    def _declare_per_variable(self, qos: Any) -> None:
+        from bridge.net.ros2.names import name_token
+
+        self._per_variable = [
+            self.node.create_publisher(f"~/out/{name_token(n)}", "std_msgs/msg/Float64", qos)
+            for n in self._output_names
+        ]
+        for name in self._input_names:
+
+            def on_value(payload: bytes, info: Any, name: str = name) -> None:
+                self._on_actions({name: cdr.decode_float64(payload)})
+
+            self.node.create_subscription(f"~/in/{name_token(name)}", "std_msgs/msg/Float64", on_value, qos)
+
+    def publish(self, sim_time_ns: int, outputs: Sequence[float]) -> None:
+        """One sample: the bundled outputs, per-variable values, the clock."""
+        self._outputs.publish(self._layout.pack(sim_time_ns, outputs))
+        for publisher, value in zip(self._per_variable, outputs):
+            publisher.publish(cdr.encode_float64(float(value)))
+        if self._clock is not None:
+            self._clock.publish(encode_clock(sim_time_ns))
+
+    def _actions(self, payload: bytes, info: Any) -> None:
+        try:
+            message = cdr.decode_joint_state(payload)
+        except Exception as exc:  # a foreign or malformed message: count and carry on
+            self.dropped += 1
+            _log.warning("ROS actions: dropped a message that is not a JointState: %s", exc)
+            return
+        known = {n: float(v) for n, v in zip(message.name, message.position) if n in self._input_names}
+        unknown = [n for n in message.name if n not in self._input_names]
+        if unknown:
+            _log.warning(
+                "ROS actions: %s are not inputs of this node (inputs: %s)", unknown, self._input_names
+            )
+        if known:
+            self._on_actions(known)
+
+    def _reset(self, request: bytes) -> bytes:
+        success, message = self._on_reset()
+        from bridge.net.ros2 import interfaces
+
+        return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
+
+    def close(self) -> None:
+        self.node.close()
+
+
+_CLOCK = struct.Struct("<4siI")  # CDR header, builtin_interfaces/Time (int32 sec, uint32 nanosec)
+
+
+def encode_clock(sim_time_ns: int) -> bytes:
+    """A ``rosgraph_msgs/msg/Clock`` payload."""
+    sec, nanosec = divmod(int(sim_time_ns), 1_000_000_000)
+    return _CLOCK.pack(b"\x00\x01\x00\x00", sec, nanosec)

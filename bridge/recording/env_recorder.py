@@ -1,0 +1,292 @@
+"""Evaluation recordings: ``RecordMcap`` records any fmu-bridge env into one MCAP file per run.
+
+The file uses the ``ros2`` profile with standard ROS 2 Jazzy messages (topics and the
+recording clock: :mod:`bridge.recording.meta`), so rosbags, ``ros2 bag``, Foxglove and Rerun
+read it. A step only keeps its values (as bytes, well under a microsecond); every ~250 steps
+and at episode ends they are packed into MCAP records at once (:mod:`bridge.recording.block`).
+The file is written as ``NAME.mcap.part``, flushed at every episode end, and renamed to
+``NAME.mcap`` by ``close()`` (also called by ``env.close()`` and at interpreter exit).
+
+    env = record_env(FmuEnv("experiment.yaml"), agent="ppo-cartpole.zip")
+    ...                      # reset/step as usual
+    env.close()              # -> recordings/<experiment>-<time>.mcap
+"""
+
+from __future__ import annotations
+
+import atexit
+import datetime
+import logging
+import weakref
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from bridge.errors import ConfigError
+from bridge.recording import cdr, meta
+from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
+
+_log = logging.getLogger(__name__)
+STEP_TOPICS = [meta.ACTIONS, meta.AGENT_ACTION, meta.OBSERVATIONS, meta.REWARD, meta.OUTPUTS]
+
+
+def _as_list(action: Any) -> Any:
+    """A copy of a Box/MultiDiscrete action (the agent may reuse its array)."""
+    return action.tolist() if action.__class__ is np.ndarray else np.asarray(action).tolist()
+
+
+class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
+    """Records an ``FmuEnv`` or ``RemoteFmuEnv`` (anything with ``.task`` and their ``info``).
+
+    Args:
+        env: the env to record.
+        path: the recording's file name (``.mcap``); ``.part`` is appended while it is written.
+        agent: what acts (a model file, a policy name): stored in the metadata.
+        seed: the run's seed, if known up front (the seed of every reset is in the events).
+        chunk_size: uncompressed bytes per MCAP chunk (at most this is lost to a crash).
+        overwrite: replace an existing recording at ``path``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env[Any, Any],
+        path: str | Path,
+        *,
+        agent: str | None = None,
+        seed: int | None = None,
+        chunk_size: int = 128 * 1024,
+        overwrite: bool = False,
+    ) -> None:
+        super().__init__(env)
+        task = getattr(env.unwrapped, "task", None)
+        if task is None:
+            raise ConfigError(
+                f"RecordMcap records fmu-bridge envs (FmuEnv, RemoteFmuEnv); {type(env.unwrapped).__name__} "
+                "has no .task to name its signals"
+            )
+        self.task = task
+        self._sampling_ns = round(task.timing.sampling_time_s * 1e9)
+        obs_size = int(np.prod(env.observation_space.shape or (0,)))
+        names = {
+            meta.OBSERVATIONS: meta.observation_names(task, obs_size),
+            meta.ACTIONS: list(task.input_names),
+            meta.AGENT_ACTION: meta.action_names(task, env.action_space),
+            meta.OUTPUTS: list(task.output_names),
+        }
+        self.writer = writer = McapWriter(path, chunk_size=chunk_size, overwrite=overwrite)
+        try:
+            self.channels = ch = meta.open_channels(writer, [*STEP_TOPICS, meta.SCENARIO, meta.EVENTS], names)
+            self._layouts = {t: cdr.JointStateLayout.of(n) for t, n in names.items()}
+            slot = {meta.ACTIONS: 0, meta.AGENT_ACTION: 0}
+            self._block = StepBlock(
+                [FixedMessage(ch[t], slot.get(t, 1), self._layouts.get(t)) for t in STEP_TOPICS]
+            )
+            meta.write_run_metadata(writer, self._run_info(agent, seed), task.experiment)
+        except BaseException:
+            writer.close()
+            raise
+        self._inputs = task.applied_inputs  # the list Task.action_to_inputs fills: the applied input values
+        self._discrete = isinstance(env.action_space, gym.spaces.Discrete)
+        self._rows: list[tuple[Any, ...]] = []
+        self._rows_per_block = max(1, chunk_size // self._block.size)
+        self._obs_dtype = np.dtype(np.float32)
+        self._episode = -1
+        self._in_episode = False
+        self._next_start_ns = 0  # recording clock at which the next episode starts
+        self._offset = 0  # recording clock - simulation time, in this episode
+        self._t_prev = 0  # simulation time of the last recorded sample, ns
+        self._steps = 0
+        self._return = 0.0
+        self.episodes: list[dict[str, Any]] = []
+        self._seeds: list[int | None] = []
+        ref = weakref.ref(self)
+        self._at_exit = lambda: _close_ref(ref)
+        atexit.register(self._at_exit)  # a program that never closes the env still gets a whole file
+
+    def _run_info(self, agent: str | None, seed: int | None) -> dict[str, Any]:
+        env = self.env.unwrapped
+        timing = self.task.timing
+        description = getattr(getattr(env, "client", None), "description", {})
+        fmu_path = getattr(env, "fmu_path", None)
+        if fmu_path is not None:
+            from bridge.fmu import sha256
+
+            checksum = sha256(Path(fmu_path))
+        else:
+            checksum = description.get("fmu_sha256", "")
+        return {
+            "env": type(env).__name__,
+            "node": getattr(env, "node", "") or "",
+            "agent": str(agent) if agent else "",
+            "seed": "" if seed is None else str(seed),
+            "fmu": str(fmu_path or description.get("model", {}).get("path", "")),
+            "fmu_sha256": checksum,
+            "step_size_s": timing.step_size_s,
+            "sampling_time_s": timing.sampling_time_s,
+            "start_time_s": timing.start_time_s,
+            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        }
+
+    # -- Gymnasium API -----------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        if self._in_episode:
+            self._end_episode("reset", False, False, {})
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._episode += 1
+        t_ns = round(info["time_s"] * 1e9)
+        self._offset = self._next_start_ns - t_ns
+        self._t_prev = t_ns
+        self._obs_dtype = np.asarray(obs).dtype
+        self._in_episode, self._steps, self._return = True, 0, 0.0
+        self._seeds.append(seed)
+        drawn = dict(info.get("drawn", {}))
+        event = {
+            "event": "episode_start",
+            "episode": self._episode,
+            "scenario": info.get("scenario"),
+            "seed": seed,
+            "time_s": info["time_s"],
+            "drawn": drawn,
+        }
+        spec = getattr(self.task, "episode", None)
+        if spec is not None:
+            event["values"] = spec.values
+        w, ch, log = self.writer, self.channels, self._next_start_ns
+        w.add_message(ch[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
+        w.add_message(ch[meta.SCENARIO], log, cdr.encode_joint_state(t_ns, list(drawn), list(drawn.values())))
+        for topic, values in ((meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])):
+            w.add_message(ch[topic], log, self._layouts[topic].pack(t_ns, np.ravel(values).tolist()))
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        # Keep the step's values now (bytes, copies); pack them in bulk later (bridge.recording.block).
+        self._rows.append(
+            (
+                info["time_s"],
+                self._inputs[:],
+                action if self._discrete else _as_list(action),
+                obs.tobytes(),
+                reward,
+                info["outputs"].tobytes(),
+            )
+        )
+        if terminated or truncated:
+            self._end_episode(info.get("reason"), terminated, truncated, info)
+        elif len(self._rows) >= self._rows_per_block:
+            self._pack_rows()
+        return obs, reward, terminated, truncated, info
+
+    def _pack_rows(self) -> None:
+        rows, self._rows = self._rows, []
+        if not rows:
+            return
+        n = len(rows)
+        times, inputs, actions, observations, rewards, outputs = zip(*rows)
+        t_ns = np.round(np.asarray(times, dtype=np.float64) * 1e9).astype(np.int64)
+        before = np.concatenate(([self._t_prev], t_ns[:-1]))  # actions are stamped at t_k
+        self._t_prev = int(t_ns[-1])
+        values = [
+            np.asarray(inputs, dtype=np.float64).reshape(n, -1),
+            np.asarray(actions, dtype=np.float64).reshape(n, -1),
+            np.frombuffer(b"".join(observations), dtype=self._obs_dtype).reshape(n, -1).astype(np.float64),
+            np.asarray(rewards, dtype=np.float64),
+            np.frombuffer(b"".join(outputs), dtype=np.float64).reshape(n, -1),
+        ]
+        offset = self._offset
+        self.writer.add_block(*self._block.pack([(before + offset, before), (t_ns + offset, t_ns)], values))
+        self._steps += n
+        self._return = float(sum(rewards, self._return))  # sequential, as a per-step sum would be
+
+    def _end_episode(
+        self, reason: str | None, terminated: bool, truncated: bool, info: dict[str, Any]
+    ) -> None:
+        self._pack_rows()
+        log = self._t_prev + self._offset
+        event = {
+            "event": "episode_end",
+            "episode": self._episode,
+            "steps": self._steps,
+            "return": self._return,
+            "reason": reason,
+            "terminated": bool(terminated),
+            "truncated": bool(truncated),
+            "time_s": self._t_prev / 1e9,
+        }
+        if "fmu_error" in info:
+            event["fmu_error"] = info["fmu_error"]
+        self.writer.add_message(self.channels[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
+        self.episodes.append(event)
+        self._in_episode = False
+        self._next_start_ns = log + self._sampling_ns
+        self.writer.flush()
+
+    def close(self) -> None:
+        """Finish the recording (summary, footer, rename from ``.part``), then close the env."""
+        atexit.unregister(self._at_exit)
+        try:
+            if not self.writer.closed:
+                if self._in_episode:
+                    self._end_episode("closed", False, False, {})
+                self.writer.add_metadata("run_summary", self._summary())
+                path = self.writer.close()
+                _log.info("recording saved: %s", path)
+        finally:
+            super().close()
+
+    def _summary(self) -> dict[str, str]:
+        returns = [e["return"] for e in self.episodes]
+        return {
+            "episodes": str(len(self.episodes)),
+            "steps": str(sum(e["steps"] for e in self.episodes)),
+            "returns": meta.to_json(returns),
+            "seeds": meta.to_json(self._seeds),
+            "mean_return": meta.to_json(float(np.mean(returns)) if returns else None),
+        }
+
+    @property
+    def path(self) -> Path:
+        """The finished file's path (``.part`` is appended while recording)."""
+        return self.writer.path
+
+
+def _close_ref(ref: weakref.ReferenceType[RecordMcap]) -> None:
+    recorder = ref()
+    if recorder is not None:
+        try:
+            recorder.close()
+        except Exception as exc:  # at exit: report, never raise
+            _log.error("finishing the recording failed: %s", exc)
+
+
+def default_run_name(env: gym.Env[Any, Any]) -> str:
+    experiment = getattr(getattr(env.unwrapped, "task", None), "experiment", None)
+    name = getattr(experiment, "name", "run")
+    return f"{name}-{datetime.datetime.now().strftime('%Y%m%d-%H%M%S')}"
+
+
+def record_env(
+    env: gym.Env[Any, Any],
+    directory: str | Path = "recordings",
+    run_name: str | None = None,
+    agent: str | None = None,
+    *,
+    seed: int | None = None,
+) -> RecordMcap:
+    """Wrap ``env`` to record into ``directory/<run_name>.mcap`` (a free name is chosen).
+
+    ``run_name`` defaults to ``<experiment>-<local time>``; ``agent`` and ``seed`` go into the
+    metadata (every episode's own seed is in its start event).
+    """
+    folder = Path(directory)
+    base = run_name or default_run_name(env)
+    path = folder / f"{base}.mcap"
+    counter = 1
+    while path.exists() or path.with_name(path.name + ".part").exists():
+        path = folder / f"{base}-{counter}.mcap"
+        counter += 1
+    return RecordMcap(env, path, agent=agent, seed=seed)

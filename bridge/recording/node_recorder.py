@@ -1,0 +1,220 @@
+"""``fmu-bridge record --node``: a running node's topics into an MCAP file, as ``ros2 bag record``.
+
+The recorder subscribes to ``<prefix>/<node>/outputs`` and ``/actions``, decodes the frames
+(``bridge.net.protocol``) and writes them as JointState messages named from the node's info reply
+(``/outputs``: ``output_names``, ``/actions``: ``input_names``), on the recording clock of
+:mod:`bridge.recording.meta`: an OUTPUTS frame at its simulation time, an ACTION frame for
+step ``k`` at ``t_k-1`` (when it takes effect), each episode shifted to start after the last.
+Episode numbers come from the frames; ERROR and REJECT frames become ``/events`` entries.
+The node's reset reply goes only to the client that asked, so step 0 is not on the wire.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from bridge.errors import BridgeError, TransportError
+from bridge.net import protocol as proto
+from bridge.recording import cdr, meta
+from bridge.recording.writer import McapWriter
+
+_log = logging.getLogger(__name__)
+TOPICS = ("outputs", "actions")
+
+
+def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, Any]:
+    """The node's info reply, retried until ``timeout_s`` (routes may still be forming)."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        remaining = deadline - time.monotonic()
+        for reply in session.get(keys.info, timeout=max(0.05, min(remaining, 1.0))):
+            if reply.ok is not None:
+                return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {keys.node!r}")
+        if remaining <= 0:
+            raise TransportError(
+                f"no FMU node named {keys.node!r} answers on {keys.info} within {timeout_s:g} s; "
+                "check the name (`fmu-bridge nodes` lists the live ones), --prefix and the Zenoh endpoints"
+            )
+        time.sleep(0.1)
+
+
+@dataclass
+class _Episode:
+    offset: int  # recording clock - simulation time
+    last_log: int
+    last_step: int = 0
+
+
+@dataclass
+class RecordStats:
+    frames: dict[str, int] = field(default_factory=dict)
+    malformed: int = 0
+    episodes: int = 0
+
+
+class NodeRecorder:
+    """Records one node's frames until ``stop()`` or ``close()``; a context manager."""
+
+    def __init__(
+        self,
+        session: Any,
+        node: str,
+        path: str | Path,
+        *,
+        prefix: str = proto.DEFAULT_PREFIX,
+        topics: tuple[str, ...] = TOPICS,
+        timeout_s: float = 5.0,
+        overwrite: bool = False,
+    ) -> None:
+        unknown = [t for t in topics if t not in TOPICS]
+        if unknown or not topics:
+            raise BridgeError(f"--topics {list(topics)}: choose from {list(TOPICS)} (comma-separated)")
+        self.keys = proto.Keys(prefix, node)
+        self.description = info = query_info(session, self.keys, timeout_s)
+        self._start_ns = round(float(info["start_time_s"]) * 1e9)
+        self._sampling_ns = round(float(info["sampling_time_s"]) * 1e9)
+        names = {meta.OUTPUTS: list(info["output_names"]), meta.ACTIONS: list(info["input_names"])}
+        names = {topic: n for topic, n in names.items() if topic.strip("/") in topics}
+        self._layouts = {topic: cdr.JointStateLayout.of(n) for topic, n in names.items()}
+        self.writer = McapWriter(path, overwrite=overwrite)
+        self.channels = meta.open_channels(self.writer, [*names, meta.EVENTS], names)
+        meta.write_run_metadata(self.writer, self._run_info())
+        self.stats = RecordStats()
+        self._episodes: dict[int, _Episode] = {}
+        self._next_start = 0
+        self._frames: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+        self._stop = threading.Event()
+        self._declared = [
+            session.declare_subscriber(getattr(self.keys, t), self._callback(t)) for t in topics
+        ]
+        token = f"{self.keys.base}/recorders/{uuid.uuid4().hex[:8]}"
+        self._declared.append(session.liveliness().declare_token(token))
+
+    def _run_info(self) -> dict[str, Any]:
+        info = self.description
+        return {
+            "env": "node recording",
+            "node": self.keys.node,
+            "prefix": self.keys.prefix,
+            "fmu_sha256": info.get("fmu_sha256", ""),
+            "step_size_s": info.get("step_size_s"),
+            "sampling_time_s": info.get("sampling_time_s"),
+            "start_time_s": info.get("start_time_s"),
+            "node_mode": info.get("mode", ""),
+            "experiment": info.get("experiment", ""),
+            "version": info.get("version", ""),
+            "node_info": info,
+        }
+
+    def _callback(self, topic: str) -> Any:
+        put = self._frames.put
+
+        def on_sample(sample: Any) -> None:
+            put((topic, sample.payload.to_bytes()))
+
+        return on_sample
+
+    # -- recording -----------------------------------------------------------------------------------
+    def run(self, duration_s: float | None = None) -> RecordStats:
+        """Record until ``stop()`` is called or ``duration_s`` (wall clock) has passed."""
+        deadline = time.monotonic() + duration_s if duration_s is not None else None
+        while not self._stop.is_set():
+            if deadline is not None and time.monotonic() >= deadline:
+                break
+            try:
+                topic, payload = self._frames.get(timeout=0.1)
+            except queue.Empty:
+                continue
+            self.handle(topic, payload)
+        return self.stats
+
+    def stop(self) -> None:
+        """Make ``run()`` return (safe from signal handlers and other threads)."""
+        self._stop.set()
+
+    def handle(self, topic: str, payload: bytes) -> None:
+        """Decode one frame and write it."""
+        try:
+            frame = proto.decode(payload)
+        except TransportError as exc:
+            self.stats.malformed += 1
+            _log.debug("dropped a malformed frame on %s: %s", topic, exc)
+            return
+        self.stats.frames[topic] = self.stats.frames.get(topic, 0) + 1
+        episode = self._episode(frame.episode)
+        if frame.kind in (proto.ERROR, proto.REJECT):
+            kind = "fmu_error" if frame.kind == proto.ERROR else "reject"
+            event = {"event": kind, "episode": frame.episode, "step": frame.step, "message": frame.message}
+            self._event(event, episode.last_log)
+            return
+        if frame.kind == proto.ACTION:
+            stamp = self._start_ns + max(frame.step - 1, 0) * self._sampling_ns
+            self._write(meta.ACTIONS, stamp, episode, frame)
+        elif frame.kind == proto.OUTPUTS:
+            episode.last_step = max(episode.last_step, frame.step)
+            self._write(meta.OUTPUTS, frame.sim_time_ns, episode, frame)
+
+    def _write(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> None:
+        layout = self._layouts[topic]
+        if frame.values.size != len(layout.names):
+            self.stats.malformed += 1
+            return
+        log = max(stamp_ns + episode.offset, 0)
+        episode.last_log = max(episode.last_log, log)
+        self.writer.add_message(self.channels[topic], log, layout.pack(stamp_ns, frame.values.tolist()))
+
+    def _episode(self, number: int) -> _Episode:
+        found = self._episodes.get(number)
+        if found is not None:
+            return found
+        if self._episodes:
+            self._end_all()
+        start = self._next_start
+        self._episodes[number] = found = _Episode(offset=start - self._start_ns, last_log=start)
+        self.stats.episodes += 1
+        self._event({"event": "episode_start", "episode": number, "time_s": self._start_ns / 1e9}, start)
+        return found
+
+    def _end_all(self) -> None:
+        """End the open episode (a new one began, or the recording stops)."""
+        number, episode = max(self._episodes.items(), key=lambda item: item[1].last_log)
+        event = {"event": "episode_end", "episode": number, "steps": episode.last_step, "reason": None}
+        self._event(event, episode.last_log)
+        self._next_start = max(e.last_log for e in self._episodes.values()) + self._sampling_ns
+        self.writer.flush()
+
+    def _event(self, event: dict[str, Any], log: int) -> None:
+        self.writer.add_message(self.channels[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
+
+    def close(self) -> Path:
+        """Stop listening, write what arrived, finish the file; returns its path."""
+        self.stop()
+        for entity in reversed(self._declared):
+            try:
+                entity.undeclare()
+            except Exception:
+                _log.debug("undeclare failed", exc_info=True)
+        self._declared = []
+        if self.writer.closed:
+            return self.writer.path
+        while True:
+            try:
+                self.handle(*self._frames.get_nowait())
+            except queue.Empty:
+                break
+        if self._episodes:
+            self._end_all()
+        return self.writer.close()
+
+    def __enter__(self) -> NodeRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

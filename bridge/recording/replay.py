@@ -1,0 +1,258 @@
+"""Replay a recording in Rerun: a ``.rrd`` file (``save``) or a spawned viewer.
+
+The only module that imports ``rerun`` (the ``viz`` extra). The Rerun recording holds:
+
+- one time series per signal, grouped by stream (``/observations/*``, ``/outputs/*``,
+  ``/actions/*`` beside ``/agent_action/*``, ``/reward``), in fixed colours;
+- the scenario of each episode (name, seed, drawn values) as a Markdown document at the
+  episode's start, the run's metadata as a static document, and episode starts and ends
+  as text log entries;
+- the cart-pole drawn in 2D when the outputs include ``x`` and ``theta``;
+- timelines ``time`` (the recording clock: episodes back to back), ``sim_time`` and
+  ``step`` (within the episode), and one ``episode_N`` timeline per episode (up to
+  ``MAX_EPISODE_TIMELINES``): choosing it in the time panel shows only that episode.
+
+Rerun reads the MCAP file itself too (``rerun file.mcap``); this adds the structure.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import yaml
+
+from bridge.errors import BridgeError, DependencyMissing
+from bridge.recording import meta
+from bridge.recording.export import episode_of, steps_of
+from bridge.recording.reader import Recording, read_recording
+
+_log = logging.getLogger(__name__)
+MAX_EPISODE_TIMELINES = 100
+GROUPS = (meta.OBSERVATIONS, meta.OUTPUTS, meta.ACTIONS, meta.AGENT_ACTION, meta.REWARD)
+PALETTE = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (188, 189, 34),
+    (23, 190, 207),
+]
+CART_RGB, POLE_RGB, TRACK_RGB = (40, 70, 160), (220, 90, 30), (128, 128, 128)
+
+
+def _rerun() -> Any:
+    try:
+        import rerun
+    except ImportError as exc:
+        raise DependencyMissing("rerun-sdk", "replay in Rerun", 'pip install "fmu-bridge[viz]"') from exc
+    return rerun
+
+
+def series_colour(group: str, index: int) -> tuple[int, int, int]:
+    """The colour of signal ``index`` of a stream (streams start at different palette places)."""
+    shift = {meta.OBSERVATIONS: 0, meta.OUTPUTS: 3, meta.ACTIONS: 6, meta.AGENT_ACTION: 7, meta.REWARD: 2}
+    return PALETTE[(shift.get(group, 0) + index) % len(PALETTE)]
+
+
+def replay(
+    path: str | Path,
+    *,
+    save: str | Path | None = None,
+    episode: int | None = None,
+    spawn: bool = True,
+) -> Path | None:
+    """Build a Rerun recording of ``path``; write it to ``save`` or show it in a spawned viewer.
+
+    Args:
+        path: the MCAP recording (``.mcap``, or ``.mcap.part`` up to its last chunk).
+        save: write a ``.rrd`` file here instead of spawning the viewer.
+        episode: replay only this episode (its number in the recording).
+
+    Returns the ``.rrd`` path when saved.
+    """
+    rr = _rerun()
+    import rerun.blueprint as rrb
+
+    recording = read_recording(path)
+    known = [e.index for e in recording.episodes]
+    if episode is not None and episode not in known:
+        raise BridgeError(f"--episode {episode}: {recording.path} has episodes {known or 'none'}")
+    stream = rr.RecordingStream("fmu_bridge", recording_id=f"{Path(path).name}:{episode}")
+    blueprint = _blueprint(rrb, recording)
+    if save is not None:
+        target = Path(save)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        stream.save(str(target), default_blueprint=blueprint)
+    elif spawn:
+        try:
+            stream.spawn(default_blueprint=blueprint)
+        except Exception as exc:  # the viewer binary is missing or cannot start here
+            raise BridgeError(f"cannot start the Rerun viewer ({exc}); use --save FILE.rrd instead") from exc
+    _log_recording(rr, stream, recording, episode)
+    stream.flush()
+    stream.disconnect()  # writes the .rrd footer now, not whenever the stream is collected
+    return Path(save) if save is not None else None
+
+
+def _blueprint(rrb: Any, recording: Recording) -> Any:
+    plots = [
+        rrb.TimeSeriesView(origin=meta.OBSERVATIONS, name="observations"),
+        rrb.TimeSeriesView(origin=meta.OUTPUTS, name="outputs (unscaled)"),
+        rrb.TimeSeriesView(
+            origin="/", contents=[f"+ {meta.ACTIONS}/**", f"+ {meta.AGENT_ACTION}/**"], name="actions"
+        ),
+        rrb.TimeSeriesView(origin=meta.REWARD, name="reward"),
+    ]
+    top = [
+        rrb.TextDocumentView(origin="/scenario", name="scenario"),
+        rrb.TextLogView(origin="/events", name="episodes"),
+    ]
+    if _cartpole_columns(recording) is not None:
+        bounds = rrb.VisualBounds2D(x_range=[-2.8, 2.8], y_range=[-1.4, 0.4])
+        top.insert(0, rrb.Spatial2DView(origin="/cartpole", name="cart-pole", visual_bounds=bounds))
+    return rrb.Blueprint(
+        rrb.Vertical(rrb.Grid(*plots, grid_columns=2), rrb.Horizontal(*top), row_shares=[3, 2]),
+        rrb.TimePanel(state="collapsed", timeline="time", play_state="following"),
+        collapse_panels=True,
+    )
+
+
+def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
+    stream.log("/about", rr.TextDocument(_about(recording), media_type=rr.MediaType.MARKDOWN), static=True)
+    for group in GROUPS:
+        series = recording.series.get(group)
+        if series is None or not len(series):
+            continue
+        names = series.names if series.values.ndim == 2 else ["reward"]
+        values = series.values if series.values.ndim == 2 else series.values[:, None]
+        rows = _rows(recording, series, episode)
+        for i, name in enumerate(names):
+            entity = f"{group}/{name}" if group != meta.REWARD else group
+            style = rr.SeriesLines(colors=[series_colour(group, i)], names=name, widths=2.0)
+            stream.log(entity, style, static=True)
+            _send(rr, stream, entity, rows, lambda r, i=i, v=values: rr.Scalars.columns(scalars=v[r, i]))
+    _log_episodes(rr, stream, recording, episode)
+    _log_cartpole(rr, stream, recording, episode)
+
+
+def _rows(recording: Recording, series: Any, episode: int | None) -> dict[str, Any]:
+    """Row selection and time columns of a stream, split by episode for the episode timelines."""
+    episodes = episode_of(recording, series.log_ns)
+    keep = np.ones(len(series), dtype=bool) if episode is None else episodes == episode
+    return {
+        "keep": keep,
+        "episode": episodes,
+        "time": series.log_ns.astype("timedelta64[ns]"),  # exact: no float seconds in between
+        "sim_time": series.stamp_ns.astype("timedelta64[ns]") if series.stamped else None,
+        "step": steps_of(recording, series),
+        "per_episode": len(recording.episodes) <= MAX_EPISODE_TIMELINES,
+    }
+
+
+def _send(rr: Any, stream: Any, entity: str, rows: dict[str, Any], columns: Any) -> None:
+    """``send_columns`` once per episode (each with its own episode timeline), or once for all."""
+    parts: list[tuple[str | None, npt.NDArray[np.bool_]]] = []
+    if rows["per_episode"]:
+        for number in np.unique(rows["episode"][rows["keep"]]):
+            label = f"episode_{number}" if number >= 0 else None
+            parts.append((label, rows["keep"] & (rows["episode"] == number)))
+    else:
+        parts.append((None, rows["keep"]))
+    for label, mask in parts:
+        if not mask.any():
+            continue
+        indexes = [
+            rr.TimeColumn("time", duration=rows["time"][mask]),
+            rr.TimeColumn("step", sequence=rows["step"][mask]),
+        ]
+        if rows["sim_time"] is not None:
+            indexes.append(rr.TimeColumn("sim_time", duration=rows["sim_time"][mask]))
+            if label is not None:
+                indexes.append(rr.TimeColumn(label, duration=rows["sim_time"][mask]))
+        stream.send_columns(entity, indexes=indexes, columns=columns(mask))
+
+
+def _log_episodes(rr: Any, stream: Any, recording: Recording, only: int | None) -> None:
+    for ep in recording.episodes:
+        if only is not None and ep.index != only:
+            continue
+        stream.set_time("time", duration=ep.start_ns / 1e9)
+        lines = [f"## Episode {ep.index}", f"- scenario: `{ep.scenario}`", f"- seed: {ep.seed}"]
+        lines += [f"- {name} = {value:.6g}" for name, value in ep.drawn.items()]
+        stream.log("/scenario", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
+        stream.log(
+            "/events", rr.TextLog(f"episode {ep.index} starts: scenario {ep.scenario}, seed {ep.seed}")
+        )
+        if ep.end_ns is not None:
+            stream.set_time("time", duration=ep.end_ns / 1e9)
+            text = f"episode {ep.index} ends after {ep.steps} steps: return {ep.episode_return}, {ep.reason}"
+            stream.log(
+                "/events", rr.TextLog(text, level="WARN" if ep.reason not in (None, "time") else "INFO")
+            )
+    stream.reset_time()
+
+
+def _about(recording: Recording) -> str:
+    run = recording.metadata.get("fmu_bridge", {})
+    lines = [f"# {run.get('experiment', recording.path.name)}", f"- file: `{recording.path}`"]
+    for key in ("version", "agent", "env", "node", "fmu_sha256", "sampling_time_s"):
+        if run.get(key):
+            lines.append(f"- {key}: `{run[key]}`")
+    if not recording.complete:
+        lines.append("- **unfinished recording**: read up to its last complete chunk")
+    return "\n".join(lines)
+
+
+def _cartpole_columns(recording: Recording) -> tuple[int, int] | None:
+    outputs = recording.series.get(meta.OUTPUTS)
+    if outputs is None or "x" not in outputs.names or "theta" not in outputs.names:
+        return None
+    return outputs.names.index("x"), outputs.names.index("theta")
+
+
+def _pole_lengths_m(recording: Recording, log_ns: npt.NDArray[np.int64]) -> npt.NDArray[np.float64]:
+    """The drawn pole per row: twice the model's ``length`` (pivot to centre of mass), from the
+    episode's drawn values, else the experiment's parameters, else 0.5 m."""
+    config = recording.metadata.get("fmu_bridge", {}).get("config")
+    try:
+        parameters = (yaml.safe_load(config) or {}).get("model", {}).get("parameters", {}) if config else {}
+        nominal = float(parameters.get("length", 0.5))
+    except (yaml.YAMLError, TypeError, ValueError, AttributeError):
+        nominal = 0.5
+    per_episode = {e.index: float(e.drawn.get("length", nominal)) for e in recording.episodes}
+    episodes = episode_of(recording, log_ns)
+    return 2.0 * np.array([per_episode.get(int(e), nominal) for e in episodes], dtype=np.float64)
+
+
+def _log_cartpole(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
+    found = _cartpole_columns(recording)
+    if found is None:
+        return
+    outputs = recording.series[meta.OUTPUTS]
+    x, theta = outputs.values[:, found[0]], outputs.values[:, found[1]]
+    cart_w, cart_h, pole = 0.4, 0.2, _pole_lengths_m(recording, outputs.log_ns)
+    stream.log(
+        "/cartpole/track",
+        rr.LineStrips2D([[[-2.4, 0.0], [2.4, 0.0]]], colors=[TRACK_RGB], radii=0.01),
+        static=True,
+    )
+    # Static parts only for what never changes: static data would hide the logged positions.
+    cart = rr.Boxes2D.from_fields(half_sizes=[[cart_w / 2, cart_h / 2]], colors=[CART_RGB])
+    stream.log("/cartpole/cart", cart, static=True)
+    stream.log("/cartpole/pole", rr.LineStrips2D.from_fields(colors=[POLE_RGB], radii=0.025), static=True)
+    rows = _rows(recording, outputs, episode)
+    # The 2D view's y axis points down: heights are negative.
+    tip_x, tip_y = x + pole * np.sin(theta), -(cart_h + pole * np.cos(theta))
+    strips = np.stack(
+        [np.column_stack([x, np.full_like(x, -cart_h)]), np.column_stack([tip_x, tip_y])], axis=1
+    )
+    centres = np.column_stack([x, np.full_like(x, -cart_h / 2)])
+    _send(rr, stream, "/cartpole/cart", rows, lambda m: rr.Boxes2D.columns(centers=centres[m]))
+    _send(rr, stream, "/cartpole/pole", rows, lambda m: rr.LineStrips2D.columns(strips=strips[m]))

@@ -1,0 +1,325 @@
+"""``Task``: everything an experiment adds on top of a model, independent of where the model runs.
+
+Action mapping, observation processing (selection, scaling, history, noise), reward,
+termination and per-episode scenarios run identically in-process (``FmuEnv``), against a
+remote node (``RemoteFmuEnv``) and inside a deployed agent node. The model side only sees
+``input_names`` written and ``output_names`` read once per sample.
+
+Time: sample ``j`` spans FMU steps ``j*n .. (j+1)*n``; the action of sample ``j`` (and the
+scenario's input profiles at ``t_j``) are held over it; the observation and reward of that
+step use outputs and references at ``t_{j+1}``.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import numpy.typing as npt
+
+from bridge.errors import BridgeError, ConfigError
+from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
+from bridge.experiment.validate import Timing, action_bounds
+from bridge.fmu import Variable
+from bridge.task.rewards import build_reward
+from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
+
+FloatArray = npt.NDArray[np.float64]
+
+
+def load_callable(path: str, key: str) -> Callable[..., Any]:
+    """Import ``module:function`` named at config ``key``."""
+    module_name, _, attr = path.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise ConfigError(
+            f"{key}: cannot import module {module_name!r} ({exc}); is it on PYTHONPATH?"
+        ) from exc
+    fn = getattr(module, attr, None)
+    if not callable(fn):
+        raise ConfigError(f"{key}: {module_name} has no callable {attr!r}")
+    return fn  # type: ignore[no-any-return]
+
+
+def _noise_table(
+    entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int
+) -> list[list[float]]:
+    if not entries:
+        return []
+    return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
+
+
+class Task:
+    """The task side of an experiment (one instance per env; holds per-episode state)."""
+
+    def __init__(self, experiment: Experiment, variables: Mapping[str, Variable], timing: Timing) -> None:
+        self.experiment = exp = experiment
+        self.timing = timing
+        self.episode_duration_s = exp.model.episode_duration
+        self._variables = variables
+        self.action_inputs = tuple(exp.actions.inputs)
+        self.input_names = self.action_inputs + tuple(scenario_inputs(exp))
+        self.reference_names, self.output_names = self._signal_sets(exp, variables)
+        self.signal_names = self.output_names + self.input_names + self.reference_names
+        self._index = {name: i for i, name in enumerate(self.signal_names)}
+        self._signals: list[float] = [0.0] * len(self.signal_names)
+        self._has_refs = False
+        self.sampler = ScenarioSampler(exp, self.sample_times)
+        self._build_actions()
+        self._build_observations()
+        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs)
+        self._build_termination()
+        self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
+        self.episode: EpisodeSpec | None = None
+        self._refs = np.zeros((1, len(self.reference_names)))
+        self._profile_inputs = np.zeros((1, len(self.input_names) - len(self.action_inputs)))
+
+    # -- layout ------------------------------------------------------------------------------------
+    @staticmethod
+    def _signal_sets(
+        exp: Experiment, variables: Mapping[str, Variable]
+    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
+        from bridge.task.rewards import reward_signal_names
+
+        refs_known = known_references(exp)
+        obs = exp.observations
+        wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
+        wanted += reward_signal_names(exp.reward, set(variables) | refs_known)
+        wanted += list(exp.termination.bounds)
+        inputs = set(exp.actions.inputs) | set(scenario_inputs(exp))
+        outputs: list[str] = []
+        references: list[str] = []
+        for name in wanted:
+            if name in refs_known and name not in variables:
+                if name not in references:
+                    references.append(name)
+            elif name not in inputs and name not in outputs:
+                outputs.append(name)
+        return tuple(references), tuple(outputs)
+
+    def sample_times(self, duration_s: float | None = None) -> FloatArray:
+        """Times t_j of the samples of an episode (j = 0..N)."""
+        n = round((duration_s or self.episode_duration_s) / self.timing.sampling_time_s + 1e-9)
+        times: FloatArray = (
+            self.timing.start_time_s + np.arange(n + 1, dtype=np.float64) * self.timing.sampling_time_s
+        )
+        return times
+
+    # -- actions -----------------------------------------------------------------------------------
+    def _build_actions(self) -> None:
+        actions = self.experiment.actions
+        n = len(self.action_inputs)
+        self._kind = actions.type
+        if actions.type == "continuous":
+            bounds = [action_bounds(self.experiment, self._variables[name]) for name in self.action_inputs]
+            low = np.array([b[0] for b in bounds], dtype=np.float64)
+            high = np.array([b[1] for b in bounds], dtype=np.float64)
+            self._a_centre = ((high + low) / 2).tolist()
+            self._a_half_list = ((high - low) / 2).tolist()
+            self.action_space: gym.Space[Any] = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)
+        elif actions.type == "discrete":
+            table = actions.table or [[v] for v in actions.levels[self.action_inputs[0]]]
+            self._table_rows = [[float(v) for v in row] for row in table]
+            self.action_space = gym.spaces.Discrete(len(table))
+        else:
+            self._levels = [np.array(actions.levels[name], dtype=np.float64) for name in self.action_inputs]
+            self.action_space = gym.spaces.MultiDiscrete([len(levels) for levels in self._levels])
+        noise = self.experiment.noise.actions
+        self._action_noise = [(self.action_inputs.index(n), d) for n, d in noise.items()]
+        self._action_noise_table: list[list[float]] = []
+        self._inputs = [0.0] * len(self.input_names)
+        self._previous_inputs = [0.0] * len(self.input_names)
+        self._n_profiles = len(self.input_names) - n
+
+    def action_to_inputs(self, action: Any, sample: int, rng: np.random.Generator) -> list[float]:
+        """FMU input values (physical units) for sample ``sample``: action, actuator noise, profiles.
+
+        Plain-Python floats on purpose: for a handful of values they beat numpy's per-call cost.
+        """
+        u = self._inputs
+        self._previous_inputs[:] = u
+        n = len(self.action_inputs)
+        if self._kind == "continuous":
+            values = action.tolist() if hasattr(action, "tolist") else list(action)
+            if not isinstance(values, list) or len(values) != n:
+                raise self._bad_action(action, sample)
+            centre, half = self._a_centre, self._a_half_list
+            for i, v in enumerate(values):
+                if v - v != 0.0:
+                    raise self._bad_action(action, sample)
+                u[i] = centre[i] + half[i] * (-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
+        elif self._kind == "discrete":
+            u[:n] = self._discrete_row(action, sample)
+        else:
+            indices = np.asarray(action).reshape(-1)
+            if indices.shape[0] != n or not all(
+                0 <= int(i) < len(lv) for i, lv in zip(indices, self._levels)
+            ):
+                raise self._bad_action(action, sample)
+            u[:n] = [float(lv[int(i)]) for i, lv in zip(indices, self._levels)]
+        if self._action_noise:
+            row = self._action_noise_table[min(sample, len(self._action_noise_table) - 1)]
+            for k, (i, _) in enumerate(self._action_noise):
+                u[i] += row[k]
+        if self._n_profiles:
+            u[n:] = self._profile_inputs[min(sample, len(self._profile_inputs) - 1)].tolist()
+        return u
+
+    def action_for_inputs(self, values: Any) -> Any:
+        """The agent action whose physical input values are nearest ``values`` (one per action input).
+
+        The inverse of the action mapping: continuous values are scaled into [-1, 1] (clipped),
+        discrete ones pick the nearest level or table row. Baselines such as PID controllers
+        compute physical inputs and use this to act through the same action space as agents.
+        """
+        u = np.asarray(values, dtype=np.float64).reshape(-1)
+        if self._kind == "continuous":
+            centre, half = np.asarray(self._a_centre), np.asarray(self._a_half_list)
+            return np.clip((u - centre) / half, -1.0, 1.0).astype(np.float32)
+        if self._kind == "discrete":
+            rows = np.asarray(self._table_rows)
+            return int(np.argmin(np.abs(rows - u).sum(axis=1)))
+        return np.array([int(np.argmin(np.abs(levels - v))) for levels, v in zip(self._levels, u)])
+
+    def _discrete_row(self, action: Any, sample: int) -> list[float]:
+        try:
+            index = int(action)
+        except (TypeError, ValueError):
+            raise self._bad_action(action, sample) from None
+        if index != action or not 0 <= index < len(self._table_rows):
+            raise self._bad_action(action, sample)
+        return self._table_rows[index]
+
+    def _bad_output(self, outputs: list[float], sample: int) -> BridgeError:
+        bad = [f"{n}={v}" for n, v in zip(self.output_names, outputs) if v - v != 0.0]
+        return BridgeError(
+            f"the FMU returned non-finite outputs {', '.join(bad)} at sample {sample}: the model diverged "
+            f"(check its parameters, the action bounds, or the step size {self.timing.step_size_s:g} s)"
+        )
+
+    def _bad_action(self, action: Any, sample: int) -> BridgeError:
+        return BridgeError(
+            f"invalid action {action!r} at sample {sample}: expected an element of {self.action_space} "
+            f"(for {list(self.action_inputs)}); a NaN usually means the policy diverged"
+        )
+
+    # -- observations ------------------------------------------------------------------------------
+    def _build_observations(self) -> None:
+        from bridge.task.observe import ObservationBuilder
+
+        self.observer = ObservationBuilder(self, self.experiment.observations, self._variables)
+        self.observation_space = self.observer.space
+
+    # -- termination -------------------------------------------------------------------------------
+    def _build_termination(self) -> None:
+        """``termination_reason(signals)`` as one generated conditional over the bounds.
+
+        Built from indices and the validated float bounds only (a code template, no user text).
+        """
+        checks = []
+        for name, (lo, hi) in self.experiment.termination.bounds.items():
+            i = self._index[name]
+            # "not (lo <= x <= hi)" so that a NaN signal also counts as outside its bounds
+            if lo is not None and hi is not None:
+                checks.append((f"not ({float(lo)!r} <= s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
+            elif lo is not None:
+                checks.append((f"not (s[{i}] >= {float(lo)!r})", f"bounds:{name}"))
+            elif hi is not None:
+                checks.append((f"not (s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
+        body = "None"
+        for condition, reason in reversed(checks):
+            body = f"({reason!r} if {condition} else {body})"
+        self.termination_reason: Callable[[list[float]], str | None] = eval(
+            f"lambda s: {body}", {"__builtins__": {}}
+        )
+
+    # -- episode life cycle --------------------------------------------------------------------------
+    def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
+        """Choose and draw the next episode (scenario, parameters, profiles) from ``rng``."""
+        spec = self.sampler.episode(rng, scenario)
+        if self._episode_hook is not None:
+            spec = self._episode_hook(spec, rng) or spec
+        self.episode = spec
+        n = spec.n_samples
+        self._refs = (
+            np.column_stack([spec.references[r] for r in self.reference_names])
+            if self.reference_names
+            else np.zeros((n + 1, 0))
+        )
+        profile_names = self.input_names[len(self.action_inputs) :]
+        self._profile_inputs = (
+            np.column_stack(
+                [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
+            )
+            if profile_names
+            else np.zeros((n + 1, 0))
+        )
+        self._has_refs = bool(self.reference_names)
+        self._inputs[len(self.action_inputs) :] = self._profile_inputs[0].tolist() if profile_names else []
+        self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        self._previous_inputs[:] = self._inputs
+        # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
+        self._action_noise_table = _noise_table(self._action_noise, rng, n + 1)
+        self.observer.new_episode(rng, n + 1)
+        return spec
+
+    def _start(self, name: str) -> float:
+        var = self._variables[name]
+        if self.episode is not None and name in self.episode.values:
+            return float(self.episode.values[name])
+        return float(var.start) if isinstance(var.start, int | float) else 0.0
+
+    @property
+    def applied_inputs(self) -> list[float]:
+        """The FMU input values of the current sample (physical units), live: read, do not modify.
+
+        Filled by ``action_to_inputs`` (actions, actuator noise, scenario profiles); recorders and
+        evaluation read it after each step without a copy."""
+        return self._inputs
+
+    @property
+    def n_samples(self) -> int:
+        return self.episode.n_samples if self.episode is not None else 0
+
+    def initial_inputs(self) -> list[float]:
+        """Input values at t_0 before any action (start values, profiles at t_0)."""
+        return list(self._inputs)
+
+    def fill_signals(self, outputs: list[float], sample: int) -> list[float]:
+        """The signal vector [outputs | inputs | references at t_sample] as a list."""
+        for value in outputs:
+            if value - value != 0.0:  # NaN or infinity from the FMU: never pass it on silently
+                raise self._bad_output(outputs, sample)
+        s = outputs + self._inputs
+        if self._has_refs:
+            s += self._refs[min(sample, len(self._refs) - 1)].tolist()
+        self._signals = s
+        return s
+
+    def first_observation(self, outputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        signals = self.fill_signals(outputs, 0)
+        self.reward.reset()
+        return self.observer.reset(signals, self._inputs, rng)
+
+    def step_result(
+        self, outputs: list[float], sample: int, fmu_terminated: bool, rng: np.random.Generator
+    ) -> tuple[npt.NDArray[np.float32], float, bool, bool, str | None]:
+        """(observation, reward, terminated, truncated, reason) after the step into sample ``sample``."""
+        signals = self.fill_signals(outputs, sample)
+        reason = self.termination_reason(signals)
+        if fmu_terminated and reason is None:
+            reason = "fmu" if self.experiment.termination.on_fmu_terminate else None
+        terminated = reason is not None
+        truncated = not terminated and (sample >= self.n_samples or fmu_terminated)
+        if truncated:
+            reason = "fmu-truncated" if fmu_terminated else "time"
+        reward = self.reward(signals, self._inputs, self._previous_inputs, terminated)
+        obs = self.observer.observe(signals, self._inputs, rng)
+        return obs, reward, terminated, truncated, reason
+
+    def signal_dict(self) -> dict[str, float]:
+        return dict(zip(self.signal_names, self._signals))

@@ -1,0 +1,125 @@
+"""Rewards from config: weighted built-in terms, a safe arithmetic expression, a Python callable.
+
+Terms are compiled once into small closures over the task's signal vector, so a reward costs
+a few microseconds per step. Penalty norms are negative (``abs``: -|x|, ``squared``: -x^2);
+``linear`` is +x; every term is multiplied by its weight.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.errors import BridgeError
+from bridge.experiment.config import RewardSection, RewardTerm
+
+FloatArray = npt.NDArray[np.float64]
+Term = Callable[[list[float], list[float], list[float]], float]
+
+
+def reward_signal_names(section: RewardSection, known: set[str]) -> list[str]:
+    """Every signal the reward reads (so the task reads it from the FMU)."""
+    names: list[str] = []
+    for term in section.terms:
+        if term.tracking is not None:
+            names += [term.tracking.output, term.tracking.reference]
+        if term.signal is not None:
+            names.append(term.signal.name)
+    if section.expression:
+        from bridge.task.expr import compile_expression
+
+        names += list(
+            compile_expression(section.expression, sorted(known), where="reward.expression").names_used
+        )
+    return names
+
+
+def _norm(kind: str, weight: float, scale: float, x: str) -> str:
+    if kind == "abs":
+        return f"-{weight!r} * abs({x}) / {scale!r}"
+    if kind == "squared":
+        return f"-{weight!r} * (({x}) / {scale!r}) ** 2"
+    return f"{weight!r} * ({x}) / {scale!r}"
+
+
+def _term_source(term: RewardTerm, index: dict[str, int], action_inputs: Sequence[str]) -> str:
+    """A Python expression over ``s`` (signals), ``u`` (inputs), ``p`` (previous inputs)."""
+    if term.alive is not None:
+        return repr(float(term.alive))
+    if term.tracking is not None:
+        t = term.tracking
+        return _norm(t.norm, t.weight, t.scale, f"s[{index[t.output]}] - s[{index[t.reference]}]")
+    if term.effort is not None:
+        e = term.effort
+        return _norm(e.norm, e.weight, e.scale, f"u[{action_inputs.index(e.name)}]")
+    if term.rate is not None:
+        r, i = term.rate, action_inputs.index(term.rate.name)
+        return _norm(r.norm, r.weight, r.scale, f"u[{i}] - p[{i}]")
+    assert term.signal is not None  # RewardTerm's validator admits exactly these kinds
+    g = term.signal
+    return _norm(g.norm, g.weight, g.scale, f"s[{index[g.name]}]")
+
+
+def compile_terms(terms: Sequence[RewardTerm], index: dict[str, int], action_inputs: Sequence[str]) -> Term:
+    """The weighted sum of built-in terms as one generated function.
+
+    The source is built from indices and floats taken from the validated config (names never
+    enter it), so this is a code template, not evaluation of user text; one expression costs a
+    fraction of a chain of closures.
+    """
+    body = " + ".join(f"({_term_source(t, index, action_inputs)})" for t in terms) or "0.0"
+    return eval(f"lambda s, u, p: {body}", {"__builtins__": {}, "abs": abs})  # type: ignore[no-any-return]
+
+
+class Reward:
+    """``reward(signals, inputs, previous_inputs, terminated) -> float``."""
+
+    def __init__(
+        self,
+        terms: Term | None,
+        expression: Any,
+        user: Callable[..., Any] | None,
+        names: Sequence[str],
+        penalty: float,
+    ) -> None:
+        self._terms = terms
+        self._expression = expression
+        self._user = user
+        self._names = tuple(names)
+        self._penalty = penalty
+
+    def reset(self) -> None:
+        """Nothing is carried between episodes today; kept for stateful rewards."""
+
+    def __call__(
+        self, signals: list[float], inputs: list[float], previous: list[float], terminated: bool
+    ) -> float:
+        total = self._terms(signals, inputs, previous) if self._terms is not None else 0.0
+        if self._expression is not None:
+            total += self._expression(signals)
+        if self._user is not None:
+            value = self._user(dict(zip(self._names, signals)))
+            try:
+                total += float(value)
+            except (TypeError, ValueError) as exc:
+                raise BridgeError(f"reward.callable returned {value!r}; expected a number") from exc
+        if terminated:
+            total += self._penalty
+        return total
+
+
+def build_reward(section: RewardSection, signal_names: Sequence[str], action_inputs: Sequence[str]) -> Reward:
+    from bridge.task.core import load_callable
+
+    index = {name: i for i, name in enumerate(signal_names)}
+    terms = compile_terms(section.terms, index, action_inputs) if section.terms else None
+    expression = None
+    if section.expression:
+        from bridge.task.expr import compile_expression
+
+        expression = compile_expression(section.expression, list(signal_names), where="reward.expression")
+    user = load_callable(section.callable, "reward.callable") if section.callable else None
+    return Reward(terms, expression, user, signal_names, section.termination_penalty)

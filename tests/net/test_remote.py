@@ -1,0 +1,363 @@
+"""FMU nodes as real subprocesses over real Zenoh sessions on 127.0.0.1."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from conftest import Loopback, node_process
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import TransportError
+from bridge.experiment.config import parse_experiment
+from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
+from bridge.net.remote import RemoteFmuEnv, describe_nodes, list_nodes
+from bridge.net.vec import RemoteVecEnv
+
+pytestmark = pytest.mark.integration
+CARTPOLE = example_experiment("cartpole_continuous")
+
+
+def trajectory(env: Any, seed: int, steps: int = 40) -> np.ndarray:
+    obs, _ = env.reset(seed=seed)
+    rows = [obs]
+    for i in range(steps):
+        obs, reward, terminated, truncated, _ = env.step(np.array([0.3 * np.sin(i)], dtype=np.float32))
+        rows.append(np.append(obs, reward))
+        if terminated or truncated:
+            break
+    return np.concatenate(rows)
+
+
+def test_remote_env_equals_in_process_env_and_passes_both_checkers(loopback: Loopback) -> None:
+    with node_process(CARTPOLE, "cp", loopback):
+        remote = RemoteFmuEnv(CARTPOLE, "cp", session=loopback.session, prefix=loopback.prefix)
+        try:
+            with FmuEnv(CARTPOLE) as local:
+                for seed in (0, 5):
+                    np.testing.assert_array_equal(trajectory(remote, seed), trajectory(local, seed))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                gym_check_env(remote, skip_render_check=True)
+                sb3_check_env(remote, warn=False)
+        finally:
+            remote.close()
+
+
+def _raw_client(net: Loopback, node: str) -> tuple[Any, list[proto.Frame], threading.Event]:
+    frames: list[proto.Frame] = []
+    event = threading.Event()
+
+    def on_frame(sample: Any) -> None:
+        frames.append(proto.decode(sample.payload.to_bytes()))
+        event.set()
+
+    keys = proto.Keys(net.prefix, node)
+    sub = net.session.declare_subscriber(keys.outputs, on_frame)  # type: ignore[attr-defined]
+    return sub, frames, event
+
+
+def _send(
+    net: Loopback, node: str, payload: bytes, frames: list[proto.Frame], event: threading.Event
+) -> proto.Frame:
+    """Send a raw action frame; return the node's answer for that action's (episode, step)."""
+    sent = proto.decode(payload)
+    count = len(frames)
+    net.session.put(proto.Keys(net.prefix, node).actions, payload)  # type: ignore[attr-defined]
+    deadline = time.monotonic() + 5
+    while time.monotonic() < deadline:
+        for frame in frames[count:]:
+            if (frame.episode, frame.step) == (sent.episode, sent.step):
+                return frame
+        event.clear()
+        event.wait(0.1)
+    raise AssertionError(f"no answer to {sent}")
+
+
+def _info(net: Loopback, node: str) -> dict[str, Any]:
+    return describe_nodes(net.session, [node], prefix=net.prefix)[0]
+
+
+def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(loopback: Loopback) -> None:
+    with node_process(CARTPOLE, "cp", loopback):
+        env = RemoteFmuEnv(CARTPOLE, "cp", session=loopback.session, prefix=loopback.prefix)
+        sub, frames, event = _raw_client(loopback, "cp")
+        try:
+            env.reset(seed=0)
+            env.step(np.zeros(1, dtype=np.float32))  # now at step 1 of episode 1
+            action = [0.0]
+            dup = _send(loopback, "cp", proto.encode_values(proto.ACTION, 1, 1, 0, action), frames, event)
+            assert (dup.kind, dup.step) == (proto.OUTPUTS, 1)  # the same answer again, not a second step
+            early = _send(loopback, "cp", proto.encode_values(proto.ACTION, 1, 5, 0, action), frames, event)
+            assert early.kind == proto.REJECT and early.message.startswith("out_of_order")
+            stale = _send(loopback, "cp", proto.encode_values(proto.ACTION, 0, 2, 0, action), frames, event)
+            assert stale.kind == proto.REJECT and stale.message.startswith("stale")
+            _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
+            assert info["step"] == 2  # the node stepped exactly twice
+            counters = _info(loopback, "cp")["counters"]
+            assert counters["steps"] == 2 and counters["duplicate"] == 1
+            assert counters["rejected_out_of_order"] == 1 and counters["rejected_stale"] == 1
+        finally:
+            sub.undeclare()
+            env.close()
+
+
+def test_random_bytes_are_counted_and_the_node_keeps_serving(loopback: Loopback) -> None:
+    rng = np.random.default_rng(0)
+    with node_process(CARTPOLE, "cp", loopback):
+        keys = proto.Keys(loopback.prefix, "cp")
+        for size in [0, 1, 23, 24, 28, 36, 200] + [int(s) for s in rng.integers(0, 300, 40)]:
+            loopback.session.put(keys.actions, rng.bytes(size))  # type: ignore[attr-defined]
+        loopback.session.put(keys.actions, proto.encode_values(proto.OUTPUTS, 0, 1, 0, [1.0]))  # type: ignore[attr-defined]
+        loopback.session.put(keys.actions, b"\x01\x02" + bytes(22) + b"\xff\xff\xff\xff")  # type: ignore[attr-defined]
+        time.sleep(0.5)
+        env = RemoteFmuEnv(CARTPOLE, "cp", session=loopback.session, prefix=loopback.prefix)
+        try:
+            with FmuEnv(CARTPOLE) as local:
+                np.testing.assert_array_equal(trajectory(env, 1, 10), trajectory(local, 1, 10))
+            assert _info(loopback, "cp")["counters"]["malformed"] >= 45
+        finally:
+            env.close()
+
+
+def test_fmu_error_truncates_the_episode_and_the_node_stays_up(loopback: Loopback, tmp_path: Path) -> None:
+    experiment = tmp_path / "typed.yaml"
+    experiment.write_text(
+        "model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 5.0}\n"
+        "actions: {inputs: [real_in], low: {real_in: -1}, high: {real_in: 1}}\n"
+        "observations: {outputs: [real_out, counter]}\n"
+        "reward: {terms: [{alive: 1.0}]}\n"
+        "scenarios: {breaks: {parameters: {fail_at_step: 3}}, fine: {}}\n"
+        "schedule: {mode: fixed}\n"
+    )
+    with node_process(experiment, "typed", loopback) as process:
+        env = RemoteFmuEnv(experiment, "typed", session=loopback.session, prefix=loopback.prefix)
+        try:
+            env.reset(seed=0, options={"scenario": "breaks"})
+            results = [env.step(np.zeros(1, dtype=np.float32)) for _ in range(3)]
+            _, _, terminated, truncated, info = results[-1]
+            assert truncated and not terminated and info["reason"] == "fmu-error"
+            assert "fail_at_step reached" in info["fmu_error"]
+            _, info = env.reset(options={"scenario": "fine"})
+            for _ in range(5):
+                env.step(np.zeros(1, dtype=np.float32))
+            assert process.poll() is None
+            assert _info(loopback, "typed")["counters"]["fmu_errors"] == 1
+        finally:
+            env.close()
+
+
+def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) -> None:
+    with node_process(CARTPOLE, "victim", loopback) as process:
+        env = RemoteFmuEnv(
+            CARTPOLE, "victim", session=loopback.session, prefix=loopback.prefix, timeout_s=3.0
+        )
+        try:
+            env.reset(seed=0)
+            env.step(np.zeros(1, dtype=np.float32))
+            os.kill(process.pid, signal.SIGKILL)
+            process.wait(timeout=10)
+            start = time.monotonic()
+            with pytest.raises(TransportError, match=r"node 'victim' (died|did not answer)"):
+                for _ in range(100):
+                    env.step(np.zeros(1, dtype=np.float32))
+            assert time.monotonic() - start < 4.0
+        finally:
+            env.close()
+
+
+def test_nodes_are_listed_by_pattern_and_described(loopback: Loopback) -> None:
+    with node_process(CARTPOLE, "worker-a", loopback), node_process(CARTPOLE, "worker-b", loopback):
+        assert list_nodes(loopback.session, prefix=loopback.prefix, pattern="worker-*") == [
+            "worker-a",
+            "worker-b",
+        ]
+        info = _info(loopback, "worker-a")
+        assert info["model"]["model_name"] == "cartpole" and info["mode"] == "lockstep"
+        assert info["input_names"] == ["force"] and len(info["fmu_sha256"]) == 64
+
+
+def test_remote_vec_env_auto_resets_as_sb3_expects(loopback: Loopback) -> None:
+    balance = example_experiment("cartpole_balance")
+    with node_process(balance, "w0", loopback), node_process(balance, "w1", loopback):
+        vec = RemoteVecEnv(balance, "w*", n_envs=2, session=loopback.session, prefix=loopback.prefix)
+        try:
+            obs = vec.reset()
+            assert obs.shape == (2, 4)
+            dones_seen = 0
+            for _ in range(80):
+                obs, rewards, dones, infos = vec.step(np.array([0, 1]))
+                for done, info, row in zip(dones, infos, obs):
+                    if done:
+                        dones_seen += 1
+                        assert info["terminal_observation"].shape == (4,)
+                        assert info["TimeLimit.truncated"] is False
+                        assert abs(row[2]) < 0.06  # the next episode's first observation
+            assert dones_seen >= 4 and rewards.dtype == np.float32
+        finally:
+            vec.close()
+
+
+def test_dead_node_is_replaced_by_a_spare_and_its_episode_truncated(loopback: Loopback) -> None:
+    with (
+        node_process(CARTPOLE, "pool-0", loopback) as first,
+        node_process(CARTPOLE, "pool-1", loopback),
+        node_process(CARTPOLE, "pool-2", loopback),
+    ):
+        vec = RemoteVecEnv(
+            CARTPOLE,
+            "pool-*",
+            n_envs=2,
+            session=loopback.session,
+            prefix=loopback.prefix,
+            replace_dead=True,
+            timeout_s=3.0,
+        )
+        try:
+            vec.reset()
+            assert [env.node for env in vec.envs] == ["pool-0", "pool-1"]
+            vec.step(np.zeros((2, 1), dtype=np.float32))
+            first.send_signal(signal.SIGKILL)
+            first.wait(timeout=10)
+            time.sleep(0.3)
+            _, _, dones, infos = vec.step(np.zeros((2, 1), dtype=np.float32))
+            assert dones[0] and infos[0]["TimeLimit.truncated"]
+            assert (
+                infos[0]["node_replaced"]["dead"] == "pool-0" and infos[0]["node_replaced"]["new"] == "pool-2"
+            )
+            for _ in range(5):
+                vec.step(np.zeros((2, 1), dtype=np.float32))
+        finally:
+            vec.close()
+
+
+@pytest.mark.slow
+def test_ppo_trains_against_two_remote_nodes(loopback: Loopback) -> None:
+    from stable_baselines3 import PPO
+
+    balance = example_experiment("cartpole_balance")
+    with node_process(balance, "ppo-0", loopback), node_process(balance, "ppo-1", loopback):
+        vec = RemoteVecEnv(balance, ["ppo-0", "ppo-1"], session=loopback.session, prefix=loopback.prefix)
+        try:
+            model = PPO("MlpPolicy", vec, n_steps=128, batch_size=64, n_epochs=2, seed=0, device="cpu")
+            model.learn(total_timesteps=1024)
+            assert model.num_timesteps >= 1024
+            counters = [_info(loopback, n)["counters"] for n in ("ppo-0", "ppo-1")]
+            assert all(c["steps"] >= 500 for c in counters)
+        finally:
+            vec.close()
+
+
+def test_realtime_node_runs_on_the_wall_clock_and_holds_the_latest_action(loopback: Loopback) -> None:
+    keys = proto.Keys(loopback.prefix, "rt")
+    frames: list[proto.Frame] = []
+    clock: list[int] = []
+    with node_process(CARTPOLE, "rt", loopback, "--mode", "realtime", "--rate", "5"):
+        sub = loopback.session.declare_subscriber(  # type: ignore[attr-defined]
+            keys.outputs, lambda s: frames.append(proto.decode(s.payload.to_bytes()))
+        )
+        clock_sub = loopback.session.declare_subscriber(  # type: ignore[attr-defined]
+            keys.clock, lambda s: clock.append(int(np.frombuffer(s.payload.to_bytes(), "<i8")[0]))
+        )
+        try:
+            loopback.session.put(keys.actions, proto.encode_values(proto.ACTION, 0, 0, 0, [10.0]))  # type: ignore[attr-defined]
+            time.sleep(1.0)
+            count = len(frames)
+            # 5x real time at 20 ms per sample: about 250 samples per wall-clock second
+            assert 150 <= count <= 300, count
+            steps = [f.step for f in frames]
+            assert steps == list(range(steps[0], steps[0] + len(steps)))  # every sample, in order
+            assert clock and clock[-1] > clock[0]
+            velocities = [f.values[1] for f in frames]
+            assert velocities[-1] > velocities[0] + 1.0  # the held +10 N push keeps accelerating the cart
+        finally:
+            sub.undeclare()
+            clock_sub.undeclare()
+
+
+def test_nodes_command_lists_live_nodes(loopback: Loopback) -> None:
+    import subprocess
+    import sys
+
+    with node_process(CARTPOLE, "listed", loopback):
+        result = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "bridge.cli",
+                "nodes",
+                "--connect",
+                loopback.endpoint,
+                "--prefix",
+                loopback.prefix,
+            ],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            check=False,
+            env={**os.environ, "COLUMNS": "200"},
+        )
+    assert result.returncode == 0, result.stderr
+    assert "listed" in result.stdout and "cartpole" in result.stdout and "1 live node" in result.stdout
+
+
+def test_unknown_node_is_a_clear_error(loopback: Loopback) -> None:
+    with pytest.raises(TransportError, match=r"no FMU node named 'ghost' answers.*fmu-bridge node"):
+        RemoteFmuEnv(CARTPOLE, "ghost", session=loopback.session, prefix=loopback.prefix, timeout_s=0.5)
+
+
+def test_node_serving_another_experiment_is_refused(loopback: Loopback) -> None:
+    other = parse_experiment(
+        {
+            "model": {"fmu": "example:cartpole", "step_size": 0.02, "episode_duration": 1.0},
+            "actions": {"inputs": ["force"], "low": {"force": -10}, "high": {"force": 10}},
+            "observations": {"outputs": ["x"]},
+            "reward": {"terms": [{"alive": 1.0}]},
+        }
+    )
+    with (
+        node_process(CARTPOLE, "cp", loopback),
+        pytest.raises(Exception, match=r"outputs \['x'\] vs the node's"),
+    ):
+        RemoteFmuEnv(other, "cp", session=loopback.session, prefix=loopback.prefix)
+
+
+@pytest.mark.slow
+def test_launch_script_starts_nodes_and_trains(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+
+    from conftest import free_port
+
+    script = Path(__file__).resolve().parents[2] / "launch_scripts" / "train_remote.py"
+    result = subprocess.run(
+        [
+            sys.executable,
+            str(script),
+            "--nodes",
+            "2",
+            "--timesteps",
+            "512",
+            "--port",
+            str(free_port()),
+            "--save",
+            str(tmp_path / "model.zip"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+        cwd=tmp_path,
+    )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "on 2 nodes" in result.stdout and (tmp_path / "model.zip").is_file()
