@@ -25,8 +25,8 @@ from agents.policies import Sb3Policy
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment, Noise, load_experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import ModelInfo, read_model_info
 from bridge.net import protocol as proto
+from bridge.plant.vocab import ModelInfo
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
@@ -80,9 +80,11 @@ def model_info_for(
     experiment: Experiment, run_dir: Path, node_description: dict[str, Any] | None
 ) -> ModelInfo:
     """Variable metadata for the Task: the local FMU, else the run's snapshot, else the node's report."""
-    from bridge.cli.inspect import info_from_summary
+    from bridge.plant.vocab import info_from_summary
 
     try:
+        from bridge.fmu import read_model_info  # FMPy only where an FMU is read
+
         return read_model_info(resolve_fmu(experiment))
     except BridgeError:
         pass

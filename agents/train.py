@@ -19,12 +19,12 @@ from typing import Any
 import gymnasium as gym
 
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
-from bridge.cli.inspect import summary_of
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.experiment.validate import resolve_fmu
 from bridge.fmu import read_model_info, sha256
+from bridge.plant.vocab import summary_of
 
 _log = logging.getLogger(__name__)
 

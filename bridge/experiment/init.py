@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from bridge.fmu import ModelInfo, Variable, read_model_info
+from bridge.plant.vocab import ModelInfo, Variable
 
 
 def _num(value: float | None) -> str:
@@ -26,6 +26,8 @@ def _comment(var: Variable) -> str:
 
 def starting_config(fmu: str | Path, *, relative_to: Path | None = None) -> str:
     """The YAML text of a starting experiment for ``fmu``."""
+    from bridge.fmu import read_model_info  # FMPy only where an FMU is read
+
     info = read_model_info(fmu)
     path = Path(fmu).resolve()
     try:

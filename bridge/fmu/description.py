@@ -6,130 +6,38 @@ including ones built for other platforms.
 
 from __future__ import annotations
 
-import difflib
 import logging
 import zipfile
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
 
-from bridge.errors import FmuLoadError, VariableError
+from bridge.errors import FmuLoadError
+from bridge.plant.vocab import (
+    NUMERIC_TYPES,
+    DefaultExperiment,
+    Interface,
+    ModelInfo,
+    Variable,
+    unknown_variable_error,
+)
+
+__all__ = [
+    "NUMERIC_TYPES",
+    "DefaultExperiment",
+    "Interface",
+    "ModelInfo",
+    "Variable",
+    "read_model_info",
+    "unknown_variable_error",
+]
 
 _log = logging.getLogger(__name__)
 
-Interface = Literal["cs", "me"]
-
 # FMI 1/2 type names mapped onto the FMI 3 vocabulary; FMI 1/2 Integer is 32 bit.
 _TYPE_ALIASES = {"Real": "Float64", "Integer": "Int32"}
-NUMERIC_TYPES = frozenset(
-    {
-        "Float32",
-        "Float64",
-        "Int8",
-        "UInt8",
-        "Int16",
-        "UInt16",
-        "Int32",
-        "UInt32",
-        "Int64",
-        "UInt64",
-        "Boolean",
-        "Enumeration",
-    }
-)
-
-
-@dataclass(frozen=True)
-class Variable:
-    """One scalar variable of an FMU, in FMI-3 type vocabulary (``Real`` is ``Float64``)."""
-
-    name: str
-    value_reference: int
-    type: str
-    causality: str
-    variability: str
-    initial: str | None
-    start: Any
-    min: float | None = None
-    max: float | None = None
-    nominal: float | None = None
-    unit: str | None = None
-    description: str | None = None
-    declared_type: str | None = None
-    enum_items: tuple[tuple[str, int], ...] = ()
-    is_array: bool = False
-
-    @property
-    def is_numeric(self) -> bool:
-        return self.type in NUMERIC_TYPES
-
-    @property
-    def settable_at_init(self) -> bool:
-        """Whether a value may be given before/at initialisation (parameter or start value)."""
-        if self.variability == "constant" or self.causality in ("calculatedParameter", "independent"):
-            return False
-        return self.causality in ("parameter", "input") or self.initial in ("exact", "approx")
-
-    @property
-    def settable_in_step(self) -> bool:
-        """Whether a value may be set between steps (inputs and tunable parameters)."""
-        return self.causality == "input" or (self.causality == "parameter" and self.variability == "tunable")
-
-
-@dataclass(frozen=True)
-class DefaultExperiment:
-    start_time_s: float | None = None
-    stop_time_s: float | None = None
-    step_size_s: float | None = None
-    tolerance: float | None = None
-
-
-@dataclass(frozen=True)
-class ModelInfo:
-    """Everything ``inspect`` shows, read from modelDescription.xml without loading a binary."""
-
-    path: Path
-    fmi_version: str
-    model_name: str
-    guid: str
-    interfaces: tuple[Interface, ...]
-    model_identifiers: dict[str, str]
-    default_experiment: DefaultExperiment
-    platforms: tuple[str, ...]
-    variables: dict[str, Variable] = field(repr=False)
-    can_get_set_state: dict[str, bool] = field(repr=False)
-    number_of_states: int = 0
-    number_of_event_indicators: int = 0
-    generation_tool: str | None = None
-    description: str | None = None
-    problems: tuple[str, ...] = ()
-    raw: ModelDescription | None = field(default=None, repr=False, compare=False)
-
-    @property
-    def fmi_major(self) -> int:
-        return int(self.fmi_version.split(".")[0])
-
-    def variable(self, name: str) -> Variable:
-        """The variable called ``name``; a clear error with close matches if there is none."""
-        try:
-            return self.variables[name]
-        except KeyError:
-            raise unknown_variable_error(name, self) from None
-
-    def by_causality(self, *causalities: str) -> list[Variable]:
-        return [v for v in self.variables.values() if v.causality in causalities]
-
-
-def unknown_variable_error(name: str, info: ModelInfo, role: str = "variable") -> VariableError:
-    close = difflib.get_close_matches(name, list(info.variables), n=5, cutoff=0.5)
-    hint = f"did you mean {close}?" if close else f"run `fmu-bridge inspect {info.path}` to list them"
-    return VariableError(
-        f"{role} {name!r} is not a variable of {info.model_name} ({len(info.variables)} variables); "
-        f"{hint} [{info.path}]"
-    )
 
 
 def read_model_info(path: str | Path) -> ModelInfo:

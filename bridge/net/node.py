@@ -27,7 +27,6 @@ from typing import Any, Literal
 
 import numpy as np
 
-from bridge.cli.inspect import summary_of
 from bridge.env.fmu_env import as_experiment
 from bridge.errors import BridgeError, FmuError, TransportError
 from bridge.experiment.config import Experiment
@@ -36,6 +35,7 @@ from bridge.fmu import Model, read_model_info, sha256
 from bridge.net import protocol as proto
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import ZenohOptions, open_session, undeclare
+from bridge.plant.vocab import summary_of
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)

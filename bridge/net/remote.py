@@ -19,13 +19,13 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from bridge.cli.inspect import info_from_summary
 from bridge.env.fmu_env import as_experiment
 from bridge.errors import BridgeError, ConfigError, StepTimeout, TransportError
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, check_experiment, timing
 from bridge.net import protocol as proto
 from bridge.net.transport import ZenohOptions, open_session, undeclare
+from bridge.plant.vocab import info_from_summary
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)

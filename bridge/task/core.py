@@ -23,7 +23,7 @@ import numpy.typing as npt
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
 from bridge.experiment.validate import Timing, action_bounds
-from bridge.fmu import Variable
+from bridge.plant.vocab import Variable
 from bridge.task.rewards import build_reward
 from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
 

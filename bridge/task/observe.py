@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.experiment.config import ObservationSection
-from bridge.fmu import Variable
+from bridge.plant.vocab import Variable
 
 if TYPE_CHECKING:
     from bridge.task.core import Task
