@@ -26,7 +26,7 @@ from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment, Noise, load_experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.net import protocol as proto
-from bridge.plant.vocab import ModelInfo
+from bridge.fmu.vocab import ModelInfo
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
@@ -80,7 +80,7 @@ def model_info_for(
     experiment: Experiment, run_dir: Path, node_description: dict[str, Any] | None
 ) -> ModelInfo:
     """Variable metadata for the Task: the local FMU, else the run's snapshot, else the node's report."""
-    from bridge.plant.vocab import info_from_summary
+    from bridge.fmu.vocab import info_from_summary
 
     try:
         from bridge.fmu import read_model_info  # FMPy only where an FMU is read
@@ -148,11 +148,9 @@ class DeployedAgent:
             values = [float(v) for v in outputs]
             if episode != self._episode_key or step == 0 or self._last_inputs is None:
                 self._start_episode(episode)
-                obs = self.task.first_observation(values, self._rng)
             else:
                 self._sample = self._sample + 1 if step is None else step
-                signals = self.task.fill_signals(values, self._sample)
-                obs = self.task.observer.observe(signals, self.task.applied_inputs, self._rng)
+            obs = self.task.observe(values, self._sample, self._rng)
             action = self.policy.act(obs, self.task.signal_dict())
             # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
             inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))

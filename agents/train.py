@@ -24,7 +24,7 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.experiment.validate import resolve_fmu
 from bridge.fmu import read_model_info, sha256
-from bridge.plant.vocab import summary_of
+from bridge.fmu.vocab import summary_of
 
 _log = logging.getLogger(__name__)
 
@@ -83,7 +83,7 @@ def build_vec_env(
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
 
     if settings.vec == "remote":
-        from bridge.net.vec import RemoteVecEnv
+        from bridge.env import RemoteVecEnv
 
         if residual:
             raise ConfigError("residual training runs in-process (--vec dummy or subproc)")

@@ -21,12 +21,11 @@ from pathlib import Path
 import numpy as np
 from common import table
 
+from bridge.env import RemoteFmuEnv, RemoteVecEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
-from bridge.net.remote import RemoteFmuEnv
 from bridge.net.transport import ZenohOptions, open_session
-from bridge.net.vec import RemoteVecEnv
 
 ECHO = """
 import sys, threading, zenoh

@@ -7,6 +7,8 @@ with paths and endpoints last. Third-party errors are wrapped at the boundary wi
 
 from __future__ import annotations
 
+FMU_LOG_HEADER = "\nFMU log (most recent last):\n  "
+
 
 class BridgeError(Exception):
     """Base class of every error raised by fmu-bridge."""
@@ -26,7 +28,7 @@ class FmuError(BridgeError):
     def __init__(self, message: str, *, log: list[str] | None = None) -> None:
         self.log = list(log or [])
         if self.log:
-            message = message + "\nFMU log (most recent last):\n  " + "\n  ".join(self.log[-20:])
+            message = message + FMU_LOG_HEADER + "\n  ".join(self.log[-20:])
         super().__init__(message)
 
 
@@ -38,28 +40,74 @@ class VariableError(FmuError):
     """A variable name is unknown, or the variable cannot be read or written this way."""
 
 
-class StepError(FmuError):
-    """An FMU step failed (error, fatal or discard status) at a known step index and time."""
+class PlantError(BridgeError):
+    """A plant could not complete a reset or a step.
+
+    Every plant (an FMU in this process, in a child process, in a node, a system of FMUs)
+    raises the same three subclasses with the same message shape: ``StepError`` (the model
+    failed), ``StepTimeout`` (no answer within the deadline) and ``PlantDied`` (the process or
+    node is gone). The episode is over after any of them; ``reset()`` starts a new one where
+    the plant still lives.
+
+    Attributes:
+        plant: the plant's name (``FMU cartpole.fmu (in-process)``, ``node 'worker-1'``).
+        episode: the episode number (1-based), or None before the first reset.
+        step: the sample index the plant was stepping into, or None for a reset.
+        time_s: simulation time at the failure, where known.
+        detail: the cause in the plant's own words (the FMU's message and log).
+    """
 
     def __init__(
         self,
         message: str,
         *,
-        step: int,
-        time_s: float,
-        log: list[str] | None = None,
+        plant: str = "",
+        episode: int | None = None,
+        step: int | None = None,
+        time_s: float | None = None,
+        detail: str = "",
     ) -> None:
+        self.plant = plant
+        self.episode = episode
         self.step = step
         self.time_s = time_s
-        super().__init__(message, log=log)
+        self.detail = detail or message
+        BridgeError.__init__(self, message)  # not super(): FmuError would reset ``log``
+
+
+class StepError(PlantError, FmuError):
+    """The model failed: an FMI call returned Error/Fatal/Discard, or its outputs are not finite."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        step: int | None = None,
+        time_s: float | None = None,
+        log: list[str] | None = None,
+        plant: str = "",
+        episode: int | None = None,
+        detail: str = "",
+    ) -> None:
+        self.log = list(log or [])
+        detail = detail or message
+        if self.log:
+            message = message + FMU_LOG_HEADER + "\n  ".join(self.log[-20:])
+        PlantError.__init__(
+            self, message, plant=plant, episode=episode, step=step, time_s=time_s, detail=detail
+        )
+
+
+class StepTimeout(PlantError):
+    """The plant did not answer a step or reset within its deadline (a hung FMU, a lost node)."""
+
+
+class PlantDied(PlantError):
+    """The plant is gone: its node's liveliness token disappeared, or its process exited."""
 
 
 class TransportError(BridgeError):
     """A network peer is unreachable, died, or sent something that is not our protocol."""
-
-
-class StepTimeout(TransportError):
-    """A remote node did not answer within the configured timeout."""
 
 
 class DependencyMissing(BridgeError):

@@ -19,8 +19,8 @@ from pathlib import Path
 
 from stable_baselines3 import PPO
 
+from bridge.env import RemoteVecEnv
 from bridge.net.transport import ZenohOptions, open_session
-from bridge.net.vec import RemoteVecEnv
 
 ROOT = Path(__file__).resolve().parent.parent
 

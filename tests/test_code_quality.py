@@ -40,6 +40,21 @@ def test_mypy_strict() -> None:
     assert result.returncode == 0, result.stdout + result.stderr
 
 
+def test_import_contracts_hold() -> None:
+    """Layers and bans from pyproject.toml's [tool.importlinter] (import-linter)."""
+    result = _run(_tool("lint-imports"))
+    assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_the_task_the_remote_env_and_the_deployed_agent_never_load_fmpy() -> None:
+    code = (
+        "import sys, bridge.task, bridge.env, bridge.net.remote, bridge.net.protocol, agents.deploy; "
+        "print(sorted(m for m in sys.modules if m == 'fmpy' or m.startswith('fmpy.')))"
+    )
+    result = _run(sys.executable, "-c", code)
+    assert result.stdout.strip() == "[]", result.stdout + result.stderr
+
+
 def test_bridge_never_imports_torch_sb3_or_agents() -> None:
     code = (
         "import sys, bridge, bridge.env.fmu_env, bridge.cli.main, bridge.fmu, bridge.task.core; "

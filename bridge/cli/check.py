@@ -27,7 +27,7 @@ def check_and_report(path: Path, *, version: str | None, steps: int, console: Co
     from gymnasium.utils.env_checker import check_env as gym_check
 
     experiment = load_experiment(path, version=version)
-    info = check_experiment(experiment)
+    info = check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
     console.print(
         f"[green]config ok[/green]: {path} (version {experiment.version}) against {info.model_name}"
     )

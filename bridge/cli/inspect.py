@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.fmu import read_model_info
-from bridge.plant.vocab import summary_of
+from bridge.fmu.vocab import summary_of
 
 VARIABLE_COLUMNS = (
     "name",

@@ -6,5 +6,7 @@ only the CLI imports it.
 """
 
 from bridge.env.fmu_env import FmuEnv, as_experiment, make
+from bridge.env.remote import RemoteFmuEnv
+from bridge.env.vec import PlantVecEnv, RemoteVecEnv
 
-__all__ = ["FmuEnv", "as_experiment", "make"]
+__all__ = ["FmuEnv", "PlantVecEnv", "RemoteFmuEnv", "RemoteVecEnv", "as_experiment", "make"]

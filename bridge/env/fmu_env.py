@@ -1,7 +1,15 @@
-"""``FmuEnv``: a Gymnasium environment generated from an FMU and an experiment file.
+"""``FmuEnv``: the one Gymnasium env, a ``Task`` over any plant.
 
-The model runs in this process (fastest); ``bridge.net.remote.RemoteFmuEnv`` runs the same Task
-against a node. All randomness is drawn from ``self.np_random`` (seeded by ``reset(seed=...)``).
+The plant (``bridge.plant``) is where the model runs: in this process (the default,
+``LocalFmuPlant``), in a node over Zenoh (``RemoteFmuEnv``), or any other plant. The env only
+maps actions to inputs through the Task, steps the plant and turns outputs into observations,
+rewards and episode ends. All randomness is drawn from ``self.np_random`` (seeded by
+``reset(seed=...)``), so the same seed gives the same trajectory whatever the plant.
+
+Errors: a failed model step, a plant that does not answer in time and a plant that is gone
+raise ``StepError``, ``StepTimeout`` and ``PlantDied`` (all ``PlantError``) from ``step`` and
+``reset``, with the same message shape for every plant; the episode is over, ``reset()`` starts
+the next one. Vector envs can turn them into truncated episodes instead (``on_error``).
 """
 
 from __future__ import annotations
@@ -14,33 +22,31 @@ import gymnasium as gym
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import BridgeError, ConfigError
-from bridge.experiment.config import Experiment, load_experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import Model, read_model_info
-from bridge.task.core import Task, load_callable
+from bridge.errors import BridgeError, ConfigError, PlantError, StepError
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.plant.base import Plant
+from bridge.task import Task, load_callable
+from bridge.task.core import NonFiniteOutputs
 
 _log = logging.getLogger(__name__)
 ObsType = npt.NDArray[np.float32]
 
-
-def as_experiment(experiment: Experiment | str | Path, version: str | None = None) -> Experiment:
-    if isinstance(experiment, Experiment):
-        return experiment.resolved(version) if version else experiment
-    return load_experiment(experiment, version=version)
+__all__ = ["FmuEnv", "ObsType", "as_experiment", "make"]
 
 
 class FmuEnv(gym.Env[ObsType, Any]):
-    """A Gymnasium env over one FMU instance.
+    """A Gymnasium env: the experiment's Task over a plant.
 
     Args:
         experiment: an :class:`Experiment` or the path of an experiment YAML file.
         version: the env version (named observation/reward/termination set) to use.
         render_mode: ``"rgb_array"`` (the cart-pole drawn, else signal plots) or ``"ansi"``.
+        plant: where the model runs; default: the experiment's FMU in this process. A plant
+            given here is owned by the env from then on (``close()`` closes it).
 
     ``info`` holds ``time_s`` (simulation time), ``step`` (sample index), ``outputs`` (unscaled
     values of ``output_names``) and, at reset, ``scenario`` and the ``drawn`` uncertain values;
-    at the end of an episode ``reason`` says why (``bounds:NAME``, ``fmu``, or None for time).
+    at the end of an episode ``reason`` says why (``bounds:NAME``, ``fmu``, ``time``).
     """
 
     metadata: dict[str, Any] = {"render_modes": ["rgb_array", "ansi"], "render_fps": 50}
@@ -51,6 +57,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
         *,
         version: str | None = None,
         render_mode: str | None = None,
+        plant: Plant | None = None,
     ) -> None:
         self.experiment = exp = as_experiment(experiment, version)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -58,32 +65,28 @@ class FmuEnv(gym.Env[ObsType, Any]):
                 f"render_mode {render_mode!r} is not supported; use one of {self.metadata['render_modes']}"
             )
         self.render_mode = render_mode
-        self.fmu_path = resolve_fmu(exp)
-        info = check_experiment(exp, read_model_info(self.fmu_path))
-        self.timing = t = timing(exp, info)
-        self.task = Task(exp, info.variables, t)
-        self.model = Model(
-            self.fmu_path,
-            step_size_s=t.step_size_s,
-            start_time_s=t.start_time_s,
-            interface=exp.model.interface,
-            reset_policy=exp.model.reset_policy,
-            tolerance=exp.model.tolerance,
-        )
+        if plant is None:
+            from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
+
+            plant = LocalFmuPlant(exp)
+        self.plant = plant
         try:
-            self._inputs = self.model.signals(self.task.input_names, writable=True, role="input")
-            self._outputs = self.model.signals(self.task.output_names, role="output")
+            self.timing = t = plant.timing
+            self.task = Task(exp, plant.info.variables, t)
+            plant.bind(self.task.input_names, self.task.output_names)
+            self._state_hook = load_callable(exp.hooks.state, "hooks.state") if exp.hooks.state else None
+            if self._state_hook is not None and not plant.can_set_values:
+                plant.set_values({})  # raises the plant's own "cannot" ConfigError
         except BaseException:
-            self.model.close()
+            plant.close()
             raise
         self.action_space = self.task.action_space
         self.observation_space = self.task.observation_space
         self.metadata = {**self.metadata, "render_fps": round(1.0 / t.sampling_time_s)}
         self.output_names = self.task.output_names
-        self._n = t.steps_per_sample
-        self._state_hook = load_callable(exp.hooks.state, "hooks.state") if exp.hooks.state else None
         self._sample = 0
         self._done = True
+        self._last_obs: ObsType | None = None
         self._trace: list[npt.NDArray[np.float64]] = []
         self._last_outputs = np.zeros(len(self.output_names))
 
@@ -94,38 +97,65 @@ class FmuEnv(gym.Env[ObsType, Any]):
         super().reset(seed=seed)
         if seed is not None:
             self.task.sampler.restart()
-        scenario = (options or {}).get("scenario")
-        spec = self.task.new_episode(self.np_random, scenario)
-        self.model.reset(spec.values)
-        self._inputs.write(self.task.initial_inputs())
-        outputs = self._outputs.read()
-        obs = self.task.first_observation(outputs.tolist(), self.np_random)
-        self._sample, self._done = 0, False
+        spec = self.task.new_episode(self.np_random, (options or {}).get("scenario"))
+        self._done = True
+        plant = self.plant
+        outputs = plant.reset(spec.values, self.task.initial_inputs())
+        try:
+            obs = self.task.first_observation(outputs.tolist(), self.np_random)
+        except NonFiniteOutputs as exc:
+            raise plant.failure(StepError, "the model returned non-finite outputs", str(exc), step=0) from exc
+        self._sample, self._done, self._last_obs = 0, False, obs
         self._record(outputs, reset=True)
         info = {
-            "time_s": self.model.time_s,
+            "time_s": plant.time_s,
             "step": 0,
             "outputs": outputs,
             "scenario": spec.scenario,
             "drawn": dict(spec.drawn),
+            **plant.reset_info(),
         }
         return obs, info
 
     def step(self, action: Any) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
+        self.send(action)
+        return self.receive()
+
+    def send(self, action: Any) -> None:
+        """First half of a step: map the action and hand the inputs to the plant.
+
+        Vector envs send to every plant before receiving from any, so that plants in other
+        processes or nodes step in parallel."""
         if self._done:
             raise BridgeError("step() called on a finished or never-reset episode: call reset() first")
-        task = self.task
-        inputs = task.action_to_inputs(action, self._sample, self.np_random)
+        inputs = self.task.action_to_inputs(action, self._sample, self.np_random)
         if self._state_hook is not None:
             self._apply_state_hook()
-        self._inputs.write(inputs)
-        fmu_terminated = self.model.advance(self._n)
-        outputs = self._outputs.read()
-        self._sample += 1
-        obs, reward, terminated, truncated, reason = task.step_result(
-            outputs.tolist(), self._sample, fmu_terminated, self.np_random
-        )
-        info: dict[str, Any] = {"time_s": self.model.time_s, "step": self._sample, "outputs": outputs}
+        try:
+            self.plant.send(inputs)
+        except PlantError:
+            self._done = True
+            raise
+
+    def receive(self) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
+        """Second half of a step: the plant's outputs turned into the task's result."""
+        plant = self.plant
+        try:
+            outputs = plant.receive()
+            self._sample += 1
+            obs, reward, terminated, truncated, reason = self.task.step_result(
+                outputs.tolist(), self._sample, plant.terminated, self.np_random
+            )
+        except PlantError:
+            self._done = True
+            raise
+        except NonFiniteOutputs as exc:
+            self._done = True
+            raise plant.failure(
+                StepError, "the model returned non-finite outputs", str(exc), step=self._sample
+            ) from exc
+        self._last_obs = obs
+        info: dict[str, Any] = {"time_s": plant.time_s, "step": self._sample, "outputs": outputs}
         if terminated or truncated:
             info["reason"] = reason
             self._done = True
@@ -133,16 +163,21 @@ class FmuEnv(gym.Env[ObsType, Any]):
             self._record(outputs)
         return obs, reward, terminated, truncated, info
 
+    @property
+    def last_observation(self) -> ObsType | None:
+        """The observation returned last (by reset or step); None before the first reset."""
+        return self._last_obs
+
     def _apply_state_hook(self) -> None:
         assert self._state_hook is not None
-        values = self._state_hook(self._sample, self.model.time_s, self.task.signal_dict())
+        values = self._state_hook(self._sample, self.plant.time_s, self.task.signal_dict())
         if values:
-            self.model.set(values)
+            self.plant.set_values(values)
 
     def close(self) -> None:
-        model = getattr(self, "model", None)
-        if model is not None:
-            model.close()
+        plant = getattr(self, "plant", None)
+        if plant is not None:
+            plant.close()
 
     # -- rendering --------------------------------------------------------------------------------
     def _record(self, outputs: npt.NDArray[np.float64], reset: bool = False) -> None:
@@ -150,14 +185,14 @@ class FmuEnv(gym.Env[ObsType, Any]):
         if self.render_mode == "rgb_array":
             if reset:
                 self._trace = []
-            self._trace.append(np.concatenate([[self.model.time_s], outputs]))
+            self._trace.append(np.concatenate([[self.plant.time_s], outputs]))
 
     def render(self) -> Any:
         from bridge.env import render
 
         names = list(self.output_names)
         if self.render_mode == "ansi":
-            return render.ansi_line(self.model.time_s, self._sample, names, self._last_outputs)
+            return render.ansi_line(self.plant.time_s, self._sample, names, self._last_outputs)
         if self.render_mode != "rgb_array":
             return None
         if "x" in names and "theta" in names:

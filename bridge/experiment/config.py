@@ -494,3 +494,10 @@ def scenario_inputs(experiment: Experiment) -> list[str]:
     for sc in experiment.scenarios.values():
         names += [n for n in sc.inputs if n not in names]
     return names
+
+
+def as_experiment(experiment: Experiment | str | Path, version: str | None = None) -> Experiment:
+    """``experiment`` itself (resolved to ``version``), or the experiment file it names, loaded."""
+    if isinstance(experiment, Experiment):
+        return experiment.resolved(version) if version else experiment
+    return load_experiment(experiment, version=version)

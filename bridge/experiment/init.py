@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from bridge.plant.vocab import ModelInfo, Variable
+from bridge.fmu.vocab import ModelInfo, Variable
 
 
 def _num(value: float | None) -> str:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, known_references, sampling_ratio, scenario_inputs
-from bridge.plant.vocab import ModelInfo, Variable
+from bridge.fmu.vocab import ModelInfo, Variable
 
 
 def resolve_fmu(experiment: Experiment) -> Path:
@@ -60,11 +60,8 @@ def timing(experiment: Experiment, info: ModelInfo) -> Timing:
     return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=model.start_time)
 
 
-def check_experiment(experiment: Experiment, info: ModelInfo | None = None) -> ModelInfo:
-    """Check every name and role in ``experiment`` against the FMU; returns its ModelInfo."""
-    from bridge.fmu import read_model_info  # FMPy only where an FMU is read
-
-    info = info or read_model_info(resolve_fmu(experiment))
+def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
+    """Check every name and role in ``experiment`` against the model ``info``; returns ``info``."""
     where = f" [{experiment.source}]" if experiment.source else ""
     variables = info.variables
     timing(experiment, info)

@@ -1,15 +1,32 @@
-"""The FMU runtime: the only package of fmu-bridge that imports FMPy.
+"""FMUs: the model vocabulary (``vocab``, no FMPy) and the FMU runtime (the only FMPy importer).
 
 FMI names (camelCase, value references, status codes) stop here; everything above speaks
-in variable names, numpy arrays and seconds.
+in variable names, numpy arrays and seconds. ``bridge.fmu.vocab`` (variables, model info, their
+JSON form) imports nothing heavy, so the task, the remote plant and the deployed agent use it
+without loading FMPy; the names below load the runtime on first use.
 """
 
 from __future__ import annotations
 
-from bridge.fmu.archive import sha256
-from bridge.fmu.description import DefaultExperiment, ModelInfo, Variable, read_model_info
-from bridge.fmu.model import RESET_POLICIES, Model, ResetPolicy
-from bridge.fmu.signals import SignalGroup
+import importlib
+from typing import TYPE_CHECKING, Any
+
+from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
+
+if TYPE_CHECKING:
+    from bridge.fmu.archive import sha256
+    from bridge.fmu.description import read_model_info
+    from bridge.fmu.model import RESET_POLICIES, Model, ResetPolicy
+    from bridge.fmu.signals import SignalGroup
+
+_RUNTIME = {
+    "sha256": "bridge.fmu.archive",
+    "read_model_info": "bridge.fmu.description",
+    "RESET_POLICIES": "bridge.fmu.model",
+    "Model": "bridge.fmu.model",
+    "ResetPolicy": "bridge.fmu.model",
+    "SignalGroup": "bridge.fmu.signals",
+}
 
 __all__ = [
     "RESET_POLICIES",
@@ -22,3 +39,11 @@ __all__ = [
     "read_model_info",
     "sha256",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    """The runtime's names, imported (with FMPy) on first use."""
+    module = _RUNTIME.get(name)
+    if module is None:
+        raise AttributeError(f"module 'bridge.fmu' has no attribute {name!r}")
+    return getattr(importlib.import_module(module), name)

@@ -15,7 +15,7 @@ import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
 
 from bridge.errors import FmuLoadError
-from bridge.plant.vocab import (
+from bridge.fmu.vocab import (
     NUMERIC_TYPES,
     DefaultExperiment,
     Interface,

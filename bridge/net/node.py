@@ -27,15 +27,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from bridge.env.fmu_env import as_experiment
-from bridge.errors import BridgeError, FmuError, TransportError
-from bridge.experiment.config import Experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import Model, read_model_info, sha256
+from bridge.errors import BridgeError, StepError, TransportError
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.fmu.vocab import summary_of
 from bridge.net import protocol as proto
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import ZenohOptions, open_session, undeclare
-from bridge.plant.vocab import summary_of
+from bridge.plant.local import LocalFmuPlant
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
@@ -64,28 +62,18 @@ class FmuNode:
         self.experiment = exp = as_experiment(experiment)
         self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
-        self.fmu_path = resolve_fmu(exp)
-        self.info = check_experiment(exp, read_model_info(self.fmu_path))
-        self.timing = timing(exp, self.info)
+        self.plant = plant = LocalFmuPlant(exp)
+        self.fmu_path, self.info, self.timing = plant.fmu_path, plant.info, plant.timing
         task = Task(exp, self.info.variables, self.timing)  # for the input/output names only
         self.input_names, self.output_names = task.input_names, task.output_names
-        self.model = Model(
-            self.fmu_path,
-            step_size_s=self.timing.step_size_s,
-            start_time_s=self.timing.start_time_s,
-            interface=exp.model.interface,
-            reset_policy=exp.model.reset_policy,
-            tolerance=exp.model.tolerance,
-        )
-        self._inputs = self.model.signals(self.input_names, writable=True, role="input")
-        self._outputs = self.model.signals(self.output_names, role="output")
+        plant.bind(self.input_names, self.output_names)
         self.counters: Counter[str] = Counter()
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.episode, self.step, self._ended = 0, -1, True
         self._last_frame = b""
         self._latest_inputs: list[float] | None = None
-        self._checksum = sha256(self.fmu_path)
+        self._checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._declared: list[Any] = []
@@ -153,7 +141,7 @@ class FmuNode:
         if self._own_session:
             self._session.close()
         with self._lock:
-            self.model.close()
+            self.plant.close()
 
     # -- handlers (run on Zenoh's threads) -----------------------------------------------------------
     def _on_action(self, sample: Any) -> None:
@@ -189,33 +177,35 @@ class FmuNode:
         return None
 
     def _advance(self, inputs: list[float] | None) -> None:
-        model = self.model
+        plant = self.plant
         try:
-            if inputs is not None:
-                self._inputs.write(inputs)
-            terminated = model.advance(self.timing.steps_per_sample)
-            outputs = self._outputs.read()
-        except FmuError as exc:
+            outputs = plant.step(inputs)
+        except StepError as exc:
             self._fail(exc)
             return
         self.step += 1
         self.counters["steps"] += 1
-        flags = proto.TERMINATED if terminated else 0
-        self._ended = terminated
+        flags = proto.TERMINATED if plant.terminated else 0
+        self._ended = plant.terminated
+        time_ns = round(plant.time_s * 1e9)
         self._last_frame = proto.encode_values(
-            proto.OUTPUTS, self.episode, self.step, round(model.time_s * 1e9), outputs, flags=flags
+            proto.OUTPUTS, self.episode, self.step, time_ns, outputs, flags=flags
         )
         self._pub.put(self._last_frame)
         if self._ros is not None:
-            self._ros.publish(round(model.time_s * 1e9), outputs.tolist())
+            self._ros.publish(time_ns, outputs.tolist())
 
-    def _fail(self, exc: BridgeError) -> None:
+    def _fail(self, exc: StepError) -> None:
         self.counters["fmu_errors"] += 1
         self.step += 1
         self._ended = True
         _log.warning("node %s: episode %d ended by an FMU error: %s", self.name, self.episode, exc)
+        # The cause in the FMU's words (and its log); the client puts it in its own StepError.
+        detail = exc.detail + (
+            "\nFMU log (most recent last):\n  " + "\n  ".join(exc.log[-20:]) if exc.log else ""
+        )
         self._last_frame = proto.encode_message(
-            proto.ERROR, self.episode, self.step, round(self.model.time_s * 1e9), str(exc), flags=proto.FAILED
+            proto.ERROR, self.episode, self.step, round(self.plant.time_s * 1e9), detail, flags=proto.FAILED
         )
         self._pub.put(self._last_frame)
 
@@ -250,20 +240,17 @@ class FmuNode:
     def reset(self, values: dict[str, Any], inputs: list[float] | None, episode: int) -> bytes:
         """Reset the model for ``episode``; returns the OUTPUTS frame of step 0."""
         with self._lock:
-            self.model.reset(values)
+            outputs = self.plant.reset(values, inputs)
             if inputs is not None:
-                self._inputs.write(inputs)
                 self._latest_inputs = list(inputs)
-            outputs = self._outputs.read()
             self.episode, self.step, self._ended = episode, 0, False
             self.counters["resets"] += 1
-            self._last_frame = proto.encode_values(
-                proto.OUTPUTS, episode, 0, round(self.model.time_s * 1e9), outputs
-            )
+            time_ns = round(self.plant.time_s * 1e9)
+            self._last_frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs)
             # step 0 goes on the outputs key too: recorders and deployed agents see every sample
             self._pub.put(self._last_frame)
             if self._ros is not None:
-                self._ros.publish(round(self.model.time_s * 1e9), outputs.tolist())
+                self._ros.publish(time_ns, outputs.tolist())
             self._next_tick = time.monotonic()
             return self._last_frame
 
@@ -277,8 +264,8 @@ class FmuNode:
             elif not self._ended:
                 self._advance(merged)
 
-    def _inputs_now(self) -> list[Any]:
-        return list(self.model.get(self.input_names).values())
+    def _inputs_now(self) -> list[float]:
+        return self.plant.current_inputs()
 
     def _ros_reset(self) -> tuple[bool, str]:
         model = self.experiment.model
@@ -309,7 +296,7 @@ class FmuNode:
             "output_names": list(self.output_names),
             "episode": self.episode,
             "step": self.step,
-            "time_s": self.model.time_s,
+            "time_s": self.plant.time_s,
             "counters": dict(self.counters),
             "model": summary_of(self.info),
         }
@@ -323,7 +310,7 @@ class FmuNode:
                 if not self._ended:
                     self._advance(self._latest_inputs)  # zero-order hold of the latest action
                     if not self._ended:
-                        self._clock_pub.put(np.int64(round(self.model.time_s * 1e9)).tobytes())
+                        self._clock_pub.put(np.int64(round(self.plant.time_s * 1e9)).tobytes())
             self._pace(period)
 
     def _pace(self, period: float) -> None:

@@ -1,9 +1,10 @@
-"""The env side of remote FMU nodes: ``NodeClient``, ``RemoteFmuEnv`` and node discovery.
+"""The client side of FMU nodes: ``RemotePlant`` (a node as a plant), ``NodeClient`` and discovery.
 
-A remote env runs the same Task as ``FmuEnv`` (actions, observations, reward, termination,
-scenarios and all randomness drawn from its own ``np_random``); only the model runs in the
-node. So the same seed gives the same trajectory in-process and remote. The FMU need not exist
-on this machine: the node reports its variables, and the Task is checked against them.
+``bridge.env.RemoteFmuEnv`` is the one env over a ``RemotePlant``: the Task (actions,
+observations, reward, termination, scenarios and all randomness) runs in the env, only the
+model runs in the node, so the same seed gives the same trajectory in-process and remote. The
+FMU need not exist on this machine: the node reports its variables, and the Task is checked
+against them.
 """
 
 from __future__ import annotations
@@ -12,24 +13,18 @@ import fnmatch
 import logging
 import threading
 import time
-from pathlib import Path
-from typing import Any, SupportsFloat
+from collections.abc import Mapping, Sequence
+from typing import Any
 
-import gymnasium as gym
-import numpy as np
-import numpy.typing as npt
-
-from bridge.env.fmu_env import as_experiment
-from bridge.errors import BridgeError, ConfigError, StepTimeout, TransportError
+from bridge.errors import FMU_LOG_HEADER, ConfigError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, check_experiment, timing
+from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.transport import ZenohOptions, open_session, undeclare
-from bridge.plant.vocab import info_from_summary
-from bridge.task.core import Task
+from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
 _log = logging.getLogger(__name__)
-ObsType = npt.NDArray[np.float32]
 
 
 class NodeClient:
@@ -91,50 +86,60 @@ class NodeClient:
         else:
             self.alive = True
 
-    def send_action(self, episode: int, step: int, inputs: list[float]) -> None:
+    def send_action(self, plant: Plant, episode: int, step: int, inputs: Sequence[float]) -> None:
         if not self.alive:
-            raise self._dead(episode, step)
+            raise self._dead(plant)
         self._frame = None
         self._event.clear()
         self._want = (episode, step)
         self._pub.put(proto.encode_values(proto.ACTION, episode, step, 0, inputs))
 
-    def wait(self) -> proto.Frame:
+    def wait(self, plant: Plant) -> proto.Frame:
         """The outputs frame for the last action; raises if the node died, rejected it or timed out."""
-        episode, step = self._want
         if not self._event.wait(self.timeout_s):
-            raise StepTimeout(
-                f"node {self.name!r} did not answer step {step} of episode {episode} within "
-                f"{self.timeout_s:g} s; it may be overloaded or unreachable (timeout_s sets the limit) "
-                f"[{self.keys.base}]"
+            raise plant.failure(
+                StepTimeout,
+                f"no answer within {self.timeout_s:g} s",
+                "the node may be overloaded, hung or unreachable",
+                f"timeout_s sets the limit [{self.keys.base}]",
             )
         frame = self._frame
         if frame is None:
-            raise self._dead(episode, step)
+            raise self._dead(plant)
         if frame.kind == proto.REJECT:
             raise TransportError(
-                f"node {self.name!r} rejected step {step} of episode {episode}: {frame.message}"
+                f"{plant.name} rejected step {self._want[1]} of episode {self._want[0]}: {frame.message}"
             )
         return frame
 
-    def _dead(self, episode: int, step: int) -> TransportError:
-        return TransportError(
-            f"node {self.name!r} died during step {step} of episode {episode} (its liveliness token "
-            f"disappeared); restart it, or let RemoteVecEnv replace dead nodes [{self.keys.base}]"
+    def _dead(self, plant: Plant, step: int | None = -1) -> PlantDied:
+        fields: dict[str, Any] = {} if step == -1 else {"step": step}
+        return plant.failure(
+            PlantDied,
+            "the plant died",
+            "the node's liveliness token disappeared",
+            f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.base}]",
+            **fields,
         )
 
-    def reset(self, episode: int, values: dict[str, Any], inputs: list[float]) -> proto.Frame:
+    def reset(self, plant: Plant, values: dict[str, Any], inputs: list[float]) -> proto.Frame:
+        if not self.alive:
+            raise self._dead(plant, step=None)
+        episode = plant.episode
         request = proto.encode_json({"episode": episode, "values": values, "inputs": inputs})
         self._want = (episode, 0)
         for reply in self._session.get(self.keys.reset, payload=request, timeout=self.timeout_s):
             if reply.ok is not None:
                 return proto.decode(reply.ok.payload.to_bytes())
-            raise TransportError(
-                f"node {self.name!r}: {reply.err.payload.to_bytes().decode(errors='replace')}"
-            )
-        raise StepTimeout(
-            f"node {self.name!r} did not answer the reset of episode {episode} within "
-            f"{self.timeout_s:g} s [{self.keys.reset}]"
+            raise TransportError(f"{plant.name}: {reply.err.payload.to_bytes().decode(errors='replace')}")
+        if not self.alive:
+            raise self._dead(plant, step=None)
+        raise plant.failure(
+            StepTimeout,
+            f"no answer within {self.timeout_s:g} s",
+            "the reset request got no reply",
+            f"the node may be overloaded, hung or unreachable [{self.keys.reset}]",
+            step=None,
         )
 
     def close(self) -> None:
@@ -147,10 +152,10 @@ class NodeClient:
 
 
 def check_node(
-    experiment: Experiment, description: dict[str, Any], task_io: tuple[Any, Any], timing_: Timing
+    experiment: Experiment, description: dict[str, Any], names: tuple[Any, Any], timing_: Timing
 ) -> None:
     """The node must serve the same model with the same timing and I/O as this env expects."""
-    inputs, outputs = task_io
+    inputs, outputs = names
     node = description.get("node", "?")
     mismatches = []
     if list(inputs) != description["input_names"]:
@@ -166,8 +171,8 @@ def check_node(
         )
 
 
-class RemoteFmuEnv(gym.Env[ObsType, Any]):
-    """``FmuEnv`` with the model in a node (lockstep over Zenoh).
+class RemotePlant(Plant):
+    """The model of a node (lockstep over Zenoh): the FMU need not exist on this machine.
 
     Args:
         experiment: the experiment (the same file the node was started with).
@@ -176,102 +181,82 @@ class RemoteFmuEnv(gym.Env[ObsType, Any]):
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
     """
 
-    metadata: dict[str, Any] = {"render_modes": []}
-
     def __init__(
         self,
-        experiment: Experiment | str | Path,
+        experiment: Experiment,
         node: str,
         *,
         options: ZenohOptions | None = None,
         session: Any = None,
         prefix: str = proto.DEFAULT_PREFIX,
         timeout_s: float = 5.0,
-        version: str | None = None,
     ) -> None:
-        self.experiment = exp = as_experiment(experiment, version)
-        if exp.hooks.state:
-            raise ConfigError(
-                "hooks.state changes the model between steps and runs in-process only; use FmuEnv"
-            )
+        self.experiment = experiment
+        self.node = node
+        self.name = f"node {node!r}"
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
+        self._time_s = 0.0
         try:
             self.client = NodeClient(self._session, node, prefix=prefix, timeout_s=timeout_s)
-            info = info_from_summary(self.client.description["model"])
-            check_experiment(exp, info)
-            self.timing = timing(exp, info)
-            self.task = Task(exp, info.variables, self.timing)
-            check_node(
-                exp, self.client.description, (self.task.input_names, self.task.output_names), self.timing
-            )
+            self.info = info_from_summary(self.client.description["model"])
+            check_experiment(experiment, self.info)
+            self.timing = timing(experiment, self.info)
         except BaseException:
             self.close()
             raise
-        self.node = node
-        self.action_space = self.task.action_space
-        self.observation_space = self.task.observation_space
-        self.output_names = self.task.output_names
-        self._episode = 0
-        self._sample = 0
-        self._done = True
+        self._time_s = self.timing.start_time_s
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[ObsType, dict[str, Any]]:
-        super().reset(seed=seed)
-        if seed is not None:
-            self.task.sampler.restart()
-        spec = self.task.new_episode(self.np_random, (options or {}).get("scenario"))
-        self._episode += 1
-        frame = self.client.reset(self._episode, spec.values, self.task.initial_inputs())
-        obs = self.task.first_observation(frame.values.tolist(), self.np_random)
-        self._sample, self._done = 0, False
-        info = {
-            "time_s": frame.sim_time_ns / 1e9,
-            "step": 0,
-            "outputs": frame.values,
-            "scenario": spec.scenario,
-            "drawn": dict(spec.drawn),
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
+        super().bind(input_names, output_names)
+        check_node(
+            self.experiment, self.client.description, (self.input_names, self.output_names), self.timing
+        )
+
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        self.episode += 1
+        self.sample, self.terminated = 0, False
+        frame = self.client.reset(self, dict(values), list(inputs or []))
+        self._time_s = frame.sim_time_ns / 1e9
+        return frame.values
+
+    def send(self, inputs: Sequence[float] | None) -> None:
+        if inputs is None:
+            raise ConfigError(f"{self.name}: a lockstep step needs input values")
+        self.client.send_action(self, self.episode, self.sample + 1, inputs)
+
+    def receive(self) -> FloatArray:
+        frame = self.client.wait(self)
+        self._time_s = frame.sim_time_ns / 1e9
+        self.sample += 1
+        if frame.kind == proto.ERROR:
+            detail, _, log = frame.message.partition(FMU_LOG_HEADER)
+            raise self.failure(
+                StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=self.sample, log=log.split("\n  ")
+            )
+        self.terminated = frame.terminated
+        return frame.values
+
+    def provenance(self) -> dict[str, str]:
+        d = self.client.description
+        return {
+            "fmu": str(d.get("model", {}).get("path", "")),
+            "fmu_sha256": d.get("fmu_sha256", ""),
             "node": self.node,
         }
-        return obs, info
 
-    def step(self, action: Any) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
-        self.send(action)
-        return self.receive()
-
-    def send(self, action: Any) -> None:
-        """First half of a step: map the action and send it (RemoteVecEnv sends to all nodes first)."""
-        if self._done:
-            raise BridgeError("step() called on a finished or never-reset episode: call reset() first")
-        inputs = self.task.action_to_inputs(action, self._sample, self.np_random)
-        self.client.send_action(self._episode, self._sample + 1, inputs)
-
-    def receive(self) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
-        """Second half of a step: wait for this node's outputs and compute the task's result."""
-        frame = self.client.wait()
-        self._sample += 1
-        info: dict[str, Any] = {"time_s": frame.sim_time_ns / 1e9, "step": self._sample}
-        if frame.kind == proto.ERROR:  # the FMU failed: the episode is truncated, the node lives on
-            self._done = True
-            obs = self.task.observer.observe(self.task._signals, self.task.applied_inputs, self.np_random)
-            info.update(reason="fmu-error", fmu_error=frame.message, outputs=np.zeros(len(self.output_names)))
-            return obs, 0.0, False, True, info
-        outputs = frame.values
-        obs, reward, terminated, truncated, reason = self.task.step_result(
-            outputs.tolist(), self._sample, frame.terminated, self.np_random
-        )
-        info["outputs"] = outputs
-        if terminated or truncated:
-            info["reason"] = reason
-            self._done = True
-        return obs, reward, terminated, truncated, info
+    def reset_info(self) -> dict[str, Any]:
+        return {"node": self.node}
 
     def close(self) -> None:
         client = getattr(self, "client", None)
         if client is not None:
             client.close()
+            self.client = None  # type: ignore[assignment]
         if getattr(self, "_own_session", False) and getattr(self, "_session", None) is not None:
             self._session.close()
             self._session = None

@@ -25,8 +25,10 @@ import gymnasium as gym
 import numpy as np
 
 from bridge.errors import ConfigError
+from bridge.plant.base import Plant
 from bridge.recording import cdr, meta
 from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
+from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
 STEP_TOPICS = [meta.ACTIONS, meta.AGENT_ACTION, meta.OBSERVATIONS, meta.REWARD, meta.OUTPUTS]
@@ -60,13 +62,13 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         overwrite: bool = False,
     ) -> None:
         super().__init__(env)
-        task = getattr(env.unwrapped, "task", None)
-        if task is None:
+        task, plant = getattr(env.unwrapped, "task", None), getattr(env.unwrapped, "plant", None)
+        if not isinstance(task, Task) or not isinstance(plant, Plant):
             raise ConfigError(
-                f"RecordMcap records fmu-bridge envs (FmuEnv, RemoteFmuEnv); {type(env.unwrapped).__name__} "
-                "has no .task to name its signals"
+                f"RecordMcap records fmu-bridge envs (a Task over a Plant: FmuEnv, RemoteFmuEnv); "
+                f"{type(env.unwrapped).__name__} has no .task and .plant to name its signals"
             )
-        self.task = task
+        self.task, self._plant = task, plant
         self._sampling_ns = round(task.timing.sampling_time_s * 1e9)
         obs_size = int(np.prod(env.observation_space.shape or (0,)))
         names = {
@@ -108,21 +110,15 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
     def _run_info(self, agent: str | None, seed: int | None) -> dict[str, Any]:
         env = self.env.unwrapped
         timing = self.task.timing
-        description = getattr(getattr(env, "client", None), "description", {})
-        fmu_path = getattr(env, "fmu_path", None)
-        if fmu_path is not None:
-            from bridge.fmu import sha256
-
-            checksum = sha256(Path(fmu_path))
-        else:
-            checksum = description.get("fmu_sha256", "")
+        origin = self._plant.provenance()
         return {
             "env": type(env).__name__,
-            "node": getattr(env, "node", "") or "",
+            "plant": self._plant.name,
+            "node": origin["node"],
             "agent": str(agent) if agent else "",
             "seed": "" if seed is None else str(seed),
-            "fmu": str(fmu_path or description.get("model", {}).get("path", "")),
-            "fmu_sha256": checksum,
+            "fmu": origin["fmu"],
+            "fmu_sha256": origin["fmu_sha256"],
             "step_size_s": timing.step_size_s,
             "sampling_time_s": timing.sampling_time_s,
             "start_time_s": timing.start_time_s,
@@ -152,7 +148,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             "time_s": info["time_s"],
             "drawn": drawn,
         }
-        spec = getattr(self.task, "episode", None)
+        spec = self.task.episode
         if spec is not None:
             event["values"] = spec.values
         w, ch, log = self.writer, self.channels, self._next_start_ns

@@ -2,7 +2,7 @@
 
 Action mapping, observations (selection, scaling, history, noise), rewards, termination and
 scenarios. Runs the same way over every plant and inside a deployed agent. May import the
-experiment and the model vocabulary (``bridge.plant.vocab``); never the FMU runtime, the env,
+experiment and the model vocabulary (``bridge.fmu.vocab``); never the FMU runtime, the env,
 the network or recording.
 """
 

@@ -23,11 +23,15 @@ import numpy.typing as npt
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
 from bridge.experiment.validate import Timing, action_bounds
-from bridge.plant.vocab import Variable
+from bridge.fmu.vocab import Variable
 from bridge.task.rewards import build_reward
 from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
 
 FloatArray = npt.NDArray[np.float64]
+
+
+class NonFiniteOutputs(BridgeError):
+    """The model returned NaN or infinite outputs (the env reports it as the plant's StepError)."""
 
 
 def load_callable(path: str, key: str) -> Callable[..., Any]:
@@ -194,10 +198,10 @@ class Task:
             raise self._bad_action(action, sample)
         return self._table_rows[index]
 
-    def _bad_output(self, outputs: list[float], sample: int) -> BridgeError:
+    def _bad_output(self, outputs: list[float], sample: int) -> NonFiniteOutputs:
         bad = [f"{n}={v}" for n, v in zip(self.output_names, outputs) if v - v != 0.0]
-        return BridgeError(
-            f"the FMU returned non-finite outputs {', '.join(bad)} at sample {sample}: the model diverged "
+        return NonFiniteOutputs(
+            f"non-finite outputs {', '.join(bad)} at sample {sample}: the model diverged "
             f"(check its parameters, the action bounds, or the step size {self.timing.step_size_s:g} s)"
         )
 
@@ -304,6 +308,12 @@ class Task:
         signals = self.fill_signals(outputs, 0)
         self.reward.reset()
         return self.observer.reset(signals, self._inputs, rng)
+
+    def observe(self, outputs: list[float], sample: int, rng: np.random.Generator) -> npt.NDArray[np.float32]:
+        """The observation for outputs at sample ``sample`` without a reward (a deployed agent)."""
+        if sample == 0:
+            return self.first_observation(outputs, rng)
+        return self.observer.observe(self.fill_signals(outputs, sample), self._inputs, rng)
 
     def step_result(
         self, outputs: list[float], sample: int, fmu_terminated: bool, rng: np.random.Generator

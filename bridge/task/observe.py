@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.experiment.config import ObservationSection
-from bridge.plant.vocab import Variable
+from bridge.fmu.vocab import Variable
 
 if TYPE_CHECKING:
     from bridge.task.core import Task

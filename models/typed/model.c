@@ -54,6 +54,26 @@ void model_event_update(FmuInstance* inst, FmuEventResult* ev) {
     (void)ev;   /* co-simulation only */
 }
 
+/* Test hooks for process isolation: what an unstable FMU from elsewhere may do. */
+static char* volatile leaked; /* escapes, so the compiler cannot drop the leaking allocation */
+
+static void misbehave(int kind) {
+    if (kind == 1) {
+        volatile int spin = 1;
+        while (spin) {
+        }
+    } else if (kind == 2) {
+        volatile int* volatile nowhere = NULL;
+        *nowhere = 1;
+    } else if (kind == 3) {
+        char* leak = malloc(1u << 20);
+        if (leak != NULL) {
+            memset(leak, 1, 1u << 20); /* touched, so it counts as resident memory */
+            leaked = leak;
+        }
+    }
+}
+
 FmuStatus model_do_step(FmuInstance* inst, double h) {
     ModelData* d = &inst->s.d;
     const double t_end = inst->s.time + h;
@@ -62,6 +82,9 @@ FmuStatus model_do_step(FmuInstance* inst, double h) {
         fmu_log_error(inst, "typed: fail_at_step reached: doStep call %d at t = %g s fails on purpose (test hook)",
                       (int)d->counter, inst->s.time);
         return FMU_ERROR;
+    }
+    if (d->fault_at_step >= 0 && d->counter >= d->fault_at_step) {
+        misbehave(d->fault_kind);
     }
     d->real_integral += d->real_in * h;
     if (!copy_inputs_to_outputs(d)) {

@@ -116,7 +116,7 @@ def test_scenario_trajectory_equals_fmpy_simulate_fmu() -> None:
     )
     with FmuEnv(experiment) as env:
         result = run(env, [np.array([0.5], dtype=np.float32)] * 200)
-        fmu = str(env.fmu_path)
+        fmu = str(env.plant.fmu_path)
     # Scenario inputs are held per agent sample, like actions. FMPy sets inputs at each of its
     # communication points (every 5 ms) from this table: 0 N.m up to 1.005 s, 0.3 N.m from 1.01 s,
     # which is what the env's step at 1.0075 s gives (no duplicate times: no FMPy input event).
@@ -335,7 +335,7 @@ def test_episode_and_state_hooks(tmp_path: Path) -> None:
         assert env.task.episode is not None and env.task.episode.values["J"] == 0.05
         for _ in range(10):
             _, _, _, _, _info = env.step(np.zeros(1, dtype=np.float32))
-        assert env.model.get(["load_torque"])["load_torque"] == 0.25
+        assert env.plant.model.get(["load_torque"])["load_torque"] == 0.25
 
 
 def test_render_modes() -> None:

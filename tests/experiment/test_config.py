@@ -10,9 +10,10 @@ import yaml
 
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
-from bridge.experiment.config import load_experiment, parse_experiment
+from bridge.experiment.config import Experiment, load_experiment, parse_experiment
 from bridge.experiment.examples import example_experiment, example_names
-from bridge.experiment.validate import check_experiment
+from bridge.experiment.validate import check_experiment, resolve_fmu
+from bridge.fmu import read_model_info
 
 
 def base(**overrides: Any) -> dict[str, Any]:
@@ -37,13 +38,17 @@ def write(tmp_path: Path, data: dict[str, Any]) -> Path:
     return path
 
 
+def check_with_fmu(experiment: Experiment) -> None:
+    check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
+
+
 def check(tmp_path: Path, data: dict[str, Any]) -> None:
-    check_experiment(load_experiment(write(tmp_path, data)))
+    check_with_fmu(load_experiment(write(tmp_path, data)))
 
 
 @pytest.mark.parametrize("name", example_names())
 def test_examples_are_valid(name: str) -> None:
-    check_experiment(load_experiment(example_experiment(name)))
+    check_with_fmu(load_experiment(example_experiment(name)))
 
 
 def test_variable_not_in_the_fmu(tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import threading
 import time
@@ -16,13 +17,13 @@ from conftest import Loopback, node_process
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from bridge.env import RemoteFmuEnv, RemoteVecEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import TransportError
+from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.experiment.config import parse_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
-from bridge.net.remote import RemoteFmuEnv, describe_nodes, list_nodes
-from bridge.net.vec import RemoteVecEnv
+from bridge.net.remote import describe_nodes, list_nodes
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -130,7 +131,19 @@ def test_random_bytes_are_counted_and_the_node_keeps_serving(loopback: Loopback)
             env.close()
 
 
-def test_fmu_error_truncates_the_episode_and_the_node_stays_up(loopback: Loopback, tmp_path: Path) -> None:
+def _failed_step(env: FmuEnv) -> StepError:
+    env.reset(seed=0, options={"scenario": "breaks"})
+    with pytest.raises(StepError) as caught:
+        for _ in range(3):
+            env.step(np.zeros(1, dtype=np.float32))
+    with pytest.raises(BridgeError, match="call reset"):
+        env.step(np.zeros(1, dtype=np.float32))  # the episode is over after a plant error
+    return caught.value
+
+
+def test_fmu_error_is_the_same_step_error_on_both_plants_and_the_node_stays_up(
+    loopback: Loopback, tmp_path: Path
+) -> None:
     experiment = tmp_path / "typed.yaml"
     experiment.write_text(
         "model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 5.0}\n"
@@ -140,21 +153,29 @@ def test_fmu_error_truncates_the_episode_and_the_node_stays_up(loopback: Loopbac
         "scenarios: {breaks: {parameters: {fail_at_step: 3}}, fine: {}}\n"
         "schedule: {mode: fixed}\n"
     )
+    with FmuEnv(experiment) as local:
+        in_process = _failed_step(local)
     with node_process(experiment, "typed", loopback) as process:
         env = RemoteFmuEnv(experiment, "typed", session=loopback.session, prefix=loopback.prefix)
         try:
-            env.reset(seed=0, options={"scenario": "breaks"})
-            results = [env.step(np.zeros(1, dtype=np.float32)) for _ in range(3)]
-            _, _, terminated, truncated, info = results[-1]
-            assert truncated and not terminated and info["reason"] == "fmu-error"
-            assert "fail_at_step reached" in info["fmu_error"]
-            _, info = env.reset(options={"scenario": "fine"})
+            remote = _failed_step(env)
+            env.reset(options={"scenario": "fine"})
             for _ in range(5):
                 env.step(np.zeros(1, dtype=np.float32))
             assert process.poll() is None
             assert _info(loopback, "typed")["counters"]["fmu_errors"] == 1
         finally:
             env.close()
+    for error, plant in ((in_process, r"FMU typed\S*\.fmu \(in-process\)"), (remote, "node 'typed'")):
+        assert re.match(
+            rf"{plant}: the model failed at step 3 of episode 1 \(t = 0\.[23] s\): .*"
+            r"; check the model's parameters.*\nFMU log.*fail_at_step reached",
+            str(error),
+            re.S,
+        ), str(error)
+        assert (error.step, error.episode) == (3, 1)
+    assert in_process.time_s == remote.time_s
+    assert "/" not in remote.detail.split("FMU log")[0], "an error reply names a local path"
 
 
 def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) -> None:
@@ -168,7 +189,7 @@ def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) 
             os.kill(process.pid, signal.SIGKILL)
             process.wait(timeout=10)
             start = time.monotonic()
-            with pytest.raises(TransportError, match=r"node 'victim' (died|did not answer)"):
+            with pytest.raises((PlantDied, StepTimeout), match=r"^node 'victim': (the plant died|no answer)"):
                 for _ in range(100):
                     env.step(np.zeros(1, dtype=np.float32))
             assert time.monotonic() - start < 4.0

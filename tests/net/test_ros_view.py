@@ -13,8 +13,8 @@ import pytest
 from conftest import Loopback, node_process
 from rosbags.typesys import Stores, get_typestore
 
+from bridge.env import RemoteFmuEnv
 from bridge.experiment.examples import example_experiment
-from bridge.net.remote import RemoteFmuEnv
 
 pytestmark = pytest.mark.integration
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from conftest import free_port
 
+from bridge.env import RemoteFmuEnv
 from bridge.errors import TransportError
 from bridge.experiment.examples import example_experiment
-from bridge.net.remote import RemoteFmuEnv
 from bridge.net.transport import ZenohOptions, open_session
 
 pytestmark = pytest.mark.integration

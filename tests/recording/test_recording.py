@@ -236,7 +236,7 @@ def test_events_metadata_and_attachment_describe_the_run(tmp_path: Path) -> None
     assert schemas[cdr.JOINT_STATE].data.decode() == cdr.schema_text(cdr.JOINT_STATE)
     run = meta["fmu_bridge"]
     assert (
-        run["fmu_sha256"] == sha256(fmu_env.fmu_path)
+        run["fmu_sha256"] == sha256(fmu_env.plant.fmu_path)
         and run["agent"] == "pd-controller"
         and run["seed"] == "100"
     )
@@ -373,7 +373,7 @@ def test_ctrl_c_finishes_the_file(tmp_path: Path) -> None:
 def test_record_node_gives_the_outputs_a_remote_env_received(loopback: Loopback, tmp_path: Path) -> None:
     """Two recordings of one remote run: the node's topics (``record --node``, a subprocess) and
     the RemoteFmuEnv itself wrapped in RecordMcap; both hold exactly what the env received."""
-    from bridge.net.remote import RemoteFmuEnv
+    from bridge.env import RemoteFmuEnv
 
     target, env_file = tmp_path / "node.mcap", tmp_path / "env.mcap"
     with node_process(CONTINUOUS, "cp", loopback):
@@ -398,7 +398,7 @@ def test_record_node_gives_the_outputs_a_remote_env_received(loopback: Loopback,
                     sent.append(list(env.task.applied_inputs))
                     if terminated or truncated:
                         break
-            description = remote.client.description
+            description = remote.plant.client.description
             env.close()
             time.sleep(0.3)
         finally:

@@ -3,7 +3,7 @@
 What a plant serves is described in these terms wherever the model runs: read from an FMU's
 modelDescription.xml in this process (``bridge.fmu.read_model_info``), or rebuilt from the JSON a
 node reports (``info_from_summary``). The task, the remote plant and the deployed agent use this
-module only, so none of them loads FMPy.
+module only, so none of them loads FMPy (``bridge.fmu`` loads its runtime lazily).
 """
 
 from __future__ import annotations

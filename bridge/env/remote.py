@@ -1,0 +1,40 @@
+"""``RemoteFmuEnv``: the one env over a node's model (a ``RemotePlant`` over Zenoh)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.net import protocol as proto
+from bridge.net.remote import RemotePlant
+from bridge.net.transport import ZenohOptions
+
+
+class RemoteFmuEnv(FmuEnv):
+    """``FmuEnv`` with the model in a node (lockstep over Zenoh).
+
+    Args:
+        experiment: the experiment (the same file the node was started with).
+        node: the node's name.
+        options: how to open a Zenoh session (ignored when ``session`` is given).
+        timeout_s: how long a step or reset may take before :class:`StepTimeout`.
+    """
+
+    def __init__(
+        self,
+        experiment: Experiment | str | Path,
+        node: str,
+        *,
+        options: ZenohOptions | None = None,
+        session: Any = None,
+        prefix: str = proto.DEFAULT_PREFIX,
+        timeout_s: float = 5.0,
+        version: str | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        exp = as_experiment(experiment, version)
+        plant = RemotePlant(exp, node, options=options, session=session, prefix=prefix, timeout_s=timeout_s)
+        super().__init__(exp, render_mode=render_mode, plant=plant)
+        self.node = node

@@ -1,0 +1,329 @@
+"""Vector envs over plants: stable-baselines3's VecEnv interface, plants stepping in parallel.
+
+``PlantVecEnv`` steps N ``FmuEnv`` (any plants): all actions go out first, then all results are
+gathered, so plants in other processes or nodes step in parallel and the trainer waits once per
+vector step. Episodes auto-reset exactly as SB3 expects: the last observation is in
+``infos[i]["terminal_observation"]`` and ``TimeLimit.truncated`` marks truncation.
+
+Errors (``PlantError``: a failed step, a timeout, a dead plant) either stop the run
+(``on_error="raise"``) or truncate that env's episode (``on_error="truncate"``, the error in
+``infos[i]["plant_error"]``) and reset it. ``RemoteVecEnv`` builds one over nodes found by name
+or pattern and, with ``replace_dead=True``, replaces a node that died or hung by a spare.
+
+bridge never imports stable-baselines3: this class implements the VecEnv interface and
+registers itself as a virtual subclass of SB3's ``VecEnv`` whenever SB3 is loaded, which is
+what SB3's ``isinstance`` checks need.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.env.fmu_env import FmuEnv
+from bridge.env.remote import RemoteFmuEnv
+from bridge.errors import ConfigError, PlantDied, PlantError, StepTimeout
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.net import protocol as proto
+from bridge.net.remote import list_nodes
+from bridge.net.transport import ZenohOptions, open_session
+
+_log = logging.getLogger(__name__)
+OnError = Literal["raise", "truncate"]
+Result = tuple[Any, float, bool, bool, dict[str, Any]]
+
+
+class PlantVecEnv:
+    """N envs stepped together, each over its own plant.
+
+    Args:
+        envs: the envs (they share the observation and action spaces); owned from then on.
+        on_error: ``"raise"`` (default) or ``"truncate"`` the episode of an env whose plant fails.
+    """
+
+    def __init__(self, envs: Sequence[FmuEnv], *, on_error: OnError = "raise") -> None:
+        _register_with_sb3()
+        if not envs:
+            raise ConfigError("a vector env needs at least one env")
+        if on_error not in ("raise", "truncate"):
+            raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
+        self.envs: list[FmuEnv] = list(envs)
+        self.on_error = on_error
+        self.num_envs = len(self.envs)
+        first = self.envs[0]
+        self.observation_space, self.action_space = first.observation_space, first.action_space
+        self.render_mode = None
+        self.metadata: dict[str, Any] = {"render_modes": []}
+        self._seeds: list[int | None] = [None] * self.num_envs
+        self._options: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        self.reset_infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        self._actions: Any = None
+        self._last_obs: list[npt.NDArray[np.float32]] = []
+
+    # -- VecEnv API ----------------------------------------------------------------------------------
+    def reset(self) -> npt.NDArray[np.float32]:
+        observations = []
+        for i in range(self.num_envs):
+            obs, self.reset_infos[i] = self._reset_one(i, self._seeds[i], self._options[i] or None)
+            observations.append(obs)
+        self._seeds = [None] * self.num_envs
+        self._options = [{} for _ in range(self.num_envs)]
+        self._last_obs = observations
+        return np.stack(observations)
+
+    def step_async(self, actions: Any) -> None:
+        self._actions = actions
+
+    def step_wait(
+        self,
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
+        actions = self._actions
+        failed: dict[int, PlantError] = {}
+        for i, env in enumerate(self.envs):  # all actions out first: the plants step in parallel
+            try:
+                env.send(actions[i])
+            except PlantError as exc:
+                failed[i] = exc
+        results: list[Any] = [None] * self.num_envs
+        for i, env in enumerate(self.envs):
+            if i not in failed:
+                try:
+                    results[i] = env.receive()
+                except PlantError as exc:
+                    failed[i] = exc
+        for i, error in failed.items():
+            results[i] = self._failed_result(i, error)
+        return self._collect(results)
+
+    def _failed_result(self, index: int, error: PlantError) -> Result:
+        info = self._recover(index, error)
+        info["plant_error"] = str(error)
+        return self._last_obs[index], 0.0, False, True, info
+
+    def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
+        """What to do about env ``index`` whose plant failed: raise, or go on (info entries)."""
+        if self.on_error == "raise":
+            raise error
+        _log.warning("env %d: episode truncated by a plant error: %s", index, error)
+        return {}
+
+    def _collect(self, results: list[Result]) -> tuple[Any, Any, Any, list[dict[str, Any]]]:
+        observations, rewards, dones, infos = [], [], [], []
+        for i, (last_obs, reward, terminated, truncated, info) in enumerate(results):
+            done = terminated or truncated
+            obs = last_obs
+            if done:
+                info["terminal_observation"] = last_obs
+                info["TimeLimit.truncated"] = truncated and not terminated
+                obs, self.reset_infos[i] = self._reset_one(i)
+            observations.append(obs)
+            rewards.append(reward)
+            dones.append(done)
+            infos.append(info)
+        self._last_obs = observations
+        return (
+            np.stack(observations),
+            np.asarray(rewards, dtype=np.float32),
+            np.asarray(dones, dtype=bool),
+            infos,
+        )
+
+    def _reset_one(
+        self, index: int, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        try:
+            return self.envs[index].reset(seed=seed, options=options)
+        except PlantError as exc:
+            info = self._recover(index, exc)
+            obs, reset_info = self.envs[index].reset(seed=seed, options=options)
+            return obs, {**reset_info, **info}
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, list[dict[str, Any]]]:
+        self.step_async(actions)
+        return self.step_wait()
+
+    def close(self) -> None:
+        for env in getattr(self, "envs", []):
+            env.close()
+        self.envs = []
+
+    def seed(self, seed: int | None = None) -> list[int | None]:
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        self._seeds = [seed + i for i in range(self.num_envs)]
+        return list(self._seeds)
+
+    def set_options(self, options: list[dict[str, Any]] | dict[str, Any] | None = None) -> None:
+        if options is None:
+            options = {}
+        self._options = list(options) if isinstance(options, list) else [dict(options) for _ in self.envs]
+
+    def _indices(self, indices: int | Iterable[int] | None) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        return [indices] if isinstance(indices, int) else list(indices)
+
+    def get_attr(self, attr_name: str, indices: int | Iterable[int] | None = None) -> list[Any]:
+        return [getattr(self.envs[i], attr_name) for i in self._indices(indices)]
+
+    def has_attr(self, attr_name: str) -> bool:
+        return hasattr(self.envs[0], attr_name)
+
+    def set_attr(self, attr_name: str, value: Any, indices: int | Iterable[int] | None = None) -> None:
+        for i in self._indices(indices):
+            setattr(self.envs[i], attr_name, value)
+
+    def env_method(
+        self, method_name: str, *args: Any, indices: int | Iterable[int] | None = None, **kwargs: Any
+    ) -> list[Any]:
+        return [getattr(self.envs[i], method_name)(*args, **kwargs) for i in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: int | Iterable[int] | None = None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+    def get_images(self) -> list[None]:
+        return [None for _ in self.envs]
+
+    def render(self, mode: str | None = None) -> None:
+        return None
+
+    @property
+    def unwrapped(self) -> PlantVecEnv:
+        return self
+
+    def getattr_recursive(self, name: str) -> Any:
+        return getattr(self, name)
+
+    def getattr_depth_check(self, name: str, already_found: bool) -> str | None:
+        return (
+            f"{type(self).__module__}.{type(self).__name__}"
+            if hasattr(self, name) and already_found
+            else None
+        )
+
+
+class RemoteVecEnv(PlantVecEnv):
+    """N remote envs stepped in parallel (one per node).
+
+    Args:
+        experiment: the experiment the nodes serve.
+        nodes: node names, or a glob pattern (``"worker-*"``) matched against live nodes.
+        n_envs: how many envs (default: every listed or matching node); extra matches are spares.
+        replace_dead: replace a node that died or stopped answering by a spare and truncate its
+            episode, instead of raising (needs ``nodes`` as a pattern).
+        on_error: what a failed model step does (``"raise"`` or ``"truncate"``); dead and hung
+            nodes follow ``replace_dead``.
+    """
+
+    def __init__(
+        self,
+        experiment: Experiment | str | Path,
+        nodes: Sequence[str] | str,
+        *,
+        n_envs: int | None = None,
+        options: ZenohOptions | None = None,
+        session: Any = None,
+        prefix: str = proto.DEFAULT_PREFIX,
+        timeout_s: float = 5.0,
+        replace_dead: bool = False,
+        on_error: OnError = "raise",
+        discovery_timeout_s: float = 10.0,
+    ) -> None:
+        self.experiment = as_experiment(experiment)
+        self._own_session = session is None
+        self._session = session if session is not None else open_session(options)
+        self._prefix, self._timeout_s, self.replace_dead = prefix, timeout_s, replace_dead
+        self._pattern = nodes if isinstance(nodes, str) else None
+        envs: list[FmuEnv] = []
+        try:
+            for name in self._discover(nodes, n_envs, discovery_timeout_s):
+                envs.append(self._connect(name))
+            super().__init__(envs, on_error=on_error)
+        except BaseException:
+            for env in envs:
+                env.close()
+            self._close_session()
+            raise
+
+    def _discover(self, nodes: Sequence[str] | str, n_envs: int | None, timeout_s: float) -> list[str]:
+        if not isinstance(nodes, str):
+            names = list(nodes)
+        else:  # nodes may still be starting: poll until enough are up or the timeout passes
+            deadline = time.monotonic() + timeout_s
+            while True:
+                names = list_nodes(self._session, prefix=self._prefix, pattern=nodes, timeout_s=1.0)
+                enough = len(names) >= n_envs if n_envs is not None else bool(names)
+                if enough or time.monotonic() > deadline:
+                    break
+                time.sleep(0.2)
+        wanted = n_envs or len(names)
+        if wanted < 1 or len(names) < wanted:
+            raise ConfigError(
+                f"RemoteVecEnv needs {wanted or 'at least one'} node(s) matching {nodes!r} under "
+                f"{self._prefix}/, found {names}; start them with `fmu-bridge node EXPERIMENT --name NAME`"
+            )
+        return names[:wanted]
+
+    def _connect(self, name: str) -> RemoteFmuEnv:
+        return RemoteFmuEnv(
+            self.experiment, name, session=self._session, prefix=self._prefix, timeout_s=self._timeout_s
+        )
+
+    def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
+        if isinstance(error, PlantDied | StepTimeout) and self.replace_dead:
+            old = self.envs[index]
+            assert isinstance(old, RemoteFmuEnv)
+            if self._replace(index, error):
+                return {
+                    "node_replaced": {"dead": old.node, "new": self.node_names[index], "error": str(error)}
+                }
+        return super()._recover(index, error)
+
+    @property
+    def node_names(self) -> list[str]:
+        return [env.node for env in self.envs if isinstance(env, RemoteFmuEnv)]
+
+    def _replace(self, index: int, error: PlantError) -> bool:
+        if self._pattern is None:
+            return False
+        in_use = set(self.node_names)
+        for name in list_nodes(self._session, prefix=self._prefix, pattern=self._pattern, timeout_s=1.0):
+            if name in in_use:
+                continue
+            try:
+                replacement = self._connect(name)
+            except PlantError:
+                continue
+            except ConfigError:
+                continue
+            old = self.envs[index]
+            _log.warning(
+                "replacing dead node %r by %r (env %d): %s", getattr(old, "node", "?"), name, index, error
+            )
+            old.close()
+            self.envs[index] = replacement
+            return True
+        raise error
+
+    def close(self) -> None:
+        super().close()
+        self._close_session()
+
+    def _close_session(self) -> None:
+        if getattr(self, "_own_session", False) and getattr(self, "_session", None) is not None:
+            self._session.close()
+            self._session = None
+
+
+def _register_with_sb3() -> None:
+    """Make ``isinstance(remote_vec_env, VecEnv)`` true in SB3, without importing SB3 here."""
+    module = sys.modules.get("stable_baselines3.common.vec_env.base_vec_env")
+    if module is not None:
+        module.VecEnv.register(PlantVecEnv)

@@ -1,0 +1,290 @@
+"""``IsolatedFmuPlant``: the FMU in a child process, behind a per-call deadline.
+
+An FMU is native code from someone else. In this process a segfault kills the trainer, an
+endless loop in ``doStep`` hangs it for good and a leak grows without bound. Here the FMU runs
+in a child process (a ``LocalFmuPlant`` there) and every reset and step waits at most
+``timeout_s``: a hung FMU becomes :class:`StepTimeout`, a crash :class:`PlantDied` naming the
+signal, and a child whose resident memory grows by more than ``memory_limit_mb`` after loading
+(a leak; checked every 32 samples) is stopped with :class:`PlantDied` saying so. With
+``restart=True`` the next ``reset()`` starts a fresh child, so a long training run survives an
+unstable FMU.
+
+Cost: one pipe round trip per sample (see ``benchmarks/bench_env.py --plant isolated``). Use it
+for untrusted or unstable FMUs; the in-process plant stays the default.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import multiprocessing as mp
+import os
+import signal
+from collections.abc import Mapping, Sequence
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+
+from bridge.errors import ConfigError, PlantDied, PlantError, StepError, StepTimeout
+from bridge.experiment.config import Experiment
+from bridge.experiment.validate import check_experiment, resolve_fmu, timing
+from bridge.fmu import read_model_info
+from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+
+_log = logging.getLogger(__name__)
+_START_TIMEOUT_S = 60.0  # loading an FMU (unpacking, instantiating) in a fresh interpreter
+
+
+class IsolatedFmuPlant(Plant):
+    """The experiment's FMU in a child process, every call bounded by ``timeout_s``.
+
+    Args:
+        experiment: the experiment (its ``model`` section, as for ``LocalFmuPlant``).
+        timeout_s: the longest a reset or one sample may take before :class:`StepTimeout`.
+        memory_limit_mb: resident memory the child may add after loading the FMU (None: no limit).
+        restart: start a fresh child at the next ``reset()`` after a hang or a crash.
+    """
+
+    can_set_values = True
+
+    def __init__(
+        self,
+        experiment: Experiment,
+        *,
+        timeout_s: float = 10.0,
+        memory_limit_mb: float | None = None,
+        restart: bool = True,
+    ) -> None:
+        if not timeout_s > 0:
+            raise ConfigError(f"timeout_s must be > 0 seconds, got {timeout_s}")
+        self.experiment = experiment
+        self.fmu_path = resolve_fmu(experiment)
+        self.info = check_experiment(experiment, read_model_info(self.fmu_path))
+        self.timing = timing(experiment, self.info)
+        self.name = f"FMU {self.fmu_path.name} (child process)"
+        self.timeout_s, self.memory_limit_mb, self.restart = timeout_s, memory_limit_mb, restart
+        self.restarts = 0
+        self._time_s = self.timing.start_time_s
+        self._process: Any = None
+        self._conn: Connection | None = None
+        self._broken: PlantError | None = None
+
+    # -- child life cycle ------------------------------------------------------------------------------
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
+        super().bind(input_names, output_names)
+        self._start()
+
+    def _start(self) -> None:
+        context = mp.get_context("spawn")  # no inherited threads or locks from this process
+        parent, child = context.Pipe()
+        args = (child, self.experiment, self.input_names, self.output_names)
+        self._process = context.Process(target=_serve, args=args, name="fmu-plant", daemon=True)
+        self._process.start()
+        child.close()
+        self._conn, self._broken = parent, None
+        try:
+            self._call(("hello",), timeout_s=_START_TIMEOUT_S, step=None)
+        except PlantDied as exc:
+            raise PlantDied(
+                f"{self.name}: the plant's process could not start ({exc.detail}); its error is "
+                "printed above. Run from a script file or a module: a child process imports the "
+                "main module again, which a program read from standard input cannot be",
+                plant=self.name,
+                detail=exc.detail,
+            ) from None
+        self._rss_start = _rss_bytes(self._process.pid)
+
+    def _stop(self) -> None:
+        process, conn = self._process, self._conn
+        self._process = self._conn = None
+        if conn is not None:
+            with contextlib.suppress(OSError):
+                conn.send(("close",))
+            conn.close()
+        if process is not None:
+            process.join(timeout=1.0)
+            if process.is_alive():
+                process.kill()
+                process.join(timeout=5.0)
+
+    def close(self) -> None:
+        self._stop()
+
+    # -- the plant interface ---------------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        if self._broken is not None or self._conn is None:
+            if not self.restart and self._broken is not None:
+                raise self._broken
+            self._stop()
+            self._start()
+            self.restarts += 1
+        self.episode += 1
+        self.sample, self.terminated = 0, False
+        return self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+
+    def send(self, inputs: Sequence[float] | None) -> None:
+        if self._broken is not None:
+            raise self._broken
+        assert self._conn is not None, "bind() first"
+        try:
+            self._conn.send(("step", None if inputs is None else list(inputs)))
+        except OSError:
+            raise self._died(self.sample + 1) from None
+
+    def receive(self) -> FloatArray:
+        outputs = self._answer(self.timeout_s, self.sample + 1)
+        self.sample += 1
+        if self.memory_limit_mb is not None and self.sample % 32 == 0:
+            self._check_memory()
+        return outputs
+
+    def _check_memory(self) -> None:
+        assert self.memory_limit_mb is not None and self._process is not None
+        grown_mb = (_rss_bytes(self._process.pid) - self._rss_start) / 2**20
+        if grown_mb > self.memory_limit_mb:
+            self._kill()
+            self._broken = self.failure(
+                PlantDied,
+                "the plant exceeded its memory limit",
+                f"its process grew by {grown_mb:.0f} MB since the FMU was loaded "
+                f"(memory_limit_mb = {self.memory_limit_mb:g}); the FMU leaks memory",
+                "its process was stopped" + ("; the next reset() starts a fresh one" if self.restart else ""),
+                step=self.sample,
+            )
+            raise self._broken
+
+    def set_values(self, values: Mapping[str, Any]) -> None:
+        self._call(("set", dict(values)), step=self.sample)
+
+    def provenance(self) -> dict[str, str]:
+        from bridge.fmu import sha256
+
+        return {"fmu": str(self.fmu_path), "fmu_sha256": sha256(self.fmu_path), "node": ""}
+
+    # -- messages ----------------------------------------------------------------------------------------
+    def _call(self, message: tuple[Any, ...], *, step: int | None, timeout_s: float | None = None) -> Any:
+        if self._conn is None:
+            raise self._died(step)
+        try:
+            self._conn.send(message)
+        except OSError:
+            raise self._died(step) from None
+        return self._answer(timeout_s or self.timeout_s, step)
+
+    def _answer(self, timeout_s: float, step: int | None) -> Any:
+        conn = self._conn
+        assert conn is not None
+        try:
+            ready = conn.poll(timeout_s)
+            reply = conn.recv() if ready else None
+        except (EOFError, OSError):
+            raise self._died(step) from None
+        if reply is None:
+            raise self._hung(step, timeout_s)
+        kind, *rest = reply
+        if kind == "ok":
+            outputs, self._time_s, self.terminated = rest
+            return outputs
+        if kind == "step_error":
+            detail, log, self._time_s = rest
+            raise self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, log=log)
+        raise rest[0]  # a BridgeError from the child (bad values, config): the plant lives on
+
+    def _hung(self, step: int | None, timeout_s: float) -> StepTimeout:
+        self._kill()
+        error = self.failure(
+            StepTimeout,
+            f"no answer within {timeout_s:g} s",
+            "the FMU is stuck in a call; its process was stopped",
+            "raise timeout_s if the model is just slow"
+            + ("; the next reset() starts a fresh process" if self.restart else ""),
+            step=step,
+            time_s=None,
+        )
+        self._broken = error
+        return error
+
+    def _died(self, step: int | None) -> PlantDied:
+        process = self._process
+        code = None
+        if process is not None:
+            process.join(timeout=2.0)
+            code = process.exitcode
+        self._kill()
+        if code is not None and code < 0:
+            cause = f"its process was killed by {signal.Signals(-code).name}"
+        else:
+            cause = f"its process exited with code {code}"
+        hint = "the FMU crashed (a segfault or an abort in its native code)"
+        if self.restart:
+            hint += "; the next reset() starts a fresh process"
+        error = self.failure(PlantDied, "the plant died", cause, hint, step=step, time_s=None)
+        self._broken = error
+        return error
+
+    def _kill(self) -> None:
+        process, conn = self._process, self._conn
+        self._process = self._conn = None
+        if process is not None and process.is_alive():
+            process.kill()
+            process.join(timeout=5.0)
+        if conn is not None:
+            conn.close()
+
+
+# -- the child process -------------------------------------------------------------------------------------
+def _serve(
+    conn: Connection,
+    experiment: Experiment,
+    input_names: Sequence[str],
+    output_names: Sequence[str],
+) -> None:
+    """The child's loop: one LocalFmuPlant, one message in, one reply out."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which stops us
+    from bridge.errors import BridgeError
+    from bridge.plant.local import LocalFmuPlant
+
+    plant = LocalFmuPlant(experiment)
+    plant.bind(input_names, output_names)
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):
+            break
+        op = message[0]
+        if op == "close":
+            break
+        try:
+            conn.send(_handle(plant, op, message[1:]))
+        except StepError as exc:
+            conn.send(("step_error", exc.detail, exc.log, plant.time_s))
+        except BridgeError as exc:
+            conn.send(("error", exc))
+    plant.close()
+
+
+def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
+    if op == "step":
+        outputs = plant.step(args[0])
+    elif op == "reset":
+        outputs = plant.reset(args[0], args[1])
+    elif op == "set":
+        plant.set_values(args[0])
+        outputs = np.zeros(0)
+    else:  # "hello"
+        outputs = np.zeros(0)
+    return ("ok", outputs, plant.time_s, plant.terminated)
+
+
+def _rss_bytes(pid: int) -> int:
+    """Resident memory of process ``pid`` (Linux /proc)."""
+    try:
+        with open(f"/proc/{pid}/statm") as statm:
+            return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, IndexError, ValueError):
+        return 0
