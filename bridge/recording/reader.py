@@ -122,19 +122,34 @@ def _episodes(events: list[dict[str, Any]]) -> list[Episode]:
             end = event if kind == "episode_end" else {}
             found.append(
                 Episode(
-                    index=int(start.get("episode", len(found))),
+                    index=_typed(start.get("episode", len(found)), int, len(found)),
                     start_ns=int(start["log_ns"]),
                     end_ns=end.get("log_ns"),
-                    scenario=start.get("scenario"),
-                    seed=start.get("seed"),
-                    steps=end.get("steps"),
-                    episode_return=end.get("return"),
-                    reason=end.get("reason"),
-                    drawn=dict(start.get("drawn") or {}),
+                    scenario=_typed(start.get("scenario"), str),
+                    seed=_typed(start.get("seed"), int),
+                    steps=_typed(end.get("steps"), int),
+                    episode_return=_typed(end.get("return"), float),
+                    reason=_typed(end.get("reason"), str),
+                    drawn=_drawn(start.get("drawn")),
                 )
             )
         start = event if kind == "episode_start" and "log_ns" in event else None
     return found
+
+
+def _typed(value: Any, kind: type[Any], default: Any = None) -> Any:
+    """``value`` if it has the JSON type ``kind`` (an int passes as a float), else ``default``."""
+    if isinstance(value, bool):
+        return default
+    if kind is float and isinstance(value, int):
+        return float(value)
+    return value if isinstance(value, kind) else default
+
+
+def _drawn(value: Any) -> dict[str, float]:
+    if not isinstance(value, dict):
+        return {}
+    return {str(k): float(v) for k, v in value.items() if _typed(v, float) is not None}
 
 
 @dataclass
@@ -185,8 +200,16 @@ def read_recording(path: str | Path, limits: scan.Limits | None = None) -> Recor
     series = _series(reading, raw, channels, schemas)
     counts = {topic: len(s) for topic, s in series.items()}
     return Recording(
-        path, reading.complete, header.profile, header.library, series, metadata, attachments, counts,
-        problems=reading.problems, problem_count=reading.problem_count,
+        path,
+        reading.complete,
+        header.profile,
+        header.library,
+        series,
+        metadata,
+        attachments,
+        counts,
+        problems=reading.problems,
+        problem_count=reading.problem_count,
     )
 
 
@@ -196,14 +219,16 @@ def _series(
     series: dict[str, Series] = {}
     for channel_id, messages in raw.items():
         if channel_id not in channels:
-            reading.problem(f"skipped {len(messages.data)} message(s) of channel {channel_id}, which is not defined")
+            reading.problem(
+                f"skipped {len(messages.data)} message(s) of channel {channel_id}, which is not defined"
+            )
             continue
         topic, schema_id = channels[channel_id]
         if topic in series:
             reading.problem(f"skipped {len(messages.data)} message(s) of a second channel named {topic!r}")
             continue
         series[topic] = _decode(reading, topic, schemas.get(schema_id, ""), messages)
-    for channel_id, (topic, schema_id) in channels.items():
+    for topic, schema_id in channels.values():
         series.setdefault(topic, _decode(reading, topic, schemas.get(schema_id, ""), _Raw()))
     return series
 
@@ -215,6 +240,13 @@ def _decode(reading: scan.Scan, topic: str, msgtype: str, raw: _Raw) -> Series:
         _log.info("channel %s has type %s, which fmu-bridge does not decode", topic, msgtype)
         log_ns = np.array(raw.log_ns, dtype=np.int64)
         return Series(topic, msgtype, [], log_ns, log_ns, np.zeros(0))
+    if msgtype == cdr.JOINT_STATE:
+        try:  # the common case: every message decodes (in one numpy call for a fixed layout)
+            names, stamps, values = cdr.decode_joint_states(raw.data)
+            log_ns = np.array(raw.log_ns, dtype=np.int64)
+            return Series(topic, msgtype, names, log_ns, stamps, values)
+        except BridgeError:
+            pass
     keep = []
     for i, payload in enumerate(raw.data):
         try:
@@ -223,7 +255,9 @@ def _decode(reading: scan.Scan, topic: str, msgtype: str, raw: _Raw) -> Series:
             continue
         keep.append(i)
     if len(keep) < len(raw.data):
-        reading.problem(f"skipped {len(raw.data) - len(keep)} message(s) of {topic} that are not valid {msgtype}")
+        reading.problem(
+            f"skipped {len(raw.data) - len(keep)} message(s) of {topic} that are not valid {msgtype}"
+        )
     data = [raw.data[i] for i in keep]
     log_ns = np.array([raw.log_ns[i] for i in keep], dtype=np.int64)
     if msgtype == cdr.JOINT_STATE:
@@ -258,7 +292,11 @@ class Recovered:
 
 
 def recover(
-    part: str | Path, output: str | Path | None = None, *, overwrite: bool = False, limits: scan.Limits | None = None
+    part: str | Path,
+    output: str | Path | None = None,
+    *,
+    overwrite: bool = False,
+    limits: scan.Limits | None = None,
 ) -> Path:
     """Rewrite everything readable in an unfinished recording into a valid ``.mcap``; returns its path.
 
@@ -268,7 +306,11 @@ def recover(
 
 
 def recover_file(
-    part: str | Path, output: str | Path | None = None, *, overwrite: bool = False, limits: scan.Limits | None = None
+    part: str | Path,
+    output: str | Path | None = None,
+    *,
+    overwrite: bool = False,
+    limits: scan.Limits | None = None,
 ) -> Recovered:
     """Rewrite everything readable in an unfinished or damaged recording into a valid ``.mcap``.
 
@@ -285,12 +327,11 @@ def recover_file(
     source = Path(part)
     target = Path(output) if output is not None else recovered_name(source)
     _check_recover_paths(source, target, overwrite)
-    schemas, channels = _definitions(source, limits)
+    first, schemas, channels = _definitions(source, limits)
+    if first is None:
+        raise scan.RecordingError(f"{source} holds no readable MCAP header: nothing to recover")
     reading = scan.Scan(source, limits)
     records = reading.records()
-    first = next(records, None)
-    if not isinstance(first, scan.Header):
-        raise scan.RecordingError(f"{source} does not start with an MCAP header: nothing to recover")
     work = target.with_name(f".{target.name}.{os.getpid()}.recovering")
     writer = McapWriter(target, profile=first.profile, library=first.library, work_path=work, overwrite=True)
     try:
@@ -311,15 +352,19 @@ def _check_recover_paths(source: Path, target: Path, overwrite: bool) -> None:
     if not source.is_file():
         raise scan.RecordingError(f"no file to recover at {source}")
     if target.resolve() == source.resolve() or (target.exists() and os.path.samefile(target, source)):
-        raise scan.RecordingError(f"recover {source}: give an output name other than the input (e.g. NAME.mcap)")
+        raise scan.RecordingError(
+            f"recover {source}: give an output name other than the input (e.g. NAME.mcap)"
+        )
     if target.exists() and not overwrite:
         raise scan.RecordingError(f"{target} exists; pass --force to overwrite it")
 
 
 def _definitions(
     source: Path, limits: scan.Limits | None
-) -> tuple[dict[int, scan.Schema], dict[int, scan.Channel]]:
-    """Every readable schema and channel (a first pass: the summary may define what a lost chunk did)."""
+) -> tuple[scan.Header | None, dict[int, scan.Schema], dict[int, scan.Channel]]:
+    """The header and every readable schema and channel (a first pass: the summary may define what a
+    lost chunk did)."""
+    header = None
     schemas: dict[int, scan.Schema] = {}
     channels: dict[int, scan.Channel] = {}
     for record in scan.Scan(source, limits).records():
@@ -327,7 +372,9 @@ def _definitions(
             schemas.setdefault(record.id, record)
         elif isinstance(record, scan.Channel):
             channels.setdefault(record.id, record)
-    return schemas, channels
+        elif isinstance(record, scan.Header) and header is None:
+            header = record
+    return header, schemas, channels
 
 
 def _copy(
@@ -359,7 +406,11 @@ def _copy(
             writer.add_metadata(record.name, record.metadata)
         elif isinstance(record, scan.Attachment):
             writer.add_attachment(
-                record.name, record.media_type, record.data, log_time=record.log_time, create_time=record.create_time
+                record.name,
+                record.media_type,
+                record.data,
+                log_time=record.log_time,
+                create_time=record.create_time,
             )
     if orphans:
         reading.problem(f"left out {orphans} message(s) of channels that are not defined")

@@ -47,9 +47,9 @@ class Limits:
     """
 
     record_bytes: int = 256 * _MIB
-    chunk_bytes: int = 64 * _MIB
-    inflate_floor: int = 256 * _MIB
-    inflate_ratio: int = 100
+    chunk_bytes: int = 32 * _MIB
+    inflate_floor: int = 64 * _MIB
+    inflate_ratio: int = 200
 
     def inflate_budget(self, file_size: int) -> int:
         return max(self.inflate_floor, self.inflate_ratio * file_size)
@@ -245,16 +245,16 @@ class Scan:
             if opcode == rec.FOOTER:
                 self._footer(content, prefix, summary_crc, stream)
                 return
-            if summary_crc is None:
+            if opcode == rec.DATA_END and summary_crc is None:
+                self._data_end(content, data_crc, pos)
+                summary_crc = 0
+            elif summary_crc is None:
                 data_crc = zlib.crc32(content, zlib.crc32(prefix, data_crc))
             else:
                 summary_crc = zlib.crc32(content, zlib.crc32(prefix, summary_crc))
-            if opcode == rec.DATA_END:
-                self._data_end(content, data_crc, pos)
-                summary_crc = 0
-            elif opcode == rec.CHUNK:
+            if opcode == rec.CHUNK:
                 yield from self._chunk(content, pos, size)
-            elif summary_crc is None or opcode in (rec.SCHEMA, rec.CHANNEL):
+            elif opcode != rec.DATA_END and (summary_crc is None or opcode in (rec.SCHEMA, rec.CHANNEL)):
                 yield from self._one(opcode, content, pos)
             pos += len(prefix) + length
 
@@ -375,5 +375,6 @@ def _decompress(compression: str, data: bytes, declared: int) -> bytes:
     except Exception as exc:  # zstandard.ZstdError, lz4's RuntimeError: the data are corrupt
         raise _Corrupt(f"{compression} data are corrupt ({type(exc).__name__}: {exc})") from exc
     if len(out) != declared:
-        raise _Corrupt(f"it declares {declared} uncompressed bytes, decompression gave {len(out)}{'+' * (len(out) > declared)}")
+        more = "+" if len(out) > declared else ""
+        raise _Corrupt(f"it declares {declared} uncompressed bytes, decompression gave {len(out)}{more}")
     return bytes(out)
