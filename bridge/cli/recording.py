@@ -71,7 +71,10 @@ def record(
     finally:
         session.close()
     frames = ", ".join(f"{n} {t}" for t, n in stats.frames.items()) or "no frames"
-    console.print(f"wrote {path}: {frames}, {stats.episodes} episode(s), {stats.malformed} malformed")
+    console.print(
+        f"wrote {path}: {frames}, {stats.episodes} episode(s), "
+        f"{stats.malformed} malformed and {stats.unplaced} unplaceable frame(s) skipped"
+    )
 
 
 def replay_cmd(

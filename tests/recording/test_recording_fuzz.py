@@ -25,6 +25,7 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from conftest import Loopback, node_process
 from typer.testing import CliRunner
 
 from bridge.cli.main import _load_plugins, app
@@ -387,3 +388,47 @@ def test_counts_are_written() -> None:
         assert counts["tracebacks"] == 0
         assert counts["corruptions"] == CORRUPTIONS
         assert zlib.crc32(COUNTS.read_bytes())  # written and not empty
+
+
+# -- the node recorder --------------------------------------------------------------------------------
+@pytest.mark.integration
+def test_the_node_recorder_counts_and_skips_frames_it_cannot_place(
+    loopback: Loopback, tmp_path: Path
+) -> None:
+    """Frames whose time or step no recording can hold are skipped and counted; the frames around
+    them are recorded exactly (read back by rosbags)."""
+    from bridge.net import protocol as proto
+    from bridge.recording.node_recorder import NodeRecorder
+
+    path = tmp_path / "node.mcap"
+    hostile = [
+        (proto.OUTPUTS, 1, 3, 2**63 - 1),
+        (proto.OUTPUTS, 1, 4, -(2**63)),
+        (proto.ACTION, 1, 2**62, 0),
+        (proto.ACTION, 1, 2**63 - 1, 0),
+        (proto.OUTPUTS, 1, 5, 2**31 * 10**9),
+    ]
+    with node_process(example_experiment("cartpole_continuous"), "hostile", loopback):
+        recorder = NodeRecorder(loopback.session, "hostile", path, prefix=loopback.prefix, timeout_s=30)
+        size = len(recorder.description["output_names"])
+        good = [(k, [float(k)] * size) for k in range(1, 4)]
+        for k, values in good[:2]:
+            recorder.handle("outputs", proto.encode_values(proto.OUTPUTS, 1, k, k * 20_000_000, values))
+        for kind, episode, step, sim_ns in hostile:
+            n = size if kind == proto.OUTPUTS else len(recorder.description["input_names"])
+            recorder.handle("outputs", proto.encode_values(kind, episode, step, sim_ns, [0.0] * n))
+        k, values = good[2]
+        recorder.handle("outputs", proto.encode_values(proto.OUTPUTS, 1, k, k * 20_000_000, values))
+        stats = recorder.stats
+        recorder.close()
+    assert stats.unplaced == len(hostile) and stats.malformed == 0
+    from rosbags.highlevel import AnyReader
+
+    with AnyReader([path]) as reader:
+        found = [
+            (reader.deserialize(raw, c.msgtype).position.tolist(), log_ns)
+            for c, log_ns, raw in reader.messages()
+            if c.topic == meta.OUTPUTS
+        ]
+    assert [v for v, _ in found] == [v for _, v in good]
+    assert [t for _, t in found] == [k * 20_000_000 for k, _ in good]  # episode 1 starts at 0
