@@ -25,7 +25,8 @@ import gymnasium as gym
 import numpy as np
 
 from bridge.errors import ConfigError
-from bridge.recording import cdr, meta
+from bridge.net.ros2 import cdr
+from bridge.recording import meta
 from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
 
 _log = logging.getLogger(__name__)

@@ -33,7 +33,7 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 from bridge.recording.writer import McapWriter
 
 OBSERVATIONS = "/observations"

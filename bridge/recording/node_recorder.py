@@ -22,7 +22,8 @@ from typing import Any
 
 from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
-from bridge.recording import cdr, meta
+from bridge.net.ros2 import cdr
+from bridge.recording import meta
 from bridge.recording.writer import McapWriter
 
 _log = logging.getLogger(__name__)

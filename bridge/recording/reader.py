@@ -22,7 +22,8 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError
-from bridge.recording import cdr, scan
+from bridge.net.ros2 import cdr
+from bridge.recording import scan
 from bridge.recording.writer import PART_SUFFIX, McapWriter
 
 _log = logging.getLogger(__name__)

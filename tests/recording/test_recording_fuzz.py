@@ -32,7 +32,8 @@ from bridge.cli.main import _load_plugins, app
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import BridgeError
 from bridge.experiment.examples import example_experiment
-from bridge.recording import cdr, meta
+from bridge.net.ros2 import cdr
+from bridge.recording import meta
 from bridge.recording import records as rec
 from bridge.recording.env_recorder import record_env
 from bridge.recording.export import describe, export_csv
@@ -392,9 +393,7 @@ def test_counts_are_written() -> None:
 
 # -- the node recorder --------------------------------------------------------------------------------
 @pytest.mark.integration
-def test_the_node_recorder_counts_and_skips_frames_it_cannot_place(
-    loopback: Loopback, tmp_path: Path
-) -> None:
+def test_node_recorder_counts_and_skips_frames_it_cannot_place(loopback: Loopback, tmp_path: Path) -> None:
     """Frames whose time or step no recording can hold are skipped and counted; the frames around
     them are recorded exactly (read back by rosbags)."""
     from bridge.net import protocol as proto
