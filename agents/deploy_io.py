@@ -12,8 +12,8 @@ from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_exper
 from agents.policies import Sb3Policy
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
+from bridge.net.ros2 import cdr
 from bridge.net.transport import ZenohOptions, open_session, undeclare
-from bridge.recording import cdr
 
 _log = logging.getLogger(__name__)
 

@@ -71,7 +71,10 @@ def record(
     finally:
         session.close()
     frames = ", ".join(f"{n} {t}" for t, n in stats.frames.items()) or "no frames"
-    console.print(f"wrote {path}: {frames}, {stats.episodes} episode(s), {stats.malformed} malformed")
+    console.print(
+        f"wrote {path}: {frames}, {stats.episodes} episode(s), "
+        f"{stats.malformed} malformed and {stats.unplaced} unplaceable frame(s) skipped"
+    )
 
 
 def replay_cmd(
@@ -124,7 +127,8 @@ def info(
     from bridge.recording.export import describe
     from bridge.recording.reader import read_recording
 
-    summary = describe(read_recording(recording))
+    data = read_recording(recording)
+    summary = describe(data)
     if as_json:
         sys.stdout.write(json.dumps(summary, indent=2, default=str) + "\n")
         return
@@ -140,6 +144,20 @@ def info(
     console.print(channels)
     _episodes_table(summary["episodes"])
     _metadata_table(summary["metadata"], summary["attachments"])
+    _warn_skipped(data.problems, data.problem_count)
+
+
+def _warn_skipped(problems: list[str], count: int) -> None:
+    """What a damaged recording's reader had to skip, on stderr."""
+    if not count:
+        return
+    err_console.print(
+        f"[yellow]warning: {count} part(s) of the file could not be read and were skipped:[/yellow]"
+    )
+    for text in problems:
+        err_console.print(f"  {escape(text)}", highlight=False)
+    if count > len(problems):
+        err_console.print(f"  ... and {count - len(problems)} more", highlight=False)
 
 
 def _episodes_table(episodes: list[dict[str, Any]]) -> None:
@@ -185,6 +203,7 @@ def export(
     if csv is None and parquet is None:
         raise BridgeError("export: give --csv DIR and/or --parquet DIR")
     data = read_recording(recording)
+    _warn_skipped(data.problems, data.problem_count)
     written = (export_csv(data, csv) if csv else []) + (export_parquet(data, parquet) if parquet else [])
     for path in written:
         console.print(f"wrote {path}")
@@ -198,12 +217,11 @@ def recover(
     force: Annotated[bool, typer.Option("--force", help="Overwrite the output.")] = False,
 ) -> None:
     """Rewrite everything readable in an unfinished recording into a valid MCAP file."""
-    from bridge.recording.reader import read_recording
-    from bridge.recording.reader import recover as rewrite
+    from bridge.recording.reader import recover_file
 
-    path = rewrite(part, output, overwrite=force)
-    counts = read_recording(path).message_counts
-    console.print(f"wrote {path}: {sum(counts.values())} messages")
+    result = recover_file(part, output, overwrite=force)
+    _warn_skipped(result.problems, result.problem_count)
+    console.print(f"wrote {result.path}: {result.messages} messages")
 
 
 def register(app: typer.Typer) -> None:

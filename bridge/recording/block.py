@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 from bridge.recording import records as rec
 
 IndexEntries = list[tuple[int, npt.NDArray[np.uint64]]]  # channel, (n, 2) array of (log time, offset)

@@ -25,8 +25,9 @@ import gymnasium as gym
 import numpy as np
 
 from bridge.errors import ConfigError
+from bridge.net.ros2 import cdr
 from bridge.plant.base import Plant
-from bridge.recording import cdr, meta
+from bridge.recording import meta
 from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
 from bridge.task.core import Task
 
@@ -96,7 +97,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self._obs_dtype = np.dtype(np.float32)
         self._episode = -1
         self._in_episode = False
-        self._next_start_ns = 0  # recording clock at which the next episode starts
+        self._clock = meta.RecordingClock(self._sampling_ns)
         self._offset = 0  # recording clock - simulation time, in this episode
         self._t_prev = 0  # simulation time of the last recorded sample, ns
         self._steps = 0
@@ -134,7 +135,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         obs, info = self.env.reset(seed=seed, options=options)
         self._episode += 1
         t_ns = round(info["time_s"] * 1e9)
-        self._offset = self._next_start_ns - t_ns
+        self._offset = self._clock.begin(t_ns).offset_ns
         self._t_prev = t_ns
         self._obs_dtype = np.asarray(obs).dtype
         self._in_episode, self._steps, self._return = True, 0, 0.0
@@ -151,7 +152,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         spec = self.task.episode
         if spec is not None:
             event["values"] = spec.values
-        w, ch, log = self.writer, self.channels, self._next_start_ns
+        w, ch, log = self.writer, self.channels, self._clock.next_start_ns
         w.add_message(ch[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
         w.add_message(ch[meta.SCENARIO], log, cdr.encode_joint_state(t_ns, list(drawn), list(drawn.values())))
         for topic, values in ((meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])):
@@ -218,7 +219,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self.writer.add_message(self.channels[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
         self.episodes.append(event)
         self._in_episode = False
-        self._next_start_ns = log + self._sampling_ns
+        self._clock.end(log)
         self.writer.flush()
 
     def close(self) -> None:

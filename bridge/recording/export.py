@@ -11,6 +11,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -37,9 +38,12 @@ def timing(recording: Recording) -> tuple[float, float]:
     """(start_time_s, sampling_time_s) of the recorded experiment (0, 0 if unknown)."""
     run = recording.metadata.get("fmu_bridge", {})
     try:
-        return float(run.get("start_time_s", 0.0)), float(run.get("sampling_time_s", 0.0))
+        start, sampling = float(run.get("start_time_s", 0.0)), float(run.get("sampling_time_s", 0.0))
     except ValueError:
         return 0.0, 0.0
+    if not (math.isfinite(start) and math.isfinite(sampling) and sampling >= 0):
+        return 0.0, 0.0
+    return start, sampling
 
 
 def steps_of(recording: Recording, series: Series) -> npt.NDArray[np.int64]:
@@ -133,6 +137,7 @@ def describe(recording: Recording) -> dict[str, Any]:
     return {
         "path": str(recording.path),
         "complete": recording.complete,
+        "problems": recording.problems,
         "profile": recording.profile,
         "library": recording.library,
         "start_ns": start,

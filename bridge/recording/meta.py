@@ -33,7 +33,7 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 from bridge.recording.writer import McapWriter
 
 OBSERVATIONS = "/observations"
@@ -67,6 +67,43 @@ PACKAGES = (
     "stable-baselines3",
     "torch",
 )
+
+
+INT64_MAX = (1 << 63) - 1
+
+
+@dataclass
+class EpisodeClock:
+    """One episode on the recording clock: ``log time = simulation time + offset_ns``."""
+
+    offset_ns: int
+    last_ns: int  # the latest log time written in the episode
+
+    def place(self, sim_time_ns: int) -> int | None:
+        """The log time of ``sim_time_ns``, or None if it falls outside ``0 .. 2^63-1``."""
+        log = sim_time_ns + self.offset_ns
+        if not 0 <= log <= INT64_MAX:
+            return None
+        self.last_ns = max(self.last_ns, log)
+        return log
+
+
+class RecordingClock:
+    """The recording clock (see the module docstring), shared by every recorder.
+
+    ``begin(sim_time_ns)`` starts an episode one sampling period after the previous one ended
+    (at 0 for the first); ``end(last_ns)`` closes one whose latest log time was ``last_ns``.
+    """
+
+    def __init__(self, sampling_ns: int) -> None:
+        self.sampling_ns = sampling_ns
+        self.next_start_ns = 0
+
+    def begin(self, sim_time_ns: int) -> EpisodeClock:
+        return EpisodeClock(offset_ns=self.next_start_ns - sim_time_ns, last_ns=self.next_start_ns)
+
+    def end(self, last_ns: int) -> None:
+        self.next_start_ns = max(self.next_start_ns, last_ns + self.sampling_ns)
 
 
 def observation_names(task: Any, size: int) -> list[str]:

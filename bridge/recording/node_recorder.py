@@ -22,11 +22,13 @@ from typing import Any
 
 from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
-from bridge.recording import cdr, meta
+from bridge.net.ros2 import cdr
+from bridge.recording import meta
 from bridge.recording.writer import McapWriter
 
 _log = logging.getLogger(__name__)
 TOPICS = ("outputs", "actions")
+_MAX_STAMP_NS = (1 << 31) * 1_000_000_000  # builtin_interfaces/Time holds int32 seconds
 
 
 def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, Any]:
@@ -47,15 +49,18 @@ def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, An
 
 @dataclass
 class _Episode:
-    offset: int  # recording clock - simulation time
-    last_log: int
+    clock: meta.EpisodeClock
     last_step: int = 0
 
 
 @dataclass
 class RecordStats:
+    """Frames received per topic; malformed ones (not decodable, wrong size) and unplaced ones
+    (well-formed, but their time or step lies outside what a recording can hold) were skipped."""
+
     frames: dict[str, int] = field(default_factory=dict)
     malformed: int = 0
+    unplaced: int = 0
     episodes: int = 0
 
 
@@ -88,7 +93,7 @@ class NodeRecorder:
         meta.write_run_metadata(self.writer, self._run_info())
         self.stats = RecordStats()
         self._episodes: dict[int, _Episode] = {}
-        self._next_start = 0
+        self._clock = meta.RecordingClock(self._sampling_ns)
         self._frames: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
         self._stop = threading.Event()
         self._declared = [
@@ -152,23 +157,28 @@ class NodeRecorder:
         if frame.kind in (proto.ERROR, proto.REJECT):
             kind = "fmu_error" if frame.kind == proto.ERROR else "reject"
             event = {"event": kind, "episode": frame.episode, "step": frame.step, "message": frame.message}
-            self._event(event, episode.last_log)
+            self._event(event, episode.clock.last_ns)
             return
         if frame.kind == proto.ACTION:
             stamp = self._start_ns + max(frame.step - 1, 0) * self._sampling_ns
             self._write(meta.ACTIONS, stamp, episode, frame)
-        elif frame.kind == proto.OUTPUTS:
+        elif frame.kind == proto.OUTPUTS and self._write(meta.OUTPUTS, frame.sim_time_ns, episode, frame):
             episode.last_step = max(episode.last_step, frame.step)
-            self._write(meta.OUTPUTS, frame.sim_time_ns, episode, frame)
 
-    def _write(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> None:
-        layout = self._layouts[topic]
+    def _write(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> bool:
+        layout = self._layouts.get(topic)
+        if layout is None:
+            return False
         if frame.values.size != len(layout.names):
             self.stats.malformed += 1
-            return
-        log = max(stamp_ns + episode.offset, 0)
-        episode.last_log = max(episode.last_log, log)
+            return False
+        log = episode.clock.place(stamp_ns) if abs(stamp_ns) < _MAX_STAMP_NS else None
+        if log is None:  # a header stamp holds int32 seconds; a log time is 0 .. 2^63-1 ns
+            self.stats.unplaced += 1
+            _log.debug("skipped a frame of episode %d at %d ns: it cannot be placed", frame.episode, stamp_ns)
+            return False
         self.writer.add_message(self.channels[topic], log, layout.pack(stamp_ns, frame.values.tolist()))
+        return True
 
     def _episode(self, number: int) -> _Episode:
         found = self._episodes.get(number)
@@ -176,18 +186,18 @@ class NodeRecorder:
             return found
         if self._episodes:
             self._end_all()
-        start = self._next_start
-        self._episodes[number] = found = _Episode(offset=start - self._start_ns, last_log=start)
+        self._episodes[number] = found = _Episode(self._clock.begin(self._start_ns))
         self.stats.episodes += 1
+        start = found.clock.last_ns
         self._event({"event": "episode_start", "episode": number, "time_s": self._start_ns / 1e9}, start)
         return found
 
     def _end_all(self) -> None:
         """End the open episode (a new one began, or the recording stops)."""
-        number, episode = max(self._episodes.items(), key=lambda item: item[1].last_log)
+        number, episode = max(self._episodes.items(), key=lambda item: item[1].clock.last_ns)
         event = {"event": "episode_end", "episode": number, "steps": episode.last_step, "reason": None}
-        self._event(event, episode.last_log)
-        self._next_start = max(e.last_log for e in self._episodes.values()) + self._sampling_ns
+        self._event(event, episode.clock.last_ns)
+        self._clock.end(max(e.clock.last_ns for e in self._episodes.values()))
         self.writer.flush()
 
     def _event(self, event: dict[str, Any], log: int) -> None:

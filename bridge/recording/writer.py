@@ -236,11 +236,25 @@ class McapWriter:
             self._write_summary()
             self._file.flush()
             os.fsync(self._file.fileno())
-        finally:
             self._file.close()
-        os.replace(self.part_path, self.path)
+            os.replace(self.part_path, self.path)
+        except OSError as exc:
+            _close_quietly(self._file)
+            raise BridgeError(
+                f"finishing the recording failed: {exc.strerror or exc}; what was written so far is in "
+                f"{self.part_path} (`fmu-bridge recover` rewrites its readable part)"
+            ) from exc
+        finally:
+            _close_quietly(self._file)
         _log.info("wrote %s (%d messages)", self.path, self.message_count)
         return self.path
+
+    def abort(self) -> None:
+        """Stop writing and delete the unfinished file (nothing is renamed to ``path``)."""
+        self.closed = True
+        atexit.unregister(self._at_exit)
+        _close_quietly(self._file)
+        self.part_path.unlink(missing_ok=True)
 
     @property
     def message_count(self) -> int:
@@ -290,6 +304,14 @@ def _refuse_existing(path: Path, part: Path) -> None:
         )
     if path.exists():
         raise BridgeError(f"a recording exists at {path}; choose another name or pass --force to replace it")
+
+
+def _close_quietly(file: Any) -> None:
+    """Close a file whose writes may have failed (closing flushes, and may fail the same way)."""
+    try:
+        file.close()
+    except OSError:
+        _log.debug("closing %s failed", getattr(file, "name", file), exc_info=True)
 
 
 def _close_ref(ref: weakref.ReferenceType[McapWriter]) -> None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 
 TS = get_typestore(Stores.ROS2_JAZZY)
 JointState = TS.types[cdr.JOINT_STATE]

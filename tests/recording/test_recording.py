@@ -33,7 +33,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import BridgeError, DependencyMissing
 from bridge.experiment.examples import example_experiment
 from bridge.fmu import sha256
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 from bridge.recording.env_recorder import RecordMcap, record_env
 from bridge.recording.export import columns, export_csv, export_parquet
 from bridge.recording.reader import read_recording, recover

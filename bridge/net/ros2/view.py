@@ -16,14 +16,13 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
 from __future__ import annotations
 
 import logging
-import struct
 from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.errors import ConfigError
-from bridge.recording import cdr
+from bridge.net.ros2 import cdr
 
 _log = logging.getLogger(__name__)
 
@@ -141,7 +140,7 @@ class RosView:
         for publisher, value in zip(self._per_variable, outputs):
             publisher.publish(cdr.encode_float64(float(value)))
         if self._clock is not None:
-            self._clock.publish(encode_clock(sim_time_ns))
+            self._clock.publish(cdr.encode_clock(sim_time_ns))
 
     def _actions(self, payload: bytes, info: Any) -> None:
         try:
@@ -167,12 +166,3 @@ class RosView:
 
     def close(self) -> None:
         self.node.close()
-
-
-_CLOCK = struct.Struct("<4siI")  # CDR header, builtin_interfaces/Time (int32 sec, uint32 nanosec)
-
-
-def encode_clock(sim_time_ns: int) -> bytes:
-    """A ``rosgraph_msgs/msg/Clock`` payload."""
-    sec, nanosec = divmod(int(sim_time_ns), 1_000_000_000)
-    return _CLOCK.pack(b"\x00\x01\x00\x00", sec, nanosec)

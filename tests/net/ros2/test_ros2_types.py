@@ -145,11 +145,11 @@ def test_truncated_cdr_raises_transport_error() -> None:
 
 
 def _bridge_cdr(name: str) -> Any:
-    if importlib.util.find_spec("bridge.recording.cdr") is None:
-        pytest.skip("bridge.recording.cdr is not written yet")
-    module = importlib.import_module("bridge.recording.cdr")
+    if importlib.util.find_spec("bridge.net.ros2.cdr") is None:
+        pytest.skip("bridge.net.ros2.cdr is not written yet")
+    module = importlib.import_module("bridge.net.ros2.cdr")
     if not hasattr(module, name):
-        pytest.skip(f"bridge.recording.cdr has no {name} yet")
+        pytest.skip(f"bridge.net.ros2.cdr has no {name} yet")
     return getattr(module, name)
 
 
