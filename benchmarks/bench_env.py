@@ -1,6 +1,9 @@
 """FmuEnv.step vs the raw FMPy loop on the same FMU, in one run (medians of interleaved repeats).
 
-Run: python benchmarks/bench_env.py [--experiment NAME] [--steps N] [--repeats R]
+Run: python benchmarks/bench_env.py [--experiment NAME] [--steps N] [--repeats R] [--isolated]
+
+``--isolated`` adds the same env over ``IsolatedFmuPlant`` (the FMU in a child process behind a
+deadline) to the interleaved loops, to state what isolation costs per step.
 
 Both loops are driven by the same balancing controller, so episodes run their full 500 samples
 and resets weigh the same in both. The env does everything an RL step needs (action mapping,
@@ -18,8 +21,10 @@ import numpy as np
 from common import RawFmpyLoop, fmt_us, interleaved, table
 
 from bridge.env.fmu_env import FmuEnv
+from bridge.experiment import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.models import example_fmu
+from bridge.plant.isolated import IsolatedFmuPlant
 
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
 GAINS = (1.0, 1.5, 30.0, 5.0)  # a stabilising state feedback for the cart-pole
@@ -40,6 +45,7 @@ def main() -> None:
         help="cartpole_balance (discrete actions, raw observations) or cartpole_continuous "
         "(Box actions, scaled observations, sensor noise)",
     )
+    parser.add_argument("--isolated", action="store_true", help="also measure the isolated plant")
     args = parser.parse_args()
 
     env = FmuEnv(example_experiment(args.experiment))
@@ -47,7 +53,7 @@ def main() -> None:
     raw = RawFmpyLoop(example_fmu("cartpole", "2.0", "cs"), ["force"], OUTPUTS, 0.02, start={"theta0": 0.02})
     episode = env.task.sample_times().size - 1
 
-    def env_loop(steps: int) -> None:
+    def env_loop(steps: int, env: FmuEnv = env) -> None:
         _, info = env.reset(seed=0)
         y = info["outputs"].tolist()
         for _ in range(steps):
@@ -67,7 +73,12 @@ def main() -> None:
             raw.run(chunk, action=lambda y: [10.0 if push(y) > 0 else -10.0] if discrete else [push(y)])
             done += chunk
 
-    rates = interleaved({"raw FMPy loop": raw_loop, "FmuEnv.step": env_loop}, args.steps, args.repeats)
+    loops = {"raw FMPy loop": raw_loop, "FmuEnv.step": env_loop}
+    if args.isolated:
+        experiment = load_experiment(example_experiment(args.experiment))
+        isolated = FmuEnv(experiment, plant=IsolatedFmuPlant(experiment))
+        loops["FmuEnv.step, isolated plant"] = lambda steps: env_loop(steps, isolated)
+    rates = interleaved(loops, args.steps, args.repeats)
     ratio = rates["raw FMPy loop"] / rates["FmuEnv.step"]
     print(
         f"experiment: {args.experiment} (FMI 2.0 CS, 1 FMU step per sample, {episode}-sample episodes), "
@@ -78,7 +89,11 @@ def main() -> None:
             [(n, f"{r:,.0f}", fmt_us(r)) for n, r in rates.items()], ("loop", "steps/s (median)", "us/step")
         )
     )
-    print(f"\ncost ratio FmuEnv / raw FMPy loop: {ratio:.3f}  (target <= 1.25)")
+    print(f"\ncost ratio FmuEnv / raw FMPy loop: {ratio:.3f}  (target <= 1.1)")
+    if args.isolated:
+        extra_us = (1 / rates["FmuEnv.step, isolated plant"] - 1 / rates["FmuEnv.step"]) * 1e6
+        print(f"isolated plant: +{extra_us:.1f} us per step over the in-process plant")
+        isolated.close()
 
     samples = []
     for _ in range(5):

@@ -167,7 +167,9 @@ class IsolatedFmuPlant(Plant):
         return {"fmu": str(self.fmu_path), "fmu_sha256": sha256(self.fmu_path), "node": ""}
 
     # -- messages ----------------------------------------------------------------------------------------
-    def _call(self, message: tuple[Any, ...], *, step: int | None, timeout_s: float | None = None) -> Any:
+    def _call(
+        self, message: tuple[Any, ...], *, step: int | None, timeout_s: float | None = None
+    ) -> FloatArray:
         if self._conn is None:
             raise self._died(step)
         try:
@@ -176,7 +178,7 @@ class IsolatedFmuPlant(Plant):
             raise self._died(step) from None
         return self._answer(timeout_s or self.timeout_s, step)
 
-    def _answer(self, timeout_s: float, step: int | None) -> Any:
+    def _answer(self, timeout_s: float, step: int | None) -> FloatArray:
         conn = self._conn
         assert conn is not None
         try:
@@ -189,7 +191,7 @@ class IsolatedFmuPlant(Plant):
         kind, *rest = reply
         if kind == "ok":
             outputs, self._time_s, self.terminated = rest
-            return outputs
+            return outputs  # type: ignore[no-any-return]
         if kind == "step_error":
             detail, log, self._time_s = rest
             raise self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, log=log)
