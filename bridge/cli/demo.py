@@ -16,7 +16,7 @@ GAINS = np.array([1.0, 1.5, 30.0, 5.0])  # a stabilising state feedback for the 
 
 def run_demo(*, console: Console, quick: bool = False) -> None:
     """The main job: with the ``train`` extra installed, train PPO, evaluate, report and record
-    (``agents.demo``, found through the ``fmu_bridge.demo`` entry point); without it, or with
+    (``agents.train_demo``, found through the ``fmu_bridge.demo`` entry point); without it, or with
     ``quick``, balance the cart-pole with a state-feedback controller and print the trajectory."""
     if not quick:
         for entry in entry_points(group="fmu_bridge.demo"):
