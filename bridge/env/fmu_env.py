@@ -118,19 +118,20 @@ class FmuEnv(gym.Env[ObsType, Any]):
         return obs, info
 
     def step(self, action: Any) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
-        self.send(action)
-        return self.receive()
+        inputs = self._inputs_for(action)
+        try:
+            outputs = self.plant.step(inputs)
+        except PlantError:
+            self._done = True
+            raise
+        return self._result(outputs)
 
     def send(self, action: Any) -> None:
         """First half of a step: map the action and hand the inputs to the plant.
 
         Vector envs send to every plant before receiving from any, so that plants in other
-        processes or nodes step in parallel."""
-        if self._done:
-            raise BridgeError("step() called on a finished or never-reset episode: call reset() first")
-        inputs = self.task.action_to_inputs(action, self._sample, self.np_random)
-        if self._state_hook is not None:
-            self._apply_state_hook()
+        processes or nodes step in parallel (``step`` is ``send`` then ``receive``)."""
+        inputs = self._inputs_for(action)
         try:
             self.plant.send(inputs)
         except PlantError:
@@ -139,16 +140,30 @@ class FmuEnv(gym.Env[ObsType, Any]):
 
     def receive(self) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
         """Second half of a step: the plant's outputs turned into the task's result."""
-        plant = self.plant
         try:
-            outputs = plant.receive()
-            self._sample += 1
-            obs, reward, terminated, truncated, reason = self.task.step_result(
-                outputs.tolist(), self._sample, plant.terminated, self.np_random
-            )
+            outputs = self.plant.receive()
         except PlantError:
             self._done = True
             raise
+        return self._result(outputs)
+
+    def _inputs_for(self, action: Any) -> list[float]:
+        if self._done:
+            raise BridgeError("step() called on a finished or never-reset episode: call reset() first")
+        inputs = self.task.action_to_inputs(action, self._sample, self.np_random)
+        if self._state_hook is not None:
+            self._apply_state_hook()
+        return inputs
+
+    def _result(
+        self, outputs: npt.NDArray[np.float64]
+    ) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
+        plant = self.plant
+        self._sample += 1
+        try:
+            obs, reward, terminated, truncated, reason = self.task.step_result(
+                outputs.tolist(), self._sample, plant.terminated, self.np_random
+            )
         except NonFiniteOutputs as exc:
             self._done = True
             raise plant.failure(
