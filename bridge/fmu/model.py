@@ -11,18 +11,18 @@ import itertools
 import logging
 import math
 from collections import OrderedDict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
-
-import numpy as np
 
 from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import archive
 from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
+from bridge.fmu.events import EventCalls
 from bridge.fmu.signals import SignalGroup
-from bridge.fmu.solver import MeStepper, event_iteration
+from bridge.fmu.solver import MeStepper
+from bridge.fmu.values import from_c, to_c
 
 _log = logging.getLogger(__name__)
 
@@ -30,6 +30,8 @@ ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
 RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
 _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8
+# An FMU state and, for model exchange, the next time event it had announced (not part of the state).
+_Snapshot = tuple[ctypes.c_void_p, float | None]
 
 
 class Model:
@@ -76,9 +78,8 @@ class Model:
         self._initialized = False
         self._closed = False
         self._failed_status = 0
-        self._snapshots: OrderedDict[tuple[Any, ...], ctypes.c_void_p | None] = OrderedDict()
+        self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
         self._me: MeStepper | None = None
-        self._discrete_dirty = False
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
@@ -153,7 +154,7 @@ class Model:
             buf = (ctype * len(group))()
             self._call_access(var_type, group, buf, setter=False)
             for var, raw in zip(group, buf):
-                values[var.name] = _from_c(raw, var_type)
+                values[var.name] = from_c(raw, var_type)
         return {v.name: values[v.name] for v in variables}
 
     def set(self, values: Mapping[str, Any]) -> None:
@@ -162,12 +163,35 @@ class Model:
         for var in variables:
             if not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
+        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
+            self.write_in_event_mode(lambda: self._write(variables, values))
+            return
         self._write(variables, values)
         if self.interface == "me":
             self._inputs_dirty = True
-            self._discrete_dirty = self._discrete_dirty or any(
-                v.variability != "continuous" for v in variables
-            )
+
+    def write_in_event_mode(self, write: Callable[[], None]) -> None:
+        """Model exchange: ``write`` in event mode, then the discrete-state iteration and continuous time.
+
+        FMI 2.0/3.0 accept discrete inputs and tunable parameters only in event mode; FMI 1.0 takes
+        them at any time but needs the event iteration afterwards.
+        """
+        me = self._me
+        if me is None or self.terminated:  # before initialisation every value is accepted
+            write()
+            return
+        events, call = me.events, self._backend.call
+        call("enterEventMode", events.enter_event_mode)
+        write()
+        terminate, me.next_event_s = call("the event iteration", events.iterate)
+        self._inputs_dirty = True
+        if terminate:
+            self.terminated = True
+            return
+        call("enterContinuousTimeMode", events.enter_continuous_time_mode)
+
+    def _to_c(self, var: Variable, value: Any) -> Any:
+        return to_c(var, value, self.info.model_name, self._backend.major)
 
     def _lookup(self, name: str, role: str = "variable") -> Variable:
         var = self.info.variables.get(name)
@@ -180,7 +204,7 @@ class Model:
     def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
         for var_type, group in _by_type(variables).items():
             ctype = self._backend.ctype(var_type)
-            buf = (ctype * len(group))(*(_to_c(var, values[var.name], self) for var in group))
+            buf = (ctype * len(group))(*(self._to_c(var, values[var.name]) for var in group))
             self._call_access(var_type, group, buf, setter=True)
 
     def _call_access(self, var_type: str, group: list[Variable], buf: Any, *, setter: bool) -> None:
@@ -196,10 +220,8 @@ class Model:
                 log=self._backend.log.recent(),
             )
 
-    def _inputs_written(self, group: SignalGroup) -> None:
+    def _inputs_written(self) -> None:
         self._inputs_dirty = True
-        if any(v.variability != "continuous" for v in group.variables):
-            self._discrete_dirty = True
 
     # -- initialisation and reset -------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None) -> None:
@@ -222,8 +244,11 @@ class Model:
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
         if snapshot is not None and self.reset_policy in ("auto", "restore"):
             self._snapshots.move_to_end(key)
-            self._backend.set_state(snapshot)
+            state, next_event_s = snapshot
+            self._backend.set_state(state)
             self._restart()
+            if self._me is not None:
+                self._me.next_event_s = next_event_s
             return
         policy = self.reset_policy
         if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
@@ -246,7 +271,12 @@ class Model:
     def _initialize(self, values: dict[Variable, Any]) -> None:
         self._initialized = False
         self._backend.log.clear()
-        early = [v for v in values if v.causality == "input" or v.initial in ("exact", "approx")]
+        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
+        early = [
+            v
+            for v in values
+            if self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx")
+        ]
         late = [v for v in values if v not in early]
         by_name = {v.name: value for v, value in values.items()}
         self._write(early, by_name)
@@ -263,11 +293,16 @@ class Model:
 
     def _start_me(self) -> None:
         # FMI 2.0 and 3.0 both leave initialisation in event mode: iterate, then integrate.
-        fmu = self._backend.fmu
-        terminate, next_event = event_iteration(fmu, self._backend.major == 3)
+        # FMI 1.0's fmiInitialize has iterated already (the backend finished it).
+        fmu, backend = self._backend.fmu, self._backend
+        events = EventCalls(fmu, backend.major)
+        if backend.major == 1:
+            terminate, next_event = getattr(backend, "initial_events", (False, None))
+        else:
+            terminate, next_event = backend.call("the initial event iteration", events.iterate)
         if terminate:
             raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
-        fmu.enterContinuousTimeMode()
+        backend.call("enterContinuousTimeMode", events.enter_continuous_time_mode)
         if self._me is None or self._me._fmu is not fmu:
             # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
             # input change needs a tighter one, so 1e-6 unless the caller asks for another.
@@ -279,7 +314,6 @@ class Model:
     def _restart(self) -> None:
         self.step_index = 0
         self.terminated = False
-        self._discrete_dirty = False
         if self._me is not None:
             self._me.restart(self.start_time_s)
 
@@ -289,7 +323,7 @@ class Model:
             var = self._lookup(name, "parameter or start value")
             if not var.settable_at_init:
                 raise VariableError(_not_settable_at_init(var, self.info))
-            _to_c(var, value, self)
+            self._to_c(var, value)
             checked[var] = value
         return checked
 
@@ -304,20 +338,21 @@ class Model:
             self._snapshots[key] = None  # first sighting: remember the key, snapshot on the next
             self._evict()
             return
-        self._snapshots[key] = self._backend.get_state()
+        next_event_s = self._me.next_event_s if self._me is not None else None
+        self._snapshots[key] = (self._backend.get_state(), next_event_s)
         self._snapshots.move_to_end(key)
         self._evict()
 
     def _evict(self) -> None:
         while len(self._snapshots) > _MAX_SNAPSHOTS:
-            _, state = self._snapshots.popitem(last=False)
-            if state is not None:
-                self._backend.free_state(state)
+            _, snapshot = self._snapshots.popitem(last=False)
+            if snapshot is not None:
+                self._backend.free_state(snapshot[0])
 
     def _drop_snapshots(self) -> None:
-        for state in self._snapshots.values():
-            if state is not None:
-                self._backend.free_state(state)
+        for snapshot in self._snapshots.values():
+            if snapshot is not None:
+                self._backend.free_state(snapshot[0])
         self._snapshots.clear()
 
     # -- stepping -----------------------------------------------------------------------------
@@ -351,11 +386,6 @@ class Model:
     def _advance_me(self, n: int) -> bool:
         assert self._me is not None  # guarded by the caller
         start = self.time_s
-        if self._discrete_dirty:
-            self._discrete_dirty = False
-            if self._me.handle_event(start, self.step_index):
-                self.terminated = True
-                return True
         end = self.start_time_s + (self.step_index + n) * self.step_size_s
         # Inputs are held piecewise constant: restart the integrator only where they may have jumped.
         restart, self._inputs_dirty = self._inputs_dirty, False
@@ -429,54 +459,6 @@ def _by_type(variables: Sequence[Variable]) -> dict[str, list[Variable]]:
 
 def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:
     return tuple(sorted((v.name, repr(x)) for v, x in values.items()))
-
-
-def _to_c(var: Variable, value: Any, model: Model) -> Any:
-    """Check ``value`` against ``var``'s type and convert it for the FMI call."""
-    where = f"{model.info.model_name}: {var.name!r} ({var.type})"
-    if var.type == "String":
-        if not isinstance(value, str):
-            raise VariableError(f"{where} expects a str, got {value!r}")
-        return value.encode()
-    if isinstance(value, str) and var.type == "Enumeration":
-        items = dict(var.enum_items)
-        if value not in items:
-            raise VariableError(f"{where}: {value!r} is not one of {list(items)}")
-        return items[value]
-    is_integer = var.type.startswith(("Int", "UInt")) or var.type == "Enumeration"
-    if is_integer and isinstance(value, int | np.integer) and not isinstance(value, bool):
-        return int(value)  # exact: large 64-bit values must not pass through a float
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise VariableError(f"{where} expects a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise VariableError(f"{where} got {value!r}: expected a finite number")
-    if var.type.startswith("Float"):
-        return number
-    if var.type == "Boolean":
-        return _boolean(number, where, value, model._backend.major)
-    if number != int(number):
-        raise VariableError(f"{where} expects a whole number, got {value!r}")
-    return int(number)
-
-
-def _boolean(number: float, where: str, value: Any, major: int) -> Any:
-    if number not in (0.0, 1.0):
-        raise VariableError(f"{where} expects True/False (or 0/1), got {value!r}")
-    if major == 1:  # FMI 1.0 booleans are chars
-        return b"\x01" if number else b"\x00"
-    return bool(number)
-
-
-def _from_c(raw: Any, var_type: str) -> Any:
-    if var_type == "String":
-        return raw.decode(errors="replace") if raw is not None else ""
-    if var_type == "Boolean":
-        return raw not in (b"\x00", 0, False)
-    if var_type.startswith("Float"):
-        return float(raw)
-    return int(raw)
 
 
 def _not_settable_at_init(var: Variable, info: ModelInfo) -> str:

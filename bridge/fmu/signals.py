@@ -8,7 +8,8 @@ correctly typed buffers: integers and booleans are never read through getReal.
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Sequence
+import math
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -16,6 +17,7 @@ import numpy.typing as npt
 
 from bridge.errors import FmuError, VariableError
 from bridge.fmu.backend import STATUS_NAMES, WARNING, numpy_dtype
+from bridge.fmu.values import int_range
 
 if TYPE_CHECKING:
     from bridge.fmu.description import Variable
@@ -32,12 +34,14 @@ class _Block:
         "_vrs",
         "buf",
         "enums",
+        "exact",
         "get",
         "index",
         "kind",
         "n",
         "nargs",
         "ptr",
+        "ranges",
         "set",
         "variables",
         "vrs",
@@ -60,6 +64,9 @@ class _Block:
         self.nargs = (self.n,) if backend.major == 3 else ()
         kind = variables[0].type
         self.kind = _FLOAT if kind.startswith("Float") else _BOOL if kind == "Boolean" else _INT
+        # 64-bit integers are checked and written as Python ints: float64 cannot hold them exactly.
+        self.exact = self.kind == _INT and self.buf.dtype.itemsize == 8
+        self.ranges = [int_range(v.type, backend.major) for v in variables] if self.kind == _INT else []
         # Enumerations accept only their declared item values.
         self.enums = [
             (i, np.array([value for _, value in v.enum_items], dtype=np.float64))
@@ -76,9 +83,14 @@ class SignalGroup:
     """A fixed, ordered list of numeric variables read or written as one float64 vector.
 
     ``read()`` returns a new array each call; ``read_into(out)`` fills a caller-owned array.
-    ``write(values)`` checks values (finite, integral for integer types, in range) before
-    any FMI call, so a bad action never reaches the FMU.
+    ``write(values)`` sets all variables of the group (inputs or tunable parameters) with one
+    call per type, after checking the values (finite, integral for integer types, in the range of
+    the type), so a bad action never reaches the FMU. 64-bit integers are written exactly when
+    given as ints. In model exchange, a group with discrete inputs or tunable parameters is
+    written in event mode (see :meth:`Model.write_in_event_mode`).
     """
+
+    write: Callable[[npt.ArrayLike], None]
 
     def __init__(self, model: Model, variables: Sequence[Variable]) -> None:
         self._model = model
@@ -99,8 +111,10 @@ class SignalGroup:
         if self._direct and first is not None:
             self._values = first.buf
             self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)  # type: ignore[arg-type]
-        # Model exchange must know when discrete inputs change (event iteration before the next step).
+        # Model exchange restarts the integrator where inputs jumped; discrete ones need event mode.
         self._notify = model.interface == "me"
+        events = self._notify and any(v.variability != "continuous" for v in variables)
+        self.write = self._write_in_event_mode if events else self._write
 
     def __len__(self) -> int:
         return len(self.names)
@@ -139,8 +153,10 @@ class SignalGroup:
             if not self._direct:
                 self._values[block.index] = block.buf
 
-    def write(self, values: npt.ArrayLike) -> None:
-        """Set all variables of the group (inputs or tunable parameters) in one call per type."""
+    def _write_in_event_mode(self, values: npt.ArrayLike) -> None:
+        self._model.write_in_event_mode(lambda: self._write(values))
+
+    def _write(self, values: npt.ArrayLike) -> None:
         component = self._backend.component
         if component is None:
             raise self._no_instance()
@@ -151,7 +167,7 @@ class SignalGroup:
         if vec.shape != (len(self.names),):
             raise self._shape_error(values)
         for block in self._blocks:
-            part = vec[block.index]
+            part: Any = _exact_part(values, block) if block.exact else vec[block.index]
             if not _valid(part, block):
                 raise self._value_error(part, block)
             if block.set is None:
@@ -161,7 +177,7 @@ class SignalGroup:
             if status > WARNING:
                 self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written(self)
+            self._model._inputs_written()
 
     def _write_direct(self, component: Any, values: Any) -> None:
         """All-Float64 groups (the common case): plain-Python checks beat numpy for a few values."""
@@ -185,7 +201,7 @@ class SignalGroup:
         if status > WARNING:
             self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written(self)
+            self._model._inputs_written()
 
     def _no_instance(self) -> FmuError:
         return FmuError(
@@ -202,18 +218,18 @@ class SignalGroup:
             f"got an array of shape {shape}"
         )
 
-    def _value_error(self, part: npt.NDArray[Any], block: _Block) -> VariableError:
-        values = np.asarray(part, dtype=np.float64)
+    def _value_error(self, part: Any, block: _Block) -> VariableError:
         bad = [
-            f"{var.name}={float(value):g}" + (f" (items: {dict(var.enum_items)})" if var.enum_items else "")
-            for i, (value, var) in enumerate(zip(values, block.variables))
-            if not _valid(np.array([value]), block) or _bad_enum(value, i, block)
+            f"{var.name}={_show(value)}" + _declared(i, block)
+            for i, (value, var) in enumerate(zip(part, block.variables))
+            if not _valid_one(value, i, block) or _bad_enum(value, i, block)
         ]
         expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
+        finite = all(not isinstance(v, float) or math.isfinite(v) for v in np.asarray(part).tolist())
         hint = (
-            "a NaN or inf usually comes from a diverged policy or controller"
-            if not np.isfinite(values).all()
-            else "round or map the value before writing it"
+            "round, clip or map the value before writing it"
+            if finite
+            else "a NaN or inf usually comes from a diverged policy or controller"
         )
         return VariableError(
             f"{self._model.info.model_name}: invalid value {', '.join(bad)} {self._where()}: expected "
@@ -240,7 +256,52 @@ def _bad_enum(value: float, position: int, block: _Block) -> bool:
     return any(i == position and value not in allowed for i, allowed in block.enums)
 
 
-def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
+def _show(value: Any) -> str:
+    return f"{value:g}" if isinstance(value, float) else str(value)
+
+
+def _declared(position: int, block: _Block) -> str:
+    var = block.variables[position]
+    if var.enum_items:
+        return f" (items: {dict(var.enum_items)})"
+    if block.kind == _INT:
+        low, high = block.ranges[position]
+        return f" ({var.type}, range [{low}, {high}])"
+    return ""
+
+
+def _valid_one(value: Any, position: int, block: _Block) -> bool:
+    if block.exact:
+        low, high = block.ranges[position]
+        return isinstance(value, int) and low <= value <= high
+    return (
+        _valid(np.array([value], dtype=np.float64), block)
+        if block.kind != _INT
+        else _int_ok(value, block.ranges[position])
+    )
+
+
+def _int_ok(value: Any, bounds: tuple[int, int]) -> bool:
+    number = float(value)
+    return math.isfinite(number) and number == round(number) and bounds[0] <= number <= bounds[1]
+
+
+def _exact_part(values: Any, block: _Block) -> list[Any]:
+    """The block's values as Python ints where they are whole numbers (else as given, to be refused)."""
+    seq = values.tolist() if isinstance(values, np.ndarray) else list(values)  # type: ignore[arg-type]
+    part: list[Any] = []
+    for i in block.index.tolist():
+        value = seq[i]
+        whole_float = isinstance(value, float | np.floating) and math.isfinite(value) and value == int(value)
+        if whole_float or isinstance(value, int | np.integer):
+            value = int(value)
+        part.append(value)
+    return part
+
+
+def _valid(part: Any, block: _Block) -> bool:
+    if block.exact:
+        return all(_valid_one(v, i, block) for i, v in enumerate(part)) and _enums_ok(part, block)
     if not np.isfinite(part).all():
         return False
     if block.kind == _FLOAT:
@@ -252,6 +313,10 @@ def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
     info = np.iinfo(block.buf.dtype)
     if not ((part >= info.min) & (part <= info.max)).all():
         return False
+    return _enums_ok(part, block)
+
+
+def _enums_ok(part: Any, block: _Block) -> bool:
     if block.enums and len(part) == block.n:
         return all(part[i] in allowed for i, allowed in block.enums)
     return True
