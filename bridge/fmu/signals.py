@@ -257,7 +257,10 @@ def _bad_enum(value: float, position: int, block: _Block) -> bool:
 
 
 def _show(value: Any) -> str:
-    return f"{value:g}" if isinstance(value, float) else str(value)
+    if isinstance(value, float | np.floating):
+        whole = math.isfinite(value) and value == int(value)
+        return str(int(value)) if whole else f"{value:g}"
+    return str(value)
 
 
 def _declared(position: int, block: _Block) -> str:

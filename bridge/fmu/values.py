@@ -41,6 +41,8 @@ def is_integer_type(var_type: str) -> bool:
 
 def range_error(model_name: str, var: Variable, value: Any, fmi_major: int) -> VariableError:
     low, high = int_range(var.type, fmi_major)
+    if isinstance(value, float) and math.isfinite(value) and value == int(value):
+        value = int(value)
     return VariableError(
         f"{model_name}: {var.name}={value} is out of range for its type {var.type} "
         f"(expected a whole number in [{low}, {high}]); clip or map the value before writing it"
