@@ -15,14 +15,14 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-from bridge.errors import ConfigError, FmuError, StepError, VariableError
-from bridge.fmu import archive
+from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
+from bridge.fmu import access, archive
 from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.solver import MeStepper
-from bridge.fmu.values import from_c, to_c
+from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
 
@@ -131,11 +131,11 @@ class Model:
         return self.info.variable(name)
 
     def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
-        """A batched accessor for numeric variables (see :class:`SignalGroup`)."""
-        variables = [self._lookup(n, role) for n in names]
-        if not variables:
+        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`)."""
+        elements = [self._element(n, role) for n in names]
+        if not elements:
             raise ConfigError(f"{role}: at least one variable is needed")
-        for var in variables:
+        for var, _ in elements:
             if not var.is_numeric:
                 raise VariableError(
                     f"{role} {var.name!r} is a {var.type} variable: signal groups are numeric "
@@ -143,32 +143,46 @@ class Model:
                 )
             if writable and not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
-        return SignalGroup(self, variables)
+        return SignalGroup(self, elements, list(names))
 
     def get(self, names: Iterable[str]) -> dict[str, Any]:
-        """Current values by name, typed (float, int, bool, str)."""
-        variables = [self._lookup(n) for n in names]
-        values: dict[str, Any] = {}
-        for var_type, group in _by_type(variables).items():
-            ctype = self._backend.ctype(var_type)
-            buf = (ctype * len(group))()
-            self._call_access(var_type, group, buf, setter=False)
-            for var, raw in zip(group, buf):
-                values[var.name] = from_c(raw, var_type)
-        return {v.name: values[v.name] for v in variables}
+        """Current values by name, typed (float, int, bool, str, bytes for Binary).
+
+        An FMI 3.0 array by its name gives a numpy array of its shape; ``y[2,3]`` (1-based indices,
+        one per dimension) gives one element.
+        """
+        wanted = {name: self._element(name) for name in names}
+        flat = access.read(self._backend, list(dict.fromkeys(var for var, _ in wanted.values())), self._where)
+        return {name: access.pick(var, flat[var.name], index) for name, (var, index) in wanted.items()}
 
     def set(self, values: Mapping[str, Any]) -> None:
-        """Set inputs or tunable parameters between steps (one FMI call per type)."""
-        variables = [self._lookup(n) for n in values]
-        for var in variables:
+        """Set inputs or tunable parameters between steps (one FMI call per type).
+
+        Array elements are written as ``{"u[2]": 1.5}``, whole arrays as ``{"u": [...]}``.
+        """
+        elements = {name: self._element(name) for name in values}
+        for var, _ in elements.values():
             if not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
+        variables = list(dict.fromkeys(var for var, _ in elements.values()))
+        flat = access.merge(self._backend, elements, values, self._to_c, self._where)
         if self.interface == "me" and any(v.variability != "continuous" for v in variables):
-            self.write_in_event_mode(lambda: self._write(variables, values))
+            self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
             return
-        self._write(variables, values)
+        access.write(self._backend, variables, flat, self._where)
         if self.interface == "me":
             self._inputs_dirty = True
+
+    def _where(self) -> str:
+        return f"at step {self.step_index} (t={self.time_s:g} s)"
+
+    def _element(self, name: str, role: str = "variable") -> tuple[Variable, int | None]:
+        try:
+            return self.info.element(name)
+        except VariableError:
+            if name not in self.info.variables and "[" not in name:
+                raise unknown_variable_error(name, self.info, role) from None
+            raise
 
     def write_in_event_mode(self, write: Callable[[], None]) -> None:
         """Model exchange: ``write`` in event mode, then the discrete-state iteration and continuous time.
@@ -198,27 +212,15 @@ class Model:
         if var is None:
             raise unknown_variable_error(name, self.info, role)
         if var.is_array:
-            raise VariableError(f"{role} {name!r} is an array variable; fmu-bridge supports scalar variables")
+            raise VariableError(
+                f"{role} {name!r} is an FMI 3.0 array: parameters and start values are scalars here; "
+                f"set its elements between steps with Model.set({{'{var.element_names()[0]}': ...}})"
+            )
         return var
 
     def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
-        for var_type, group in _by_type(variables).items():
-            ctype = self._backend.ctype(var_type)
-            buf = (ctype * len(group))(*(self._to_c(var, values[var.name]) for var in group))
-            self._call_access(var_type, group, buf, setter=True)
-
-    def _call_access(self, var_type: str, group: list[Variable], buf: Any, *, setter: bool) -> None:
-        fn = self._backend.accessor(var_type, setter=setter)
-        vrs = (ctypes.c_uint * len(group))(*(v.value_reference for v in group))
-        extra = (len(group),) if self._backend.major == 3 else ()
-        status = fn(self._backend.component, vrs, len(group), buf, *extra)
-        if status > WARNING:
-            what = "set" if setter else "get"
-            raise FmuError(
-                f"{self.info.model_name}: {what} of {[v.name for v in group]} returned "
-                f"{STATUS_NAMES[status]} at step {self.step_index} (t={self.time_s:g} s)",
-                log=self._backend.log.recent(),
-            )
+        flat = {v.name: [self._to_c(v, values[v.name])] for v in variables}
+        access.write(self._backend, list(variables), flat, self._where)
 
     def _inputs_written(self) -> None:
         self._inputs_dirty = True
@@ -427,6 +429,12 @@ class Model:
 
 
 def _choose_interface(info: ModelInfo, interface: str) -> Interface:
+    if not info.interfaces:
+        raise FmuLoadError(
+            f"{info.path.name} offers scheduled execution only (FMI 3.0), which fmu-bridge does not run: "
+            f"it runs co-simulation and model exchange; re-export the model with one of those "
+            f"interfaces [{info.path}]"
+        )
     if interface == "auto":
         return "cs" if "cs" in info.interfaces else "me"
     if interface not in ("cs", "me"):
@@ -448,13 +456,6 @@ def _step_size(info: ModelInfo, step_size_s: float | None) -> float:
     if not (math.isfinite(h) and h > 0):
         raise ConfigError(f"step size must be a positive finite number of seconds, got {h!r}")
     return float(h)
-
-
-def _by_type(variables: Sequence[Variable]) -> dict[str, list[Variable]]:
-    groups: dict[str, list[Variable]] = {}
-    for var in variables:
-        groups.setdefault(var.type, []).append(var)
-    return groups
 
 
 def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:

@@ -8,6 +8,7 @@ correctly typed buffers: integers and booleans are never read through getReal.
 from __future__ import annotations
 
 import ctypes
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
@@ -39,7 +40,9 @@ class _Block:
         "index",
         "kind",
         "n",
+        "names",
         "nargs",
+        "pick",
         "ptr",
         "ranges",
         "set",
@@ -48,20 +51,28 @@ class _Block:
     )
     # ``vrs`` and ``ptr`` are integer addresses of ``_vrs`` and ``buf``, which the block keeps alive.
 
-    def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
+    def __init__(self, model: Model, elements: list[tuple[Variable, int | None]], index: list[int]) -> None:
         backend = model._backend
+        variables = [var for var, _ in elements]
         ctype = backend.ctype(variables[0].type)
         self.variables = variables
+        self.names = [var.element_names()[i] if i is not None else var.name for var, i in elements]
         self.index = np.asarray(index, dtype=np.intp)
-        self.n = len(variables)
-        self._vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in variables))
+        unique = list(dict.fromkeys(variables))
+        self.n = len(unique)
+        self._vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in unique))
         self.vrs = ctypes.addressof(self._vrs)
-        self.buf = np.zeros(self.n, dtype=numpy_dtype(ctype))
+        # FMI 3.0 arrays are read and written whole; ``pick`` takes the elements of the group.
+        offsets = dict(zip(unique, itertools.accumulate((v.size for v in unique), initial=0)))
+        positions = [offsets[var] + (i or 0) for var, i in elements]
+        total = sum(v.size for v in unique)
+        self.pick = None if positions == list(range(total)) else np.asarray(positions, dtype=np.intp)
+        self.buf = np.zeros(total, dtype=numpy_dtype(ctype))
         self.ptr = self.buf.ctypes.data
         self.get = backend.fast_accessor(variables[0].type, setter=False)
         self.set = backend.fast_accessor(variables[0].type, setter=True) if _settable(variables) else None
-        # FMI 3.0 getters/setters take the number of values as a fifth argument.
-        self.nargs = (self.n,) if backend.major == 3 else ()
+        # FMI 3.0 getters/setters take the number of values (arrays expanded) as a fifth argument.
+        self.nargs = (total,) if backend.major == 3 else ()
         kind = variables[0].type
         self.kind = _FLOAT if kind.startswith("Float") else _BOOL if kind == "Boolean" else _INT
         # 64-bit integers are checked and written as Python ints: float64 cannot hold them exactly.
@@ -92,25 +103,31 @@ class SignalGroup:
 
     write: Callable[[npt.ArrayLike], None]
 
-    def __init__(self, model: Model, variables: Sequence[Variable]) -> None:
+    def __init__(
+        self,
+        model: Model,
+        elements: Sequence[tuple[Variable, int | None]],
+        names: Sequence[str] | None = None,
+    ) -> None:
         self._model = model
         self._backend = model._backend
+        variables = [var for var, _ in elements]
         self.variables = tuple(variables)
-        self.names = tuple(v.name for v in variables)
-        groups: dict[str, tuple[list[Variable], list[int]]] = {}
-        for i, var in enumerate(variables):
-            key = model._backend.type_key(var.type)
+        self.names = tuple(names) if names is not None else tuple(v.name for v in variables)
+        groups: dict[str, tuple[list[tuple[Variable, int | None]], list[int]]] = {}
+        for i, element in enumerate(elements):
+            key = model._backend.type_key(element[0].type)
             members, index = groups.setdefault(key, ([], []))
-            members.append(var)
+            members.append(element)
             index.append(i)
         self._blocks = [_Block(model, members, index) for members, index in groups.values()]
         self._values = np.zeros(len(variables), dtype=np.float64)
         first = self._blocks[0] if len(self._blocks) == 1 else None
-        # The common case (all Float64) reads straight into the float64 vector.
-        self._direct = first is not None and first.buf.dtype == np.float64
+        # The common case (all Float64 scalars) reads straight into the float64 vector.
+        self._direct = first is not None and first.buf.dtype == np.float64 and first.pick is None
         if self._direct and first is not None:
             self._values = first.buf
-            self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)  # type: ignore[arg-type]
+            self._cbuf = (ctypes.c_double * len(first.buf)).from_buffer(first.buf)  # type: ignore[arg-type]
         # Model exchange restarts the integrator where inputs jumped; discrete ones need event mode.
         self._notify = model.interface == "me"
         events = self._notify and any(v.variability != "continuous" for v in variables)
@@ -151,7 +168,7 @@ class SignalGroup:
             if status > WARNING:
                 self._fail("get", block, status)
             if not self._direct:
-                self._values[block.index] = block.buf
+                self._values[block.index] = block.buf if block.pick is None else block.buf[block.pick]
 
     def _write_in_event_mode(self, values: npt.ArrayLike) -> None:
         self._model.write_in_event_mode(lambda: self._write(values))
@@ -172,7 +189,13 @@ class SignalGroup:
                 raise self._value_error(part, block)
             if block.set is None:
                 raise self._not_settable()
-            block.buf[:] = part
+            if block.pick is None:
+                block.buf[:] = part
+            else:  # arrays are written whole: the other elements keep their current values
+                status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
+                if status > WARNING:
+                    self._fail("get", block, status)
+                block.buf[block.pick] = part
             status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
             if status > WARNING:
                 self._fail("set", block, status)
@@ -193,7 +216,7 @@ class SignalGroup:
             if isinstance(exc, VariableError):
                 raise
             flat = np.asarray(values, dtype=np.float64).reshape(-1)
-            if flat.shape != (block.n,):
+            if flat.shape != (len(block.buf),):
                 raise self._shape_error(values) from exc
             self._write_direct(component, flat.tolist())
             return
@@ -220,8 +243,8 @@ class SignalGroup:
 
     def _value_error(self, part: Any, block: _Block) -> VariableError:
         bad = [
-            f"{var.name}={_show(value)}" + _declared(i, block)
-            for i, (value, var) in enumerate(zip(part, block.variables))
+            f"{name}={_show(value)}" + _declared(i, block)
+            for i, (value, name) in enumerate(zip(part, block.names))
             if not _valid_one(value, i, block) or _bad_enum(value, i, block)
         ]
         expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
@@ -237,14 +260,14 @@ class SignalGroup:
         )
 
     def _not_settable(self) -> VariableError:
-        fixed = [v.name for b in self._blocks for v in b.variables if not v.settable_in_step]
+        fixed = [n for b in self._blocks for v, n in zip(b.variables, b.names) if not v.settable_in_step]
         return VariableError(
             f"{self._model.info.model_name}: {fixed} cannot be set between steps: only inputs and tunable "
             f"parameters can; pass parameters and start values to reset() instead"
         )
 
     def _fail(self, what: str, block: _Block, status: int) -> None:
-        names = [v.name for v in block.variables]
+        names = block.names
         raise FmuError(
             f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} "
             f"{self._where()}",
@@ -320,6 +343,6 @@ def _valid(part: Any, block: _Block) -> bool:
 
 
 def _enums_ok(part: Any, block: _Block) -> bool:
-    if block.enums and len(part) == block.n:
+    if block.enums and len(part) == len(block.variables):
         return all(part[i] in allowed for i, allowed in block.enums)
     return True
