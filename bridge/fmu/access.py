@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ctypes
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -26,7 +27,7 @@ def read(backend: Backend, variables: Sequence[Variable], where: Where) -> dict[
     values: dict[str, list[Any]] = {}
     for var_type, group in by_type(variables).items():
         if var_type == "Binary":
-            raw = backend.call("fmi3GetBinary", lambda g=group: backend.fmu.getBinary(_vrs(g), _total(g)))
+            raw = backend.call("fmi3GetBinary", partial(backend.fmu.getBinary, _vrs(group), _total(group)))
             _split(group, [bytes(b) for b in raw], values)
             continue
         if var_type == "Clock":
@@ -44,7 +45,7 @@ def write(
     for var_type, group in by_type(variables).items():
         items = [x for v in group for x in flat[v.name]]
         if var_type == "Binary":
-            backend.call("fmi3SetBinary", lambda g=group, b=items: backend.fmu.setBinary(_vrs(g), b))
+            backend.call("fmi3SetBinary", partial(backend.fmu.setBinary, _vrs(group), items))
             continue
         buf = (backend.ctype(var_type) * len(items))(*items)
         _call(backend, var_type, group, buf, setter=True, where=where)
