@@ -60,7 +60,7 @@ def inspect_cmd(
     ] = None,
 ) -> None:
     """Show an FMU's version, interfaces, default experiment, platforms and variables."""
-    from bridge.cli.inspect import VARIABLE_COLUMNS, summary
+    from bridge.cli.inspect import VARIABLE_COLUMNS, clock_lines, interfaces_text, summary, type_cell
 
     info = summary(fmu)
     if causality:
@@ -71,7 +71,7 @@ def inspect_cmd(
     de = info["default_experiment"]
     console.print(f"[bold]{info['model_name']}[/bold]  ({info['path']})")
     console.print(
-        f"FMI {info['fmi_version']}  interfaces: {', '.join(info['interfaces'])}  "
+        f"FMI {info['fmi_version']}  interfaces: {interfaces_text(info)}  "
         f"platforms: {', '.join(info['platforms']) or 'none (source only?)'}"
     )
     console.print(
@@ -86,9 +86,11 @@ def inspect_cmd(
         err_console.print(f"[yellow]standard violation:[/yellow] {escape(problem)}")
     table = Table(*VARIABLE_COLUMNS, show_lines=False)
     for var in info["variables"]:
-        table.add_row(*(_cell(var.get(col)) for col in VARIABLE_COLUMNS))
+        table.add_row(*(type_cell(var) if col == "type" else _cell(var.get(col)) for col in VARIABLE_COLUMNS))
     console.print(table)
     console.print(f"{len(info['variables'])} variables")
+    for line in clock_lines(info):
+        console.print(f"clock {escape(line)}")
 
 
 def _cell(value: Any) -> str:

@@ -19,6 +19,7 @@ from fmpy import fmi1, fmi2, fmi3
 from bridge.errors import FmuError, FmuLoadError
 from bridge.fmu import logs
 from bridge.fmu.description import Interface, ModelInfo
+from bridge.fmu.events import fmi1_iterate
 
 OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
 STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
@@ -180,13 +181,10 @@ class Fmi1Backend(Backend):
     major = 1
 
     def _load(self, unzip_dir: pathlib.Path) -> Any:
-        if self.interface != "cs":
-            raise FmuLoadError(
-                f"{self.info.path.name}: FMI 1.0 model exchange is not supported; use its co-simulation "
-                f"interface or an FMI 2.0/3.0 export [{self.info.path}]"
-            )
         self._callbacks = logs.fmi1_callbacks()
-        return fmi1.FMU1Slave(**self._fmpy_kwargs(unzip_dir))
+        self.initial_events: tuple[bool, float | None] = (False, None)
+        cls = fmi1.FMU1Slave if self.interface == "cs" else fmi1.FMU1Model
+        return cls(**self._fmpy_kwargs(unzip_dir))
 
     def ctype(self, var_type: str) -> Any:
         if var_type == "Boolean":
@@ -198,6 +196,9 @@ class Fmi1Backend(Backend):
         return fn  # type: ignore[no-any-return]
 
     def instantiate(self) -> None:
+        if self.interface == "me":
+            self._instantiate_model()
+            return
         location = pathlib.Path(self.fmu.unzipDirectory).as_uri()
         self.component = self.call(
             "fmiInstantiateSlave",
@@ -219,19 +220,43 @@ class Fmi1Backend(Backend):
             )
         self.fmu.component = self.component
 
+    def _instantiate_model(self) -> None:
+        name, guid = self.instance_name.encode(), self.info.guid.encode()
+        self.component = self.call(
+            "fmiInstantiateModel",
+            lambda: self.fmu.fmi1InstantiateModel(name, guid, self._callbacks, fmi1.fmi1False),
+        )
+        if not self.component:
+            raise FmuError(
+                f"{self.info.model_name}: fmiInstantiateModel returned NULL", log=self.log.recent()
+            )
+        self.fmu.component = self.component
+
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
         self._init_args = (start_s, stop_s)
+        if self.interface == "me":
+            self.call("fmiSetTime", lambda: self.fmu.setTime(start_s))
 
     def exit_initialization(self) -> None:
         start_s, stop_s = self._init_args
-        self.call("fmiInitializeSlave", lambda: self.fmu.initialize(tStart=start_s, stopTime=stop_s))
+        if self.interface == "cs":
+            self.call("fmiInitializeSlave", lambda: self.fmu.initialize(tStart=start_s, stopTime=stop_s))
+            return
+        # fmiInitialize runs the first event iteration; finish it here (FMI 1.0 has no event mode).
+        first = self.call("fmiInitialize", self.fmu.initialize)
+        self.initial_events = self.call("fmiEventUpdate", lambda: fmi1_iterate(self.fmu, first))
 
     def reset(self) -> None:
+        if self.interface == "me":
+            raise FmuError(f"{self.info.model_name}: FMI 1.0 model exchange has no reset; re-instantiate")
         self.call("fmiResetSlave", self.fmu.reset)
 
     def free_instance(self) -> None:
         if self.component:
-            self.fmu.fmi1FreeSlaveInstance(self.component)
+            if self.interface == "me":
+                self.fmu.fmi1FreeModelInstance(self.component)
+            else:
+                self.fmu.fmi1FreeSlaveInstance(self.component)
             self.component = None
 
     def stepper(self) -> Callable[[float, float], int]:

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import logging
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
+from xml.etree import ElementTree
 
 import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
@@ -17,6 +19,7 @@ from fmpy.model_description import ModelDescription, ModelVariable, ValidationEr
 from bridge.errors import FmuLoadError
 from bridge.fmu.vocab import (
     NUMERIC_TYPES,
+    ClockInfo,
     DefaultExperiment,
     Interface,
     ModelInfo,
@@ -56,10 +59,11 @@ def read_model_info(path: str | Path) -> ModelInfo:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
             can_state[kind] = bool(iface.canGetAndSetFMUstate)
-    if not interfaces:
+    scheduled = md.scheduledExecution is not None
+    if not interfaces and not scheduled:
         raise FmuLoadError(
-            f"{fmu_path.name} declares neither co-simulation nor model exchange; "
-            f"fmu-bridge runs only those two interfaces [{fmu_path}]"
+            f"{fmu_path.name} declares no interface: fmu-bridge runs co-simulation and model "
+            f"exchange; re-export it with one of them [{fmu_path}]"
         )
     return ModelInfo(
         path=fmu_path,
@@ -70,13 +74,14 @@ def read_model_info(path: str | Path) -> ModelInfo:
         model_identifiers=identifiers,
         default_experiment=_default_experiment(md),
         platforms=tuple(fmpy.supported_platforms(str(fmu_path))) if fmu_path.is_file() else (),
-        variables={v.name: _variable(v) for v in md.modelVariables},
+        variables=_variables(md, fmu_path),
         can_get_set_state=can_state,
         number_of_states=int(md.numberOfContinuousStates or 0),
         number_of_event_indicators=int(md.numberOfEventIndicators or 0),
         generation_tool=md.generationTool,
         description=md.description,
         problems=problems,
+        scheduled_execution=scheduled,
         raw=md,
     )
 
@@ -172,7 +177,48 @@ def _variable(v: ModelVariable) -> Variable:
         declared_type=declared.name if declared is not None else None,
         enum_items=items,
         is_array=bool(v.dimensions),
+        dimensions=_dimensions(v),
+        clock=ClockInfo(str(v.intervalVariability or "unspecified")) if var_type == "Clock" else None,
     )
+
+
+def _variables(md: ModelDescription, fmu_path: Path) -> dict[str, Variable]:
+    variables = {v.name: _variable(v) for v in md.modelVariables}
+    clocks = [v for v in variables.values() if v.clock is not None]
+    if clocks:  # FMPy reads a clock's interval variability only; the rest comes from the XML
+        attributes = _clock_attributes(fmu_path)
+        for var in clocks:
+            variables[var.name] = replace(var, clock=_clock(var, attributes.get(var.name, {})))
+    return variables
+
+
+def _clock_attributes(fmu_path: Path) -> dict[str, dict[str, str]]:
+    if fmu_path.is_file():
+        with zipfile.ZipFile(fmu_path) as archive:
+            text = archive.read("modelDescription.xml")
+    else:
+        text = (fmu_path / "modelDescription.xml").read_bytes()
+    root = ElementTree.fromstring(text)
+    return {str(e.get("name")): dict(e.attrib) for e in root.iterfind("ModelVariables/Clock")}
+
+
+def _clock(var: Variable, attributes: dict[str, str]) -> ClockInfo:
+    return ClockInfo(
+        interval_variability=attributes.get("intervalVariability", "unspecified"),
+        interval_s=_float(attributes.get("intervalDecimal")),
+        shift_s=_float(attributes.get("shiftDecimal")),
+        can_be_deactivated=attributes.get("canBeDeactivated") in ("true", "1"),
+    )
+
+
+def _dimensions(v: ModelVariable) -> tuple[int, ...]:
+    """Array sizes, resolved by FMPy (a dimension may be a structural parameter's start value)."""
+    if not v.dimensions:
+        return ()
+    shape = getattr(v, "shape", None)
+    if shape:
+        return tuple(int(n) for n in shape)
+    return tuple(int(d.start) if d.start is not None else 0 for d in v.dimensions)
 
 
 def _start_value(start: Any, var_type: str) -> Any:

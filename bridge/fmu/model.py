@@ -11,18 +11,18 @@ import itertools
 import logging
 import math
 from collections import OrderedDict
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-
-from bridge.errors import ConfigError, FmuError, StepError, VariableError
-from bridge.fmu import archive
+from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
+from bridge.fmu import access, archive
 from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
+from bridge.fmu.events import EventCalls
 from bridge.fmu.signals import SignalGroup
-from bridge.fmu.solver import MeStepper, event_iteration
+from bridge.fmu.solver import MeStepper
+from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
 
@@ -30,6 +30,8 @@ ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
 RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
 _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8
+# An FMU state and, for model exchange, the next time event it had announced (not part of the state).
+_Snapshot = tuple[ctypes.c_void_p, float | None]
 
 
 class Model:
@@ -76,9 +78,8 @@ class Model:
         self._initialized = False
         self._closed = False
         self._failed_status = 0
-        self._snapshots: OrderedDict[tuple[Any, ...], ctypes.c_void_p | None] = OrderedDict()
+        self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
         self._me: MeStepper | None = None
-        self._discrete_dirty = False
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
@@ -130,11 +131,11 @@ class Model:
         return self.info.variable(name)
 
     def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
-        """A batched accessor for numeric variables (see :class:`SignalGroup`)."""
-        variables = [self._lookup(n, role) for n in names]
-        if not variables:
+        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`)."""
+        elements = [self._element(n, role) for n in names]
+        if not elements:
             raise ConfigError(f"{role}: at least one variable is needed")
-        for var in variables:
+        for var, _ in elements:
             if not var.is_numeric:
                 raise VariableError(
                     f"{role} {var.name!r} is a {var.type} variable: signal groups are numeric "
@@ -142,64 +143,87 @@ class Model:
                 )
             if writable and not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
-        return SignalGroup(self, variables)
+        return SignalGroup(self, elements, list(names))
 
     def get(self, names: Iterable[str]) -> dict[str, Any]:
-        """Current values by name, typed (float, int, bool, str)."""
-        variables = [self._lookup(n) for n in names]
-        values: dict[str, Any] = {}
-        for var_type, group in _by_type(variables).items():
-            ctype = self._backend.ctype(var_type)
-            buf = (ctype * len(group))()
-            self._call_access(var_type, group, buf, setter=False)
-            for var, raw in zip(group, buf):
-                values[var.name] = _from_c(raw, var_type)
-        return {v.name: values[v.name] for v in variables}
+        """Current values by name, typed (float, int, bool, str, bytes for Binary).
+
+        An FMI 3.0 array by its name gives a numpy array of its shape; ``y[2,3]`` (1-based indices,
+        one per dimension) gives one element.
+        """
+        wanted = {name: self._element(name) for name in names}
+        flat = access.read(self._backend, list(dict.fromkeys(var for var, _ in wanted.values())), self._where)
+        return {name: access.pick(var, flat[var.name], index) for name, (var, index) in wanted.items()}
 
     def set(self, values: Mapping[str, Any]) -> None:
-        """Set inputs or tunable parameters between steps (one FMI call per type)."""
-        variables = [self._lookup(n) for n in values]
-        for var in variables:
+        """Set inputs or tunable parameters between steps (one FMI call per type).
+
+        Array elements are written as ``{"u[2]": 1.5}``, whole arrays as ``{"u": [...]}``.
+        """
+        elements = {name: self._element(name) for name in values}
+        for var, _ in elements.values():
             if not var.settable_in_step:
                 raise VariableError(_not_settable_in_step(var, self.info))
-        self._write(variables, values)
+        variables = list(dict.fromkeys(var for var, _ in elements.values()))
+        flat = access.merge(self._backend, elements, values, self._to_c, self._where)
+        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
+            self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
+            return
+        access.write(self._backend, variables, flat, self._where)
         if self.interface == "me":
             self._inputs_dirty = True
-            self._discrete_dirty = self._discrete_dirty or any(
-                v.variability != "continuous" for v in variables
-            )
+
+    def _where(self) -> str:
+        return f"at step {self.step_index} (t={self.time_s:g} s)"
+
+    def _element(self, name: str, role: str = "variable") -> tuple[Variable, int | None]:
+        try:
+            return self.info.element(name)
+        except VariableError:
+            if name not in self.info.variables and "[" not in name:
+                raise unknown_variable_error(name, self.info, role) from None
+            raise
+
+    def write_in_event_mode(self, write: Callable[[], None]) -> None:
+        """Model exchange: ``write`` in event mode, then the discrete-state iteration and continuous time.
+
+        FMI 2.0/3.0 accept discrete inputs and tunable parameters only in event mode; FMI 1.0 takes
+        them at any time but needs the event iteration afterwards.
+        """
+        me = self._me
+        if me is None or self.terminated:  # before initialisation every value is accepted
+            write()
+            return
+        events, call = me.events, self._backend.call
+        call("enterEventMode", events.enter_event_mode)
+        write()
+        terminate, me.next_event_s = call("the event iteration", events.iterate)
+        self._inputs_dirty = True
+        if terminate:
+            self.terminated = True
+            return
+        call("enterContinuousTimeMode", events.enter_continuous_time_mode)
+
+    def _to_c(self, var: Variable, value: Any) -> Any:
+        return to_c(var, value, self.info.model_name, self._backend.major)
 
     def _lookup(self, name: str, role: str = "variable") -> Variable:
         var = self.info.variables.get(name)
         if var is None:
             raise unknown_variable_error(name, self.info, role)
         if var.is_array:
-            raise VariableError(f"{role} {name!r} is an array variable; fmu-bridge supports scalar variables")
+            raise VariableError(
+                f"{role} {name!r} is an FMI 3.0 array: parameters and start values are scalars here; "
+                f"set its elements between steps with Model.set({{'{var.element_names()[0]}': ...}})"
+            )
         return var
 
     def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
-        for var_type, group in _by_type(variables).items():
-            ctype = self._backend.ctype(var_type)
-            buf = (ctype * len(group))(*(_to_c(var, values[var.name], self) for var in group))
-            self._call_access(var_type, group, buf, setter=True)
+        flat = {v.name: [self._to_c(v, values[v.name])] for v in variables}
+        access.write(self._backend, list(variables), flat, self._where)
 
-    def _call_access(self, var_type: str, group: list[Variable], buf: Any, *, setter: bool) -> None:
-        fn = self._backend.accessor(var_type, setter=setter)
-        vrs = (ctypes.c_uint * len(group))(*(v.value_reference for v in group))
-        extra = (len(group),) if self._backend.major == 3 else ()
-        status = fn(self._backend.component, vrs, len(group), buf, *extra)
-        if status > WARNING:
-            what = "set" if setter else "get"
-            raise FmuError(
-                f"{self.info.model_name}: {what} of {[v.name for v in group]} returned "
-                f"{STATUS_NAMES[status]} at step {self.step_index} (t={self.time_s:g} s)",
-                log=self._backend.log.recent(),
-            )
-
-    def _inputs_written(self, group: SignalGroup) -> None:
+    def _inputs_written(self) -> None:
         self._inputs_dirty = True
-        if any(v.variability != "continuous" for v in group.variables):
-            self._discrete_dirty = True
 
     # -- initialisation and reset -------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None) -> None:
@@ -222,8 +246,11 @@ class Model:
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
         if snapshot is not None and self.reset_policy in ("auto", "restore"):
             self._snapshots.move_to_end(key)
-            self._backend.set_state(snapshot)
+            state, next_event_s = snapshot
+            self._backend.set_state(state)
             self._restart()
+            if self._me is not None:
+                self._me.next_event_s = next_event_s
             return
         policy = self.reset_policy
         if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
@@ -246,7 +273,12 @@ class Model:
     def _initialize(self, values: dict[Variable, Any]) -> None:
         self._initialized = False
         self._backend.log.clear()
-        early = [v for v in values if v.causality == "input" or v.initial in ("exact", "approx")]
+        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
+        early = [
+            v
+            for v in values
+            if self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx")
+        ]
         late = [v for v in values if v not in early]
         by_name = {v.name: value for v, value in values.items()}
         self._write(early, by_name)
@@ -263,11 +295,16 @@ class Model:
 
     def _start_me(self) -> None:
         # FMI 2.0 and 3.0 both leave initialisation in event mode: iterate, then integrate.
-        fmu = self._backend.fmu
-        terminate, next_event = event_iteration(fmu, self._backend.major == 3)
+        # FMI 1.0's fmiInitialize has iterated already (the backend finished it).
+        fmu, backend = self._backend.fmu, self._backend
+        events = EventCalls(fmu, backend.major)
+        if backend.major == 1:
+            terminate, next_event = getattr(backend, "initial_events", (False, None))
+        else:
+            terminate, next_event = backend.call("the initial event iteration", events.iterate)
         if terminate:
             raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
-        fmu.enterContinuousTimeMode()
+        backend.call("enterContinuousTimeMode", events.enter_continuous_time_mode)
         if self._me is None or self._me._fmu is not fmu:
             # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
             # input change needs a tighter one, so 1e-6 unless the caller asks for another.
@@ -279,7 +316,6 @@ class Model:
     def _restart(self) -> None:
         self.step_index = 0
         self.terminated = False
-        self._discrete_dirty = False
         if self._me is not None:
             self._me.restart(self.start_time_s)
 
@@ -289,7 +325,7 @@ class Model:
             var = self._lookup(name, "parameter or start value")
             if not var.settable_at_init:
                 raise VariableError(_not_settable_at_init(var, self.info))
-            _to_c(var, value, self)
+            self._to_c(var, value)
             checked[var] = value
         return checked
 
@@ -304,20 +340,21 @@ class Model:
             self._snapshots[key] = None  # first sighting: remember the key, snapshot on the next
             self._evict()
             return
-        self._snapshots[key] = self._backend.get_state()
+        next_event_s = self._me.next_event_s if self._me is not None else None
+        self._snapshots[key] = (self._backend.get_state(), next_event_s)
         self._snapshots.move_to_end(key)
         self._evict()
 
     def _evict(self) -> None:
         while len(self._snapshots) > _MAX_SNAPSHOTS:
-            _, state = self._snapshots.popitem(last=False)
-            if state is not None:
-                self._backend.free_state(state)
+            _, snapshot = self._snapshots.popitem(last=False)
+            if snapshot is not None:
+                self._backend.free_state(snapshot[0])
 
     def _drop_snapshots(self) -> None:
-        for state in self._snapshots.values():
-            if state is not None:
-                self._backend.free_state(state)
+        for snapshot in self._snapshots.values():
+            if snapshot is not None:
+                self._backend.free_state(snapshot[0])
         self._snapshots.clear()
 
     # -- stepping -----------------------------------------------------------------------------
@@ -351,11 +388,6 @@ class Model:
     def _advance_me(self, n: int) -> bool:
         assert self._me is not None  # guarded by the caller
         start = self.time_s
-        if self._discrete_dirty:
-            self._discrete_dirty = False
-            if self._me.handle_event(start, self.step_index):
-                self.terminated = True
-                return True
         end = self.start_time_s + (self.step_index + n) * self.step_size_s
         # Inputs are held piecewise constant: restart the integrator only where they may have jumped.
         restart, self._inputs_dirty = self._inputs_dirty, False
@@ -397,6 +429,12 @@ class Model:
 
 
 def _choose_interface(info: ModelInfo, interface: str) -> Interface:
+    if not info.interfaces:
+        raise FmuLoadError(
+            f"{info.path.name} offers scheduled execution only (FMI 3.0), which fmu-bridge does not run: "
+            f"it runs co-simulation and model exchange; re-export the model with one of those "
+            f"interfaces [{info.path}]"
+        )
     if interface == "auto":
         return "cs" if "cs" in info.interfaces else "me"
     if interface not in ("cs", "me"):
@@ -420,63 +458,8 @@ def _step_size(info: ModelInfo, step_size_s: float | None) -> float:
     return float(h)
 
 
-def _by_type(variables: Sequence[Variable]) -> dict[str, list[Variable]]:
-    groups: dict[str, list[Variable]] = {}
-    for var in variables:
-        groups.setdefault(var.type, []).append(var)
-    return groups
-
-
 def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:
     return tuple(sorted((v.name, repr(x)) for v, x in values.items()))
-
-
-def _to_c(var: Variable, value: Any, model: Model) -> Any:
-    """Check ``value`` against ``var``'s type and convert it for the FMI call."""
-    where = f"{model.info.model_name}: {var.name!r} ({var.type})"
-    if var.type == "String":
-        if not isinstance(value, str):
-            raise VariableError(f"{where} expects a str, got {value!r}")
-        return value.encode()
-    if isinstance(value, str) and var.type == "Enumeration":
-        items = dict(var.enum_items)
-        if value not in items:
-            raise VariableError(f"{where}: {value!r} is not one of {list(items)}")
-        return items[value]
-    is_integer = var.type.startswith(("Int", "UInt")) or var.type == "Enumeration"
-    if is_integer and isinstance(value, int | np.integer) and not isinstance(value, bool):
-        return int(value)  # exact: large 64-bit values must not pass through a float
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise VariableError(f"{where} expects a number, got {value!r}") from None
-    if not math.isfinite(number):
-        raise VariableError(f"{where} got {value!r}: expected a finite number")
-    if var.type.startswith("Float"):
-        return number
-    if var.type == "Boolean":
-        return _boolean(number, where, value, model._backend.major)
-    if number != int(number):
-        raise VariableError(f"{where} expects a whole number, got {value!r}")
-    return int(number)
-
-
-def _boolean(number: float, where: str, value: Any, major: int) -> Any:
-    if number not in (0.0, 1.0):
-        raise VariableError(f"{where} expects True/False (or 0/1), got {value!r}")
-    if major == 1:  # FMI 1.0 booleans are chars
-        return b"\x01" if number else b"\x00"
-    return bool(number)
-
-
-def _from_c(raw: Any, var_type: str) -> Any:
-    if var_type == "String":
-        return raw.decode(errors="replace") if raw is not None else ""
-    if var_type == "Boolean":
-        return raw not in (b"\x00", 0, False)
-    if var_type.startswith("Float"):
-        return float(raw)
-    return int(raw)
 
 
 def _not_settable_at_init(var: Variable, info: ModelInfo) -> str:

@@ -8,7 +8,9 @@ correctly typed buffers: integers and booleans are never read through getReal.
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Sequence
+import itertools
+import math
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -16,6 +18,7 @@ import numpy.typing as npt
 
 from bridge.errors import FmuError, VariableError
 from bridge.fmu.backend import STATUS_NAMES, WARNING, numpy_dtype
+from bridge.fmu.values import int_range
 
 if TYPE_CHECKING:
     from bridge.fmu.description import Variable
@@ -32,34 +35,49 @@ class _Block:
         "_vrs",
         "buf",
         "enums",
+        "exact",
         "get",
         "index",
         "kind",
         "n",
+        "names",
         "nargs",
+        "pick",
         "ptr",
+        "ranges",
         "set",
         "variables",
         "vrs",
     )
     # ``vrs`` and ``ptr`` are integer addresses of ``_vrs`` and ``buf``, which the block keeps alive.
 
-    def __init__(self, model: Model, variables: list[Variable], index: list[int]) -> None:
+    def __init__(self, model: Model, elements: list[tuple[Variable, int | None]], index: list[int]) -> None:
         backend = model._backend
+        variables = [var for var, _ in elements]
         ctype = backend.ctype(variables[0].type)
         self.variables = variables
+        self.names = [var.element_names()[i] if i is not None else var.name for var, i in elements]
         self.index = np.asarray(index, dtype=np.intp)
-        self.n = len(variables)
-        self._vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in variables))
+        unique = list(dict.fromkeys(variables))
+        self.n = len(unique)
+        self._vrs = (ctypes.c_uint * self.n)(*(v.value_reference for v in unique))
         self.vrs = ctypes.addressof(self._vrs)
-        self.buf = np.zeros(self.n, dtype=numpy_dtype(ctype))
+        # FMI 3.0 arrays are read and written whole; ``pick`` takes the elements of the group.
+        offsets = dict(zip(unique, itertools.accumulate((v.size for v in unique), initial=0)))
+        positions = [offsets[var] + (i or 0) for var, i in elements]
+        total = sum(v.size for v in unique)
+        self.pick = None if positions == list(range(total)) else np.asarray(positions, dtype=np.intp)
+        self.buf = np.zeros(total, dtype=numpy_dtype(ctype))
         self.ptr = self.buf.ctypes.data
         self.get = backend.fast_accessor(variables[0].type, setter=False)
         self.set = backend.fast_accessor(variables[0].type, setter=True) if _settable(variables) else None
-        # FMI 3.0 getters/setters take the number of values as a fifth argument.
-        self.nargs = (self.n,) if backend.major == 3 else ()
+        # FMI 3.0 getters/setters take the number of values (arrays expanded) as a fifth argument.
+        self.nargs = (total,) if backend.major == 3 else ()
         kind = variables[0].type
         self.kind = _FLOAT if kind.startswith("Float") else _BOOL if kind == "Boolean" else _INT
+        # 64-bit integers are checked and written as Python ints: float64 cannot hold them exactly.
+        self.exact = self.kind == _INT and self.buf.dtype.itemsize == 8
+        self.ranges = [int_range(v.type, backend.major) for v in variables] if self.kind == _INT else []
         # Enumerations accept only their declared item values.
         self.enums = [
             (i, np.array([value for _, value in v.enum_items], dtype=np.float64))
@@ -76,31 +94,44 @@ class SignalGroup:
     """A fixed, ordered list of numeric variables read or written as one float64 vector.
 
     ``read()`` returns a new array each call; ``read_into(out)`` fills a caller-owned array.
-    ``write(values)`` checks values (finite, integral for integer types, in range) before
-    any FMI call, so a bad action never reaches the FMU.
+    ``write(values)`` sets all variables of the group (inputs or tunable parameters) with one
+    call per type, after checking the values (finite, integral for integer types, in the range of
+    the type), so a bad action never reaches the FMU. 64-bit integers are written exactly when
+    given as ints. In model exchange, a group with discrete inputs or tunable parameters is
+    written in event mode (see :meth:`Model.write_in_event_mode`).
     """
 
-    def __init__(self, model: Model, variables: Sequence[Variable]) -> None:
+    write: Callable[[npt.ArrayLike], None]
+
+    def __init__(
+        self,
+        model: Model,
+        elements: Sequence[tuple[Variable, int | None]],
+        names: Sequence[str] | None = None,
+    ) -> None:
         self._model = model
         self._backend = model._backend
+        variables = [var for var, _ in elements]
         self.variables = tuple(variables)
-        self.names = tuple(v.name for v in variables)
-        groups: dict[str, tuple[list[Variable], list[int]]] = {}
-        for i, var in enumerate(variables):
-            key = model._backend.type_key(var.type)
+        self.names = tuple(names) if names is not None else tuple(v.name for v in variables)
+        groups: dict[str, tuple[list[tuple[Variable, int | None]], list[int]]] = {}
+        for i, element in enumerate(elements):
+            key = model._backend.type_key(element[0].type)
             members, index = groups.setdefault(key, ([], []))
-            members.append(var)
+            members.append(element)
             index.append(i)
         self._blocks = [_Block(model, members, index) for members, index in groups.values()]
         self._values = np.zeros(len(variables), dtype=np.float64)
         first = self._blocks[0] if len(self._blocks) == 1 else None
-        # The common case (all Float64) reads straight into the float64 vector.
-        self._direct = first is not None and first.buf.dtype == np.float64
+        # The common case (all Float64 scalars) reads straight into the float64 vector.
+        self._direct = first is not None and first.buf.dtype == np.float64 and first.pick is None
         if self._direct and first is not None:
             self._values = first.buf
-            self._cbuf = (ctypes.c_double * first.n).from_buffer(first.buf)  # type: ignore[arg-type]
-        # Model exchange must know when discrete inputs change (event iteration before the next step).
+            self._cbuf = (ctypes.c_double * len(first.buf)).from_buffer(first.buf)  # type: ignore[arg-type]
+        # Model exchange restarts the integrator where inputs jumped; discrete ones need event mode.
         self._notify = model.interface == "me"
+        events = self._notify and any(v.variability != "continuous" for v in variables)
+        self.write = self._write_in_event_mode if events else self._write
 
     def __len__(self) -> int:
         return len(self.names)
@@ -137,10 +168,12 @@ class SignalGroup:
             if status > WARNING:
                 self._fail("get", block, status)
             if not self._direct:
-                self._values[block.index] = block.buf
+                self._values[block.index] = block.buf if block.pick is None else block.buf[block.pick]
 
-    def write(self, values: npt.ArrayLike) -> None:
-        """Set all variables of the group (inputs or tunable parameters) in one call per type."""
+    def _write_in_event_mode(self, values: npt.ArrayLike) -> None:
+        self._model.write_in_event_mode(lambda: self._write(values))
+
+    def _write(self, values: npt.ArrayLike) -> None:
         component = self._backend.component
         if component is None:
             raise self._no_instance()
@@ -151,17 +184,23 @@ class SignalGroup:
         if vec.shape != (len(self.names),):
             raise self._shape_error(values)
         for block in self._blocks:
-            part = vec[block.index]
+            part: Any = _exact_part(values, block) if block.exact else vec[block.index]
             if not _valid(part, block):
                 raise self._value_error(part, block)
             if block.set is None:
                 raise self._not_settable()
-            block.buf[:] = part
+            if block.pick is None:
+                block.buf[:] = part
+            else:  # arrays are written whole: the other elements keep their current values
+                status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
+                if status > WARNING:
+                    self._fail("get", block, status)
+                block.buf[block.pick] = part
             status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
             if status > WARNING:
                 self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written(self)
+            self._model._inputs_written()
 
     def _write_direct(self, component: Any, values: Any) -> None:
         """All-Float64 groups (the common case): plain-Python checks beat numpy for a few values."""
@@ -177,7 +216,7 @@ class SignalGroup:
             if isinstance(exc, VariableError):
                 raise
             flat = np.asarray(values, dtype=np.float64).reshape(-1)
-            if flat.shape != (block.n,):
+            if flat.shape != (len(block.buf),):
                 raise self._shape_error(values) from exc
             self._write_direct(component, flat.tolist())
             return
@@ -185,7 +224,7 @@ class SignalGroup:
         if status > WARNING:
             self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written(self)
+            self._model._inputs_written()
 
     def _no_instance(self) -> FmuError:
         return FmuError(
@@ -202,18 +241,18 @@ class SignalGroup:
             f"got an array of shape {shape}"
         )
 
-    def _value_error(self, part: npt.NDArray[Any], block: _Block) -> VariableError:
-        values = np.asarray(part, dtype=np.float64)
+    def _value_error(self, part: Any, block: _Block) -> VariableError:
         bad = [
-            f"{var.name}={float(value):g}" + (f" (items: {dict(var.enum_items)})" if var.enum_items else "")
-            for i, (value, var) in enumerate(zip(values, block.variables))
-            if not _valid(np.array([value]), block) or _bad_enum(value, i, block)
+            f"{name}={_show(value)}" + _declared(i, block)
+            for i, (value, name) in enumerate(zip(part, block.names))
+            if not _valid_one(value, i, block) or _bad_enum(value, i, block)
         ]
         expected = {_FLOAT: "finite numbers", _INT: "whole numbers in range", _BOOL: "0 or 1"}[block.kind]
+        finite = all(not isinstance(v, float) or math.isfinite(v) for v in np.asarray(part).tolist())
         hint = (
-            "a NaN or inf usually comes from a diverged policy or controller"
-            if not np.isfinite(values).all()
-            else "round or map the value before writing it"
+            "round, clip or map the value before writing it"
+            if finite
+            else "a NaN or inf usually comes from a diverged policy or controller"
         )
         return VariableError(
             f"{self._model.info.model_name}: invalid value {', '.join(bad)} {self._where()}: expected "
@@ -221,14 +260,14 @@ class SignalGroup:
         )
 
     def _not_settable(self) -> VariableError:
-        fixed = [v.name for b in self._blocks for v in b.variables if not v.settable_in_step]
+        fixed = [n for b in self._blocks for v, n in zip(b.variables, b.names) if not v.settable_in_step]
         return VariableError(
             f"{self._model.info.model_name}: {fixed} cannot be set between steps: only inputs and tunable "
             f"parameters can; pass parameters and start values to reset() instead"
         )
 
     def _fail(self, what: str, block: _Block, status: int) -> None:
-        names = [v.name for v in block.variables]
+        names = block.names
         raise FmuError(
             f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} "
             f"{self._where()}",
@@ -240,7 +279,55 @@ def _bad_enum(value: float, position: int, block: _Block) -> bool:
     return any(i == position and value not in allowed for i, allowed in block.enums)
 
 
-def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
+def _show(value: Any) -> str:
+    if isinstance(value, float | np.floating):
+        whole = math.isfinite(value) and value == int(value)
+        return str(int(value)) if whole else f"{value:g}"
+    return str(value)
+
+
+def _declared(position: int, block: _Block) -> str:
+    var = block.variables[position]
+    if var.enum_items:
+        return f" (items: {dict(var.enum_items)})"
+    if block.kind == _INT:
+        low, high = block.ranges[position]
+        return f" ({var.type}, range [{low}, {high}])"
+    return ""
+
+
+def _valid_one(value: Any, position: int, block: _Block) -> bool:
+    if block.exact:
+        low, high = block.ranges[position]
+        return isinstance(value, int) and low <= value <= high
+    return (
+        _valid(np.array([value], dtype=np.float64), block)
+        if block.kind != _INT
+        else _int_ok(value, block.ranges[position])
+    )
+
+
+def _int_ok(value: Any, bounds: tuple[int, int]) -> bool:
+    number = float(value)
+    return math.isfinite(number) and number == round(number) and bounds[0] <= number <= bounds[1]
+
+
+def _exact_part(values: Any, block: _Block) -> list[Any]:
+    """The block's values as Python ints where they are whole numbers (else as given, to be refused)."""
+    seq = values.tolist() if isinstance(values, np.ndarray) else list(values)  # type: ignore[arg-type]
+    part: list[Any] = []
+    for i in block.index.tolist():
+        value = seq[i]
+        whole_float = isinstance(value, float | np.floating) and math.isfinite(value) and value == int(value)
+        if whole_float or isinstance(value, int | np.integer):
+            value = int(value)
+        part.append(value)
+    return part
+
+
+def _valid(part: Any, block: _Block) -> bool:
+    if block.exact:
+        return all(_valid_one(v, i, block) for i, v in enumerate(part)) and _enums_ok(part, block)
     if not np.isfinite(part).all():
         return False
     if block.kind == _FLOAT:
@@ -252,6 +339,10 @@ def _valid(part: npt.NDArray[Any], block: _Block) -> bool:
     info = np.iinfo(block.buf.dtype)
     if not ((part >= info.min) & (part <= info.max)).all():
         return False
-    if block.enums and len(part) == block.n:
+    return _enums_ok(part, block)
+
+
+def _enums_ok(part: Any, block: _Block) -> bool:
+    if block.enums and len(part) == len(block.variables):
         return all(part[i] in allowed for i, allowed in block.enums)
     return True

@@ -17,6 +17,7 @@ from fmpy.sundials import CVodeSolver
 
 from bridge.errors import StepError
 from bridge.fmu.backend import Backend
+from bridge.fmu.events import EventCalls
 
 
 class _HeldInputs:
@@ -30,15 +31,6 @@ class _HeldInputs:
 
 def _close(a: float, b: float) -> bool:
     return math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12)
-
-
-def event_iteration(fmu: Any, v3: bool) -> tuple[bool, float | None]:
-    """Run the discrete-state iteration in event mode: (terminate requested, next time event)."""
-    update = fmu.updateDiscreteStates if v3 else fmu.newDiscreteStates
-    needed, terminate, defined, next_time = True, False, False, 0.0
-    while needed and not terminate:
-        needed, terminate, _, _, defined, next_time = update()
-    return bool(terminate), (float(next_time) if defined else None)
 
 
 class MeStepper:
@@ -55,20 +47,24 @@ class MeStepper:
         self._backend = backend
         self._fmu: Any = backend.fmu
         info = backend.info
-        self._v3 = backend.major == 3
+        major = backend.major
+        self.events = EventCalls(self._fmu, major)
         self._needs_completed = bool(
             info.raw is not None
             and info.raw.modelExchange is not None
-            and (self._v3 or info.raw.modelExchange.needsCompletedIntegratorStep)
+            and (major != 2 or info.raw.modelExchange.needsCompletedIntegratorStep)
         )
         self.next_event_s = next_event_s
         fmu = self._fmu
+        self._get_nominals = (
+            fmu.getNominalContinuousStates if major == 1 else fmu.getNominalsOfContinuousStates
+        )
         self._solver = CVodeSolver(
             nx=info.number_of_states,
             nz=info.number_of_event_indicators,
             get_x=fmu.getContinuousStates,
             set_x=fmu.setContinuousStates,
-            get_dx=fmu.getContinuousStateDerivatives if self._v3 else fmu.getDerivatives,
+            get_dx=fmu.getContinuousStateDerivatives if major == 3 else fmu.getDerivatives,
             get_z=fmu.getEventIndicators,
             get_nominals=self._nominals,
             set_time=fmu.setTime,
@@ -80,7 +76,7 @@ class MeStepper:
 
     def _nominals(self, pointer: Any, n: int) -> None:
         """State nominals scale CVode's absolute tolerance; some exporters report 0 (illegal there)."""
-        self._fmu.getNominalsOfContinuousStates(pointer, n)
+        self._get_nominals(pointer, n)
         nominal = np.ctypeslib.as_array(pointer, (n,))
         bad = ~np.isfinite(nominal) | (nominal <= 0.0)
         if bad.any():
@@ -92,11 +88,11 @@ class MeStepper:
 
     def handle_event(self, time_s: float, step: int) -> bool:
         """Event mode, discrete iteration, back to continuous time; True if termination requested."""
-        self._fmu.enterEventMode()
-        terminate, self.next_event_s = event_iteration(self._fmu, self._v3)
+        self.events.enter_event_mode()
+        terminate, self.next_event_s = self.events.iterate()
         if terminate:
             return True
-        self._fmu.enterContinuousTimeMode()
+        self.events.enter_continuous_time_mode()
         self._solver.reset(time_s)
         return False
 
@@ -131,5 +127,4 @@ class MeStepper:
     def _completed(self) -> tuple[bool, bool]:
         if not self._needs_completed:
             return False, False
-        result = self._fmu.completedIntegratorStep()
-        return bool(result[0]), bool(result[1])
+        return self.events.completed_step()

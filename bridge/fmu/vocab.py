@@ -9,6 +9,9 @@ module only, so none of them loads FMPy (``bridge.fmu`` loads its runtime lazily
 from __future__ import annotations
 
 import difflib
+import itertools
+import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -36,6 +39,16 @@ NUMERIC_TYPES = frozenset(
 
 
 @dataclass(frozen=True)
+class ClockInfo:
+    """What an FMI 3.0 Clock declares: its interval variability and, where given, interval and shift."""
+
+    interval_variability: str
+    interval_s: float | None = None
+    shift_s: float | None = None
+    can_be_deactivated: bool = False
+
+
+@dataclass(frozen=True)
 class Variable:
     """One scalar variable of an FMU, in FMI-3 type vocabulary (``Real`` is ``Float64``)."""
 
@@ -54,10 +67,28 @@ class Variable:
     declared_type: str | None = None
     enum_items: tuple[tuple[str, int], ...] = ()
     is_array: bool = False
+    dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays: the size of each dimension, row-major
+    clock: ClockInfo | None = None  # FMI 3.0 Clock variables
 
     @property
     def is_numeric(self) -> bool:
         return self.type in NUMERIC_TYPES
+
+    @property
+    def size(self) -> int:
+        """Number of scalar elements: 1 for a scalar, the product of the dimensions for an array."""
+        return math.prod(self.dimensions) if self.dimensions else 1
+
+    def element_names(self) -> list[str]:
+        """Names of the scalar elements: ``name`` for a scalar, ``name[i]``, ``name[i,j]``... for an array.
+
+        Indices are 1-based, as Modelica tools name the elements of arrays they export as scalars
+        (``a[1]``), and run in row-major order (the last index fastest), as FMI 3.0 stores arrays.
+        """
+        if not self.dimensions:
+            return [self.name]
+        ranges = (range(1, n + 1) for n in self.dimensions)
+        return [f"{self.name}[{','.join(map(str, idx))}]" for idx in itertools.product(*ranges)]
 
     @property
     def settable_at_init(self) -> bool:
@@ -99,6 +130,7 @@ class ModelInfo:
     generation_tool: str | None = None
     description: str | None = None
     problems: tuple[str, ...] = ()
+    scheduled_execution: bool = False  # FMI 3.0 scheduled execution (listed, not run)
     raw: Any = field(default=None, repr=False, compare=False)  # FMPy's ModelDescription, in-process only
 
     @property
@@ -114,6 +146,41 @@ class ModelInfo:
 
     def by_causality(self, *causalities: str) -> list[Variable]:
         return [v for v in self.variables.values() if v.causality in causalities]
+
+    @property
+    def clocks(self) -> list[Variable]:
+        return [v for v in self.variables.values() if v.clock is not None]
+
+    def scalar_names(self) -> list[str]:
+        """Every name a config may use: scalars as declared, arrays element by element (``y[2,3]``)."""
+        return [name for v in self.variables.values() for name in v.element_names()]
+
+    def element(self, name: str) -> tuple[Variable, int | None]:
+        """The variable a name refers to and, for an array element ``y[2,3]``, its row-major flat index.
+
+        A declared name wins (FMI 1.0/2.0 exports name scalarised arrays ``a[1]``); else ``name[i,...]``
+        with 1-based indices addresses an element of an FMI 3.0 array.
+        """
+        if name in self.variables:
+            return self.variables[name], None
+        match = _ELEMENT.fullmatch(name)
+        var = self.variables.get(match.group(1)) if match else None
+        if match is None or var is None or not var.dimensions:
+            raise unknown_variable_error(name, self)
+        index = tuple(int(i) for i in match.group(2).split(","))
+        if len(index) != len(var.dimensions) or not all(1 <= i <= n for i, n in zip(index, var.dimensions)):
+            shape = ",".join(map(str, var.dimensions))
+            raise VariableError(
+                f"{name!r}: index out of range for array {var.name}[{shape}] of {self.model_name}; "
+                f"indices are 1-based, one per dimension, e.g. {var.element_names()[0]!r}"
+            )
+        flat = 0
+        for i, n in zip(index, var.dimensions):
+            flat = flat * n + (i - 1)
+        return var, flat
+
+
+_ELEMENT = re.compile(r"(.+)\[\s*(\d+(?:\s*,\s*\d+)*)\s*\]")
 
 
 def unknown_variable_error(name: str, info: ModelInfo, role: str = "variable") -> VariableError:
@@ -145,6 +212,7 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
         "can_get_set_state": {k.upper(): v for k, v in info.can_get_set_state.items()},
         "continuous_states": info.number_of_states,
         "event_indicators": info.number_of_event_indicators,
+        "scheduled_execution": info.scheduled_execution,
         "problems": list(info.problems),
         "variables": [
             {
@@ -159,9 +227,21 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
                 "unit": v.unit,
                 "description": v.description,
                 **({"enumeration": dict(v.enum_items)} if v.enum_items else {}),
+                **({"dimensions": list(v.dimensions)} if v.dimensions else {}),
+                **({"clock": _clock_summary(v.clock)} if v.clock is not None else {}),
             }
             for v in info.variables.values()
         ],
+        "clocks": [v.name for v in info.clocks],
+    }
+
+
+def _clock_summary(clock: ClockInfo) -> dict[str, Any]:
+    return {
+        "interval_variability": clock.interval_variability,
+        "interval_s": clock.interval_s,
+        "shift_s": clock.shift_s,
+        "can_be_deactivated": clock.can_be_deactivated,
     }
 
 
@@ -171,6 +251,8 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
     variables = {}
     for v in data["variables"]:
         items = tuple((str(k), int(x)) for k, x in (v.get("enumeration") or {}).items())
+        dimensions = tuple(int(n) for n in v.get("dimensions") or ())
+        clock = ClockInfo(**v["clock"]) if v.get("clock") else None
         variables[v["name"]] = Variable(
             name=v["name"],
             value_reference=-1,
@@ -185,6 +267,9 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
             unit=v.get("unit"),
             description=v.get("description"),
             enum_items=items,
+            is_array=bool(dimensions),
+            dimensions=dimensions,
+            clock=clock,
         )
     return ModelInfo(
         path=Path(data.get("path", "remote.fmu")),
@@ -204,6 +289,7 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
         can_get_set_state={k.lower(): bool(x) for k, x in data.get("can_get_set_state", {}).items()},
         number_of_states=int(data.get("continuous_states", 0)),
         number_of_event_indicators=int(data.get("event_indicators", 0)),
+        scheduled_execution=bool(data.get("scheduled_execution", False)),
         generation_tool=data.get("generation_tool"),
         description=data.get("description"),
     )

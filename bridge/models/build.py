@@ -32,7 +32,14 @@ logger = logging.getLogger(__name__)
 #: gcc flags; -fvisibility=hidden keeps everything but the FMI functions out of the symbol table.
 CFLAGS: Final = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-fvisibility=hidden")
 
-_WRAPPERS: Final = {"1.0": "fmi1_cs.c", "2.0": "fmi2.c", "3.0": "fmi3.c"}
+_WRAPPERS: Final = {
+    ("1.0", "cs"): "fmi1_cs.c",
+    ("1.0", "me"): "fmi1_me.c",
+    ("2.0", "cs"): "fmi2.c",
+    ("2.0", "me"): "fmi2.c",
+    ("3.0", "cs"): "fmi3.c",
+    ("3.0", "me"): "fmi3.c",
+}
 _CORE_SOURCES: Final = ("fmu_core.c", "fmu_vars.c", "fmu_solver.c")
 _FMI_HEADERS: Final = {
     "1.0": ("fmi1Functions.h",),
@@ -69,7 +76,7 @@ def build_archive(spec: Spec, fmi_version: str, interface: str, key: str, target
         (work / "model_gen.c").write_text(c_table(spec, fmi_version, interface), encoding="ascii")
         sources = [
             *(common / s for s in _CORE_SOURCES),
-            common / _WRAPPERS[fmi_version],
+            common / _WRAPPERS[fmi_version, interface],
             spec.directory / "model.c",
             work / "model_gen.c",
         ]

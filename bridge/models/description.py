@@ -101,10 +101,15 @@ def _type_attributes(v: Variable, fmi_version: str) -> dict[str, str]:
         declaredType=v.declared_type,
         unit=v.unit,
         start=start,
-        min=v.min if numeric else None,
-        max=v.max if numeric else None,
+        min=_bound(v, v.min) if numeric else None,
+        max=_bound(v, v.max) if numeric else None,
         nominal=v.nominal,
     )
+
+
+def _bound(v: Variable, value: float | None) -> float | int | None:
+    """Integer types declare whole-number bounds (xs:int/xs:long in the schemas)."""
+    return int(value) if value is not None and v.type in INT_TYPES else value
 
 
 def _type_definitions(spec: Spec, fmi_version: str) -> ET.Element | None:
@@ -129,9 +134,13 @@ def _type_definitions(spec: Spec, fmi_version: str) -> ET.Element | None:
 
 
 def _xml_fmi1(spec: Spec, interface: str, token: str) -> ET.Element:
-    """FMI 1.0 co-simulation stand-alone: no ModelStructure, causality internal, variability parameter."""
+    """FMI 1.0 model exchange or co-simulation stand-alone: causality internal, variability parameter."""
     variables = spec.variant_variables("1.0", interface)
-    counts = {"numberOfContinuousStates": "0", "numberOfEventIndicators": "0"}  # CS exposes neither
+    me = interface == "me"
+    counts = {  # CS exposes neither
+        "numberOfContinuousStates": str(len(spec.states()) if me else 0),
+        "numberOfEventIndicators": str(len(spec.event_indicators) if me else 0),
+    }
     root = _root("1.0", spec, modelIdentifier=spec.name, guid=token, **counts)
     experiment = _default_experiment(spec, ("startTime", "stopTime", "tolerance"))
     _append(root, _units_element(variables, fmi1=True), _type_definitions(spec, "1.0"), experiment)
@@ -148,6 +157,8 @@ def _xml_fmi1(spec: Spec, interface: str, token: str) -> ET.Element:
         )
         scalar = ET.SubElement(model_variables, "ScalarVariable", attributes)
         ET.SubElement(scalar, FMI2_TYPES[v.type], _type_attributes(v, "1.0"))
+    if me:
+        return root  # an FMI 1.0 model-exchange description has no Implementation element
     standalone = ET.SubElement(ET.SubElement(root, "Implementation"), "CoSimulation_StandAlone")
     flags = ("canHandleVariableCommunicationStepSize", "canNotUseMemoryManagementFunctions")
     ET.SubElement(standalone, "Capabilities", dict.fromkeys(flags, "true"))

@@ -103,7 +103,10 @@ FmuStatus fmu_get(FmuInstance* inst, const char* fn, unsigned type_mask, unsigne
 static unsigned settable_modes(const FmuInstance* inst, const FmuVariable* v) {
     unsigned before_init = FMU_MODE_BIT(MODE_INSTANTIATED) | FMU_MODE_BIT(MODE_INITIALIZATION);
     if (v->causality == C_INPUT) {
-        return before_init | FMU_MODE_BIT(MODE_STEP) | FMU_MODE_BIT(MODE_EVENT) | FMU_MODE_BIT(MODE_CONTINUOUS);
+        /* FMI 2.0/3.0 model exchange: discrete inputs change only in event mode (FMI 1.0 has no modes). */
+        unsigned running = FMU_MODE_BIT(MODE_STEP) | FMU_MODE_BIT(MODE_EVENT);
+        if (v->variability == V_CONTINUOUS || inst->fmi_version == 1) running |= FMU_MODE_BIT(MODE_CONTINUOUS);
+        return before_init | running;
     }
     if (v->variability == V_TUNABLE && inst->fmi_version >= 2) {
         return before_init | FMU_MODE_BIT(MODE_STEP) | FMU_MODE_BIT(MODE_EVENT);
@@ -125,6 +128,9 @@ static FmuStatus check_settable(FmuInstance* inst, const char* fn, const FmuVari
     } else if (v->causality == C_PARAMETER) {
         fmu_log_error(inst, "%s: fixed parameter %s can only be set before initialization ends; reset the "
                       "instance to change it", fn, v->name);
+    } else if (inst->s.mode == MODE_CONTINUOUS) {
+        fmu_log_error(inst, "%s: discrete input %s can only be set in event mode (call EnterEventMode first)",
+                      fn, v->name);
     } else {
         fmu_log_error(inst, "%s: input %s cannot be set after the instance terminated or failed", fn, v->name);
     }
