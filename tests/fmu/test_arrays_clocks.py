@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from bridge.cli.main import app
 from bridge.errors import FmuLoadError, VariableError
 from bridge.fmu import Model, read_model_info
-from bridge.plant.vocab import info_from_summary, summary_of
+from bridge.fmu.vocab import info_from_summary, summary_of
 
 SLAVES = Path(__file__).resolve().parent.parent / "data" / "slaves"
 
