@@ -25,8 +25,8 @@ from agents.policies import Sb3Policy
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment, Noise, load_experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.net import protocol as proto
 from bridge.fmu.vocab import ModelInfo
+from bridge.net import protocol as proto
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
