@@ -20,6 +20,17 @@ from bridge.errors import ConfigError, DependencyMissing
 METADATA_KEY = "fmu_bridge"  # the same key as agents.export.onnx (not imported: that module needs torch)
 
 
+def load_policy(path: Path, runtime: str) -> Any:
+    """The deployed policy of a run: ``torch`` (stable-baselines3) or ``onnx`` (onnxruntime)."""
+    if runtime == "onnx":
+        return OnnxPolicy(path)
+    if runtime == "torch":
+        from agents.policies import Sb3Policy
+
+        return Sb3Policy(path)
+    raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
+
+
 def onnx_file(path: Path) -> Path:
     """``policy.onnx`` of a run directory, or the given ``.onnx`` file."""
     if path.is_file() and path.suffix == ".onnx":
@@ -50,9 +61,7 @@ class OnnxPolicy:
         options.intra_op_num_threads = 1
         options.inter_op_num_threads = 1
         try:
-            self._session = ort.InferenceSession(
-                str(self.path), options, providers=["CPUExecutionProvider"]
-            )
+            self._session = ort.InferenceSession(str(self.path), options, providers=["CPUExecutionProvider"])
         except Exception as exc:
             raise ConfigError(f"cannot load the ONNX policy {self.path}: {exc}") from exc
         raw = self._session.get_modelmeta().custom_metadata_map.get(METADATA_KEY)

@@ -87,7 +87,7 @@ def actor_modules(model: Any, algo: str) -> list[Any]:
 
 def network_ops(modules: list[Any]) -> list[Op]:
     """Flatten the modules into linear layers and activations; anything else is an error."""
-    import torch.nn as nn
+    from torch import nn
 
     ops: list[Op] = []
     pending = list(modules)

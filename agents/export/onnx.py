@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +48,9 @@ def _wrapper(parts: PolicyParts, model: Any) -> Any:
             self.register_buffer("high", tensor(parts.high, torch.float32))
             self.register_buffer("centre", tensor(parts.centre))
             self.register_buffer("half_range", tensor(parts.half))
-            self.register_buffer("table", tensor(parts.table if parts.table is not None else np.zeros((1, 1))))
+            self.register_buffer(
+                "table", tensor(parts.table if parts.table is not None else np.zeros((1, 1)))
+            )
 
         def forward(self, observation: Any) -> tuple[Any, Any]:
             x = observation
@@ -79,16 +82,18 @@ def export_onnx(run: Path, out: Path | None = None) -> Path:
     module = _wrapper(parts, model)
     example = torch.zeros((1, len(parts.observation_names)), dtype=torch.float32)
     try:
-        torch.onnx.export(
-            module,
-            (example,),
-            str(out),
-            input_names=["observation"],
-            output_names=["action", "inputs"],
-            dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}, "inputs": {0: "batch"}},
-            opset_version=OPSET,
-            dynamo=False,
-        )
+        with warnings.catch_warnings():  # the TorchScript exporter (no onnxscript needed) is deprecated
+            warnings.simplefilter("ignore", DeprecationWarning)
+            torch.onnx.export(
+                module,
+                (example,),
+                str(out),
+                input_names=["observation"],
+                output_names=["action", "inputs"],
+                dynamic_axes={"observation": {0: "batch"}, "action": {0: "batch"}, "inputs": {0: "batch"}},
+                opset_version=OPSET,
+                dynamo=False,
+            )
     except Exception as exc:
         raise BridgeError(f"torch.onnx.export failed for {run}: {exc}; output: {out}") from exc
     graph = onnx.load(str(out))

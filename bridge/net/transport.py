@@ -73,6 +73,25 @@ class ZenohOptions:
         return ", ".join(parts)
 
 
+ZENOH_MODES = ("peer", "client")
+
+
+def session_mode(
+    mode: str | None, listen: tuple[str, ...], connect: tuple[str, ...], config: Path | None
+) -> str | None:
+    """The Zenoh mode of a command-line session: ``--zenoh-mode`` when given; else client when the
+    session only connects (to a router: rmw_zenoh's layout, and the mode that works from behind NAT,
+    a firewall or a container, since nothing has to connect back); else peer. ``None`` leaves the
+    mode to the config file."""
+    if mode is not None:
+        if mode not in ZENOH_MODES:
+            raise TransportError(f"--zenoh-mode {mode!r} is unknown; use client or peer")
+        return mode
+    if config is not None:
+        return None
+    return "client" if connect and not listen else None
+
+
 def quiet_zenoh_logs(level: str = "error") -> None:
     """Zenoh logs through its own logger; keep it to errors unless RUST_LOG says otherwise."""
     with _LOG_ONCE:
