@@ -30,7 +30,7 @@ ZenohModeOpt = Annotated[
     str | None,
     typer.Option(
         "--zenoh-mode",
-        help="client or peer; default: client when only --connect is given (a router), else peer.",
+        help="client (remote hosts: through the router) or peer (default).",
     ),
 ]
 

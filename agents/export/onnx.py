@@ -57,16 +57,17 @@ def _wrapper(parts: PolicyParts, model: Any) -> Any:
             if self.normalise:
                 x = torch.clamp((x.double() - self.mean) / self.std, -self.clip, self.clip).float()
             y = self.actor(x)
+            low, high = self.get_buffer("low"), self.get_buffer("high")
             if parts.head == "argmax":
                 action = torch.argmax(y, dim=1)
-                return action, self.table[action]
+                return action, self.get_buffer("table")[action]
             if parts.head == "clip":
-                action = torch.maximum(torch.minimum(y, self.high), self.low)
+                action = torch.maximum(torch.minimum(y, high), low)
             else:
                 squashed = torch.tanh(y) if parts.head == "squash" else y
-                action = self.low + 0.5 * (squashed + 1.0) * (self.high - self.low)
+                action = low + 0.5 * (squashed + 1.0) * (high - low)
             unit = torch.clamp(action.double(), -1.0, 1.0)
-            return action, self.centre + self.half_range * unit
+            return action, self.get_buffer("centre") + self.get_buffer("half_range") * unit
 
     return DeployedPolicy().eval()
 

@@ -117,11 +117,10 @@ def test_latency_statistics_stay_bounded() -> None:
     assert np.isnan(Stats().summary()["latency_p99_us"])
 
 
-def test_zenoh_mode_is_client_when_only_connecting() -> None:
+def test_zenoh_mode_option() -> None:
     router = ("tcp/10.0.0.1:7447",)
-    assert session_mode(None, (), router, None) == "client"
-    assert session_mode(None, ("tcp/0.0.0.0:7448",), router, None) is None  # listens: a peer
+    assert session_mode("client", (), router, None) == "client"
     assert session_mode("peer", (), router, None) == "peer"
-    assert session_mode(None, (), router, Path("z.json5")) is None  # the file says its mode
+    assert session_mode(None, (), router, None) is None  # peer, or the config file's mode
     with pytest.raises(Exception, match="client or peer"):
         session_mode("router", (), (), None)
