@@ -1,4 +1,4 @@
-"""``fmu-bridge train / evaluate / compare``: added to the bridge CLI through an entry point."""
+"""``fmu-bridge train, evaluate, compare, agent run, export``: added through an entry point."""
 
 from __future__ import annotations
 
@@ -20,6 +20,55 @@ def register(app: typer.Typer) -> None:
     agent_app = typer.Typer(help="Deployed agents: run a trained policy as a node.", no_args_is_help=True)
     agent_app.command("run")(agent_run_cmd)
     app.add_typer(agent_app, name="agent")
+    export_app = typer.Typer(help="Export a trained run: ONNX graph or policy FMU.", no_args_is_help=True)
+    export_app.command("onnx")(export_onnx_cmd)
+    export_app.command("fmu")(export_fmu_cmd)
+    app.add_typer(export_app, name="export")
+
+
+ZenohModeOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--zenoh-mode",
+        help="client (remote hosts: through the router) or peer (default).",
+    ),
+]
+
+
+def export_onnx_cmd(
+    run: Annotated[Path, typer.Argument(help="A run directory (or model .zip) from `fmu-bridge train`.")],
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Default: RUN/policy.onnx.")] = None,
+) -> None:
+    """The deployed policy as one ONNX graph: normalisation, network, action mapping, metadata."""
+    from agents.export.onnx import export_onnx
+
+    console.print(f"ONNX policy: {export_onnx(run, out)}")
+
+
+def export_fmu_cmd(
+    run: Annotated[Path, typer.Argument(help="A run directory (or model .zip) from `fmu-bridge train`.")],
+    fmi: Annotated[str, typer.Option("--fmi", help="FMI version: 2 or 3.")] = "2",
+    out: Annotated[Path | None, typer.Option("-o", "--out", help="Default: RUN/policy-fmi<N>.fmu.")] = None,
+) -> None:
+    """The deployed policy as a co-simulation FMU (C from the weights, compiled with gcc)."""
+    from agents.export.policy_fmu import export_fmu
+
+    console.print(f"policy FMU: {export_fmu(run, fmi, out)}")
+
+
+def safe_inputs(values: list[float] | None, n_inputs: int) -> list[float]:
+    """``--safe-value``: one value for every action input, or one per action input (in order)."""
+    from bridge.errors import ConfigError
+
+    given = list(values or [0.0])
+    if len(given) == 1:
+        return given * n_inputs
+    if len(given) != n_inputs:
+        raise ConfigError(
+            f"--safe-value: {len(given)} values for {n_inputs} action inputs; give one value for all "
+            "of them or one per action input, in the order of actions.inputs"
+        )
+    return given
 
 
 def agent_run_cmd(
@@ -39,8 +88,9 @@ def agent_run_cmd(
         str, typer.Option(help="hold (the last action) or safe, when observations stop.")
     ] = "hold",
     safe_value: Annotated[
-        float, typer.Option(help="The safe physical input value (with --missing safe).")
-    ] = 0.0,
+        list[float] | None,
+        typer.Option(help="Safe physical input value(s) (--missing safe): one for all inputs, or one each."),
+    ] = None,
     timeout_s: Annotated[
         float, typer.Option("--timeout", help="Seconds without observation before the rule.")
     ] = 0.5,
@@ -52,38 +102,36 @@ def agent_run_cmd(
     connect: Annotated[list[str] | None, typer.Option("--connect")] = None,
     listen: Annotated[list[str] | None, typer.Option("--listen")] = None,
     zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config")] = None,
+    zenoh_mode: ZenohModeOpt = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID (ros2 transport).")] = None,
+    runtime: Annotated[
+        str, typer.Option(help="torch (stable-baselines3) or onnx (onnxruntime, no torch needed).")
+    ] = "torch",
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
     import signal
     import threading
 
-    from agents.deploy import DeploySettings
     from agents.deploy_io import AgentNode
-    from bridge.errors import ConfigError
-    from bridge.net.transport import ZenohOptions
+    from bridge.net.transport import ZenohOptions, session_mode
 
-    if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
-        raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    settings = DeploySettings(
-        transport=transport,  # type: ignore[arg-type]  # checked above
+    settings = agent_settings(
+        model, config, transport, missing, safe_value, runtime,
         node=node,
         prefix=prefix,
         observation_topic=observation_topic,
         action_topic=action_topic,
-        missing=missing,  # type: ignore[arg-type]  # checked above
-        safe_inputs=None,
         timeout_s=timeout_s,
         scenario=scenario,
         domain_id=ros_domain,
-    )
-    if missing == "safe":
-        settings.safe_inputs = [safe_value]
-    options = ZenohOptions(config_file=zenoh_config, listen=tuple(listen or ()), connect=tuple(connect or ()))
+    )  # fmt: skip
+    listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
+    mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
+    options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
     agent = AgentNode(model, config, settings, options)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    console.print(f"agent {model} acting on {node!r} over {transport}; Ctrl-C stops it")
+    console.print(f"agent {model} acting on {node!r} over {transport} ({runtime}); Ctrl-C stops it")
     try:
         stats = agent.run(duration_s, stop)
     finally:
@@ -96,8 +144,38 @@ def agent_run_cmd(
     )
 
 
+def agent_settings(
+    model: Path,
+    config: Path | None,
+    transport: str,
+    missing: str,
+    safe_values: list[float] | None,
+    runtime: str,
+    **fields: Any,
+) -> Any:
+    """The ``DeploySettings`` of ``agent run`` (checked; safe values one per action input)."""
+    from agents.deploy import DeploySettings, deployment_experiment
+    from bridge.errors import ConfigError
+
+    if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
+        raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
+    if runtime not in ("torch", "onnx"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
+    experiment, _ = deployment_experiment(model, config)
+    n_inputs = len(experiment.actions.inputs)
+    return DeploySettings(
+        transport=transport,  # type: ignore[arg-type]  # checked above
+        missing=missing,  # type: ignore[arg-type]  # checked above
+        safe_inputs=safe_inputs(safe_values, n_inputs) if missing == "safe" else None,
+        runtime=runtime,  # type: ignore[arg-type]  # checked above
+        **fields,
+    )
+
+
 def train_cmd(
-    experiment: Annotated[Path, typer.Argument(help="An experiment YAML file.")],
+    experiment: Annotated[
+        Path | None, typer.Argument(help="An experiment YAML file (with --resume: the run's copy).")
+    ] = None,
     algo: Annotated[str | None, typer.Option(help="PPO, SAC, TD3, A2C or DQN.")] = None,
     timesteps: Annotated[int | None, typer.Option(help="Environment steps to train for.")] = None,
     n_envs: Annotated[int | None, typer.Option("--n-envs", help="Parallel environments.")] = None,
@@ -109,10 +187,18 @@ def train_cmd(
     nodes: Annotated[str | None, typer.Option(help="Remote node name pattern (with --vec remote).")] = None,
     connect: Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint (remote).")] = None,
     zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config")] = None,
+    zenoh_mode: ZenohModeOpt = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
 ) -> None:
-    """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes)."""
+    """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
+
+    ``--resume RUN`` continues a run with its own experiment and settings; options given on the
+    command line (e.g. ``--timesteps``: how many more steps) override the stored ones."""
     from agents.train import train
+    from bridge.errors import ConfigError
+
+    if experiment is None and resume is None:
+        raise ConfigError("give an experiment file to train on, or --resume RUN_DIR to continue a run")
 
     overrides: dict[str, Any] = {
         "algo": algo.upper() if algo else None,
@@ -121,11 +207,12 @@ def train_cmd(
         "vec": vec,
         "seed": seed,
     }
-    if nodes or connect or zenoh_config:
+    if nodes or connect or zenoh_config or zenoh_mode:
         overrides["remote"] = {
             "nodes": nodes or "*",
             "connect": list(connect or []),
             "zenoh_config": str(zenoh_config) if zenoh_config else None,
+            "zenoh_mode": zenoh_mode,
         }
     result = train(
         experiment, overrides=overrides, run_dir=run_dir, resume=resume, version=version, progress=progress

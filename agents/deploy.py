@@ -11,7 +11,6 @@ Missing or late observations trigger a configured rule (hold the last action, or
 from __future__ import annotations
 
 import logging
-import statistics
 import threading
 import time
 from collections.abc import Sequence
@@ -21,7 +20,8 @@ from typing import Any, Literal
 
 import numpy as np
 
-from agents.policies import Sb3Policy
+from agents.latency import LatencyWindow
+from agents.policies import Policy
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment, Noise, load_experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
@@ -46,6 +46,7 @@ class DeploySettings:
     scenario: str | None = None
     domain_id: int | None = None
     namespace: str = "/"
+    runtime: Literal["torch", "onnx"] = "torch"
 
 
 @dataclass
@@ -53,16 +54,15 @@ class Stats:
     observations: int = 0
     actions: int = 0
     missing_events: int = 0
-    latencies_s: list[float] = field(default_factory=list)
+    latencies_s: LatencyWindow = field(default_factory=LatencyWindow)  # bounded: the recent window
 
     def summary(self) -> dict[str, float]:
-        lat = sorted(self.latencies_s) or [float("nan")]
         return {
             "observations": self.observations,
             "actions": self.actions,
             "missing_events": self.missing_events,
-            "latency_median_us": statistics.median(lat) * 1e6,
-            "latency_p99_us": lat[int(0.99 * (len(lat) - 1))] * 1e6,
+            "latency_median_us": self.latencies_s.quantile(0.5) * 1e6,
+            "latency_p99_us": self.latencies_s.quantile(0.99) * 1e6,
         }
 
 
@@ -106,7 +106,7 @@ class DeployedAgent:
 
     def __init__(
         self,
-        policy: Sb3Policy,
+        policy: Policy,
         experiment: Experiment,
         info: ModelInfo,
         settings: DeploySettings,
@@ -130,9 +130,10 @@ class DeployedAgent:
     def _warm_up(self) -> None:
         """The first inference of a torch model is slow (allocations, kernel choice): do it before
         observations arrive, so the first real action is on time. One thread: lower latency."""
-        import torch
+        if self.settings.runtime == "torch":  # the onnx runtime must work without torch
+            import torch
 
-        torch.set_num_threads(1)
+            torch.set_num_threads(1)
         space = self.task.observation_space
         for _ in range(3):
             self.policy.act(np.zeros(space.shape, dtype=np.float32), {})

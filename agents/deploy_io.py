@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_experiment, model_info_for
-from agents.policies import Sb3Policy
+from agents.runtime import load_policy
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
 from bridge.net.ros2 import cdr
@@ -35,7 +35,7 @@ class AgentNode:
         self._declared: list[Any] = []
         self._ros: Any = None  # the ROS node (ros2/rclpy transports), made by _ros_publisher
         experiment, _ = deployment_experiment(model, config)
-        policy = Sb3Policy(model)
+        policy = load_policy(model, settings.runtime)
         description = self._node_description() if settings.transport == "zenoh" else None
         run_dir = model if model.is_dir() else model.parent
         info = model_info_for(experiment, run_dir, description)

@@ -20,16 +20,22 @@ class RemoteSettings(BaseModel):
     connect: list[str] = []
     listen: list[str] = []
     zenoh_config: str | None = None
+    zenoh_mode: str | None = None
     timeout_s: float = 5.0
     replace_dead: bool = False
 
     def options(self) -> ZenohOptions:
         from pathlib import Path
 
+        from bridge.net.transport import session_mode
+
+        config = Path(self.zenoh_config) if self.zenoh_config else None
+        listen, connect = tuple(self.listen), tuple(self.connect)
         return ZenohOptions(
-            config_file=Path(self.zenoh_config) if self.zenoh_config else None,
-            listen=tuple(self.listen),
-            connect=tuple(self.connect),
+            config_file=config,
+            mode=session_mode(self.zenoh_mode, listen, connect, config),
+            listen=listen,
+            connect=connect,
         )
 
 

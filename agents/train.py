@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+from pydantic import ValidationError
 
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
 from bridge.env.fmu_env import FmuEnv
@@ -124,7 +125,7 @@ def prepare_run_dir(
 
 
 def train(
-    experiment_path: Path,
+    experiment_path: Path | None,
     *,
     overrides: dict[str, Any] | None = None,
     run_dir: Path | None = None,
@@ -139,6 +140,8 @@ def train(
 
     if resume is not None:
         return _resume(resume, overrides or {}, progress)
+    if experiment_path is None:
+        raise ConfigError("train: give an experiment file, or resume= a run directory")
     experiment = load_experiment(experiment_path, version=version)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
     residual = _residual(experiment, settings)
@@ -271,10 +274,20 @@ def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainRe
 
     from agents.policies import load_model
 
-    info = json.loads((run_dir / "run.json").read_text())
+    info_file = run_dir / "run.json"
+    if not info_file.is_file() or not (run_dir / "model.zip").is_file():
+        raise ConfigError(
+            f"--resume {run_dir}: not a run directory (expected run.json and model.zip from "
+            "`fmu-bridge train`)"
+        )
+    info = json.loads(info_file.read_text())
     experiment_path = run_dir / "experiment.yaml"
     experiment = load_experiment(experiment_path, version=info["version"])
-    settings = TrainingSettings.model_validate({**info["settings"], **overrides})
+    given = {k: v for k, v in overrides.items() if v is not None}  # unset options keep the run's values
+    try:
+        settings = TrainingSettings.model_validate({**info["settings"], **given})
+    except ValidationError as exc:
+        raise ConfigError(f"--resume {run_dir}: invalid training settings: {exc}") from None
     env = build_vec_env(settings, experiment, experiment_path, info.get("residual"), settings.seed + 1)
     if (run_dir / "vecnormalize.pkl").is_file():
         env = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), env)

@@ -246,17 +246,28 @@ ListenOpt = Annotated[
     list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447.")
 ]
 ConnectOpt = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")]
+ZenohModeOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--zenoh-mode",
+        help="client (remote hosts: through the router) or peer (default).",
+    ),
+]
 PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
 
 
 def _zenoh_options(
-    config: Path | None, listen: list[str] | None, connect: list[str] | None, mode: str | None = None
+    config: Path | None,
+    listen: list[str] | None,
+    connect: list[str] | None,
+    mode: str | None = None,
+    zenoh_mode: str | None = None,
 ) -> Any:
-    from bridge.net.transport import ZenohOptions
+    from bridge.net.transport import ZenohOptions, session_mode
 
-    return ZenohOptions(
-        config_file=config, mode=mode, listen=tuple(listen or ()), connect=tuple(connect or ())
-    )
+    listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
+    chosen = mode or session_mode(zenoh_mode, listen_t, connect_t, config)
+    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t)
 
 
 @app.command()
@@ -273,6 +284,7 @@ def node(
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     version: VersionOpt = None,
     ros: Annotated[
@@ -303,7 +315,7 @@ def node(
         name=name,
         mode=mode,  # type: ignore[arg-type]
         rate=rate,
-        options=_zenoh_options(zenoh_config, listen, connect),
+        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode),
         prefix=prefix,
         ros=view,
     )
@@ -350,6 +362,7 @@ def nodes(
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     timeout_s: Annotated[float, typer.Option("--timeout", help="Seconds to wait for answers.")] = 2.0,
 ) -> None:
@@ -357,7 +370,7 @@ def nodes(
     from bridge.net.remote import describe_nodes, list_nodes
     from bridge.net.transport import open_session, wait_connected
 
-    session = open_session(_zenoh_options(zenoh_config, listen, connect))
+    session = open_session(_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode))
     try:
         wait_connected(session, timeout_s)
         names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)

@@ -73,6 +73,26 @@ class ZenohOptions:
         return ", ".join(parts)
 
 
+ZENOH_MODES = ("peer", "client")
+
+
+def session_mode(
+    mode: str | None, listen: tuple[str, ...], connect: tuple[str, ...], config: Path | None
+) -> str | None:
+    """The Zenoh mode of a command-line session: ``--zenoh-mode`` (client or peer) when given.
+
+    Client mode is the one for remote hosts behind NAT, a firewall or a container (nothing has to
+    connect back; rmw_zenoh documents it for remote hosts). Without the option the session is a
+    peer, or what the config file says. ``listen``/``connect``/``config`` are taken for a future
+    automatic choice (client when only connecting to a router)."""
+    del listen, connect, config
+    if mode is None:
+        return None
+    if mode not in ZENOH_MODES:
+        raise TransportError(f"--zenoh-mode {mode!r} is unknown; use client or peer")
+    return mode
+
+
 def quiet_zenoh_logs(level: str = "error") -> None:
     """Zenoh logs through its own logger; keep it to errors unless RUST_LOG says otherwise."""
     with _LOG_ONCE:

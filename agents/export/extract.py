@@ -1,0 +1,199 @@
+"""A run directory as what every export needs: normalisation, network layers, action mapping, names.
+
+The deterministic action of each algorithm (as ``model.predict(deterministic=True)`` computes it):
+PPO/A2C the Gaussian mean (or the argmax of the logits), clipped to the action space; SAC the tanh
+of the mean, unscaled; TD3 the actor's (tanh) output, unscaled; DQN the argmax of the Q-values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.errors import ConfigError
+
+FloatArray = npt.NDArray[np.float64]
+Head = Literal["clip", "squash", "unscale", "argmax"]
+ACTIVATIONS = ("tanh", "relu", "elu")
+_HEADS: dict[str, Head] = {"PPO": "clip", "A2C": "clip", "SAC": "squash", "TD3": "unscale", "DQN": "argmax"}
+
+
+@dataclass(frozen=True)
+class Op:
+    """One step of the network: ``linear`` (weight ``(out, in)``, bias) or an activation."""
+
+    kind: str
+    weight: FloatArray | None = None
+    bias: FloatArray | None = None
+
+
+@dataclass
+class PolicyParts:
+    """Everything between the Task's observation vector and the plant's input values.
+
+    Attributes:
+        obs_mean, obs_std, obs_clip: VecNormalize ``clip((obs - mean) / std, -clip, clip)`` with
+            ``std = sqrt(var + epsilon)``; ``obs_mean is None`` when the run has no statistics.
+        ops: the network's deterministic path (float32 weights as float64 arrays).
+        head: how the network output becomes the agent's action.
+        low, high: the Box action space (continuous heads).
+        centre, half: continuous action ``a`` -> input values ``centre + half * clip(a, -1, 1)``.
+        table: discrete action ``i`` -> input values ``table[i]``.
+    """
+
+    algo: str
+    observation_names: list[str]
+    input_names: list[str]
+    units: dict[str, str]
+    ops: list[Op]
+    head: Head
+    obs_mean: FloatArray | None = None
+    obs_std: FloatArray | None = None
+    obs_clip: float = float("inf")
+    low: FloatArray = field(default_factory=lambda: np.zeros(0))
+    high: FloatArray = field(default_factory=lambda: np.zeros(0))
+    centre: FloatArray = field(default_factory=lambda: np.zeros(0))
+    half: FloatArray = field(default_factory=lambda: np.zeros(0))
+    table: FloatArray | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def discrete(self) -> bool:
+        return self.head == "argmax"
+
+
+def actor_modules(model: Any, algo: str) -> list[Any]:
+    """The torch modules of the deterministic path, in order (before the head)."""
+    if algo in ("PPO", "A2C"):
+        policy = model.policy
+        if getattr(policy, "use_sde", False) or getattr(policy, "squash_output", False):
+            raise ConfigError(f"{algo} with gSDE (use_sde) cannot be exported; train without use_sde")
+        extractor = getattr(policy, "pi_features_extractor", policy.features_extractor)
+        return [extractor, policy.mlp_extractor.policy_net, policy.action_net]
+    if algo == "SAC":
+        if getattr(model.actor, "use_sde", False):
+            raise ConfigError("SAC with gSDE (use_sde) cannot be exported; train without use_sde")
+        return [model.actor.features_extractor, model.actor.latent_pi, model.actor.mu]
+    if algo == "TD3":
+        return [model.actor.features_extractor, model.actor.mu]
+    if algo == "DQN":
+        return [model.q_net.features_extractor, model.q_net.q_net]
+    raise ConfigError(f"algorithm {algo!r} cannot be exported; supported: {sorted(_HEADS)}")
+
+
+def network_ops(modules: list[Any]) -> list[Op]:
+    """Flatten the modules into linear layers and activations; anything else is an error."""
+    from torch import nn
+
+    ops: list[Op] = []
+    pending = list(modules)
+    while pending:
+        module = pending.pop(0)
+        if isinstance(module, nn.Sequential) or type(module).__name__ == "FlattenExtractor":
+            pending[:0] = list(module.children())
+        elif isinstance(module, nn.Linear):
+            weight = module.weight.detach().double().numpy()
+            bias = module.bias.detach().double().numpy() if module.bias is not None else np.zeros(len(weight))
+            ops.append(Op("linear", weight, bias))
+        elif isinstance(module, nn.Tanh | nn.ReLU) or (isinstance(module, nn.ELU) and module.alpha == 1.0):
+            ops.append(Op(type(module).__name__.lower()))
+        elif not isinstance(module, nn.Flatten | nn.Identity):
+            raise ConfigError(
+                f"layer {type(module).__name__} cannot be exported to C: policies must be MLPs of "
+                f"Linear layers and {', '.join(ACTIVATIONS)} activations (SB3's MlpPolicy)"
+            )
+    return ops
+
+
+def load_parts(run: Path) -> tuple[PolicyParts, Any]:
+    """Read a run directory (or its model .zip): the parts and the loaded SB3 model."""
+    from agents.deploy import deployment_experiment, model_info_for
+    from agents.policies import Sb3Policy
+    from bridge.experiment.validate import check_experiment, timing
+    from bridge.task.core import Task
+
+    run_dir = run if run.is_dir() else run.parent
+    policy = Sb3Policy(run)
+    if policy.residual:
+        raise ConfigError(
+            f"{run} is a residual policy (a baseline plus a learned correction): export the baseline "
+            "and the correction together is not supported; deploy it with `agent run --runtime torch`"
+        )
+    algo = str(policy.run.get("algo") or type(policy.model).__name__)
+    experiment, _ = deployment_experiment(run, None)
+    info = model_info_for(experiment, run_dir, None)
+    check_experiment(experiment, info)
+    task = Task(experiment, info.variables, timing(experiment, info))
+    ops = network_ops(actor_modules(policy.model, algo))
+    parts = PolicyParts(
+        algo=algo,
+        observation_names=observation_names(task),
+        input_names=list(task.action_inputs),
+        units={n: info.variables[n].unit or "" for n in (*task.action_inputs, *task.output_names)},
+        ops=ops,
+        head=_HEADS[algo],
+    )
+    _set_normalisation(parts, policy)
+    _set_actions(parts, task, policy.model)
+    parts.metadata = _metadata(parts, policy, experiment)
+    return parts, policy.model
+
+
+def observation_names(task: Any) -> list[str]:
+    """Names of the observation elements; with history ``name@t-k`` (k samples ago), oldest first."""
+    names = list(task.observer.names)
+    history = task.experiment.observations.history
+    if history == 1:
+        return names
+    return [f"{n}@t-{history - 1 - k}" for k in range(history) for n in names]
+
+
+def _set_normalisation(parts: PolicyParts, policy: Any) -> None:
+    rms = policy._obs_rms
+    if rms is None:
+        return
+    parts.obs_mean = np.asarray(rms.mean, dtype=np.float64)
+    parts.obs_std = np.sqrt(np.asarray(rms.var, dtype=np.float64) + policy._eps)
+    parts.obs_clip = float(policy._clip)
+
+
+def _set_actions(parts: PolicyParts, task: Any, model: Any) -> None:
+    import gymnasium as gym
+
+    rng = np.random.default_rng(0)
+    n = len(task.action_inputs)
+    space = model.action_space
+    if isinstance(space, gym.spaces.Box):
+        if parts.head == "argmax":
+            raise ConfigError(f"{parts.algo} acts on discrete spaces only, but the run's space is {space}")
+        parts.low, parts.high = space.low.astype(np.float64), space.high.astype(np.float64)
+        zero = np.asarray(task.action_to_inputs(np.zeros(n), 0, rng)[:n], dtype=np.float64)
+        one = np.asarray(task.action_to_inputs(np.ones(n), 0, rng)[:n], dtype=np.float64)
+        parts.centre, parts.half = zero, one - zero
+    elif isinstance(space, gym.spaces.Discrete):
+        parts.head = "argmax"
+        rows = [task.action_to_inputs(i, 0, rng)[:n] for i in range(int(space.n))]
+        parts.table = np.asarray(rows, dtype=np.float64)
+    else:
+        raise ConfigError(f"action space {space} cannot be exported; supported: Box and Discrete")
+
+
+def _metadata(parts: PolicyParts, policy: Any, experiment: Any) -> dict[str, Any]:
+    from agents.settings import package_versions
+
+    return {
+        "experiment": experiment.name,
+        "experiment_version": experiment.version,
+        "algo": parts.algo,
+        "observation_names": parts.observation_names,
+        "action_inputs": parts.input_names,
+        "units": parts.units,
+        "action_kind": "discrete" if parts.discrete else "continuous",
+        "observation_processing": "caller (the Task: selection, scaling, errors, history)",
+        "packages": package_versions(),
+        "run": policy.name,
+    }
