@@ -156,6 +156,7 @@ def agent_settings(
     """The ``DeploySettings`` of ``agent run`` (checked; safe values one per action input)."""
     from agents.deploy import DeploySettings, deployment_experiment
     from bridge.errors import ConfigError
+    from bridge.net.ros2.args import current as current_ros_args
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
@@ -163,6 +164,15 @@ def agent_settings(
         raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
+    ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings
+    if ros.namespace is not None:
+        fields["namespace"] = ros.namespace
+    for key in ("observation_topic", "action_topic"):
+        topic = fields.get(key)
+        if topic in ros.remaps:
+            fields[key] = ros.remaps[topic]
+    if "domain_id" in ros.parameters:
+        fields["domain_id"] = int(ros.parameters["domain_id"])
     return DeploySettings(
         transport=transport,  # type: ignore[arg-type]  # checked above
         missing=missing,  # type: ignore[arg-type]  # checked above

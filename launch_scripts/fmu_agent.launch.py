@@ -8,11 +8,26 @@ On a ROS 2 Jazzy machine with fmu-bridge installed in the same Python environmen
 ``backend:=rclpy`` runs both as rclpy nodes on the machine's RMW; ``backend:=zenoh`` speaks the
 rmw_zenoh wire format directly (then start ``ros2 run rmw_zenoh_cpp rmw_zenohd`` first and export
 RMW_IMPLEMENTATION=rmw_zenoh_cpp for the ros2 CLI). See docs/ros2.md.
+
+Where launch_ros is installed both are launch_ros ``Node`` actions, so a namespace pushed by an
+enclosing launch file (``PushRosNamespace``), remappings and parameters reach them: ``fmu-bridge``
+reads the ``--ros-args`` that ``Node`` appends. Without launch_ros they are plain processes.
 """
+
+from typing import Any
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, ExecuteProcess
 from launch.substitutions import LaunchConfiguration, PythonExpression
+
+
+def _process(name: str, arguments: list[Any]) -> Any:
+    """A ROS node action where launch_ros exists (namespace, remaps, parameters honoured)."""
+    try:
+        from launch_ros.actions import Node
+    except ImportError:
+        return ExecuteProcess(cmd=["fmu-bridge", *arguments], output="screen")
+    return Node(executable="fmu-bridge", name=name, arguments=arguments, output="screen")
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -35,9 +50,9 @@ def generate_launch_description() -> LaunchDescription:
             DeclareLaunchArgument(
                 "router", default_value="tcp/127.0.0.1:7447", description="Zenoh router endpoint"
             ),
-            ExecuteProcess(
-                cmd=[
-                    "fmu-bridge",
+            _process(
+                "fmu_node",
+                [
                     "node",
                     experiment,
                     "--name",
@@ -52,11 +67,10 @@ def generate_launch_description() -> LaunchDescription:
                     "--connect",
                     router,
                 ],
-                output="screen",
             ),
-            ExecuteProcess(
-                cmd=[
-                    "fmu-bridge",
+            _process(
+                "fmu_agent",
+                [
                     "agent",
                     "run",
                     run,
@@ -69,7 +83,6 @@ def generate_launch_description() -> LaunchDescription:
                     "--connect",
                     router,
                 ],
-                output="screen",
             ),
         ]
     )

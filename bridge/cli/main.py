@@ -306,9 +306,12 @@ def node(
     loaded = as_experiment(experiment, version)
     view = None
     if ros or ros_backend:
+        from bridge.net.ros2.args import current
         from bridge.net.ros2.view import settings_from
 
-        section = {**loaded.ros, **({"domain_id": ros_domain} if ros_domain is not None else {})}
+        section = current().apply(
+            {**loaded.ros, **({"domain_id": ros_domain} if ros_domain is not None else {})}
+        )
         view = settings_from(section, backend=ros_backend)
     server = FmuNode(
         loaded,
@@ -449,7 +452,10 @@ def main() -> None:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     _load_plugins()
     try:
-        app()
+        from bridge.net.ros2.args import split_ros_args
+
+        argv, _ = split_ros_args(sys.argv[1:])  # ros2 launch appends --ros-args ... (see docs/ros2.md)
+        app(args=argv)
     except BridgeError as exc:
         # Messages end with "[path]": escape them, or rich reads that as markup.
         err_console.print(f"[bold red]error:[/bold red] {escape(str(exc))}", highlight=False, soft_wrap=True)
