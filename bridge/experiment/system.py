@@ -26,7 +26,11 @@ class ComponentSection(_Strict):
     """One FMU of the system. ``step_size`` must divide the macro step (multi-rate); ``node``
     serves the component from a node of that name instead of this process."""
 
-    fmu: str = Field(description="Path to the .fmu (relative to the experiment file) or example:NAME")
+    fmu: str = Field(
+        default="",
+        description="Path to the .fmu (relative to the experiment file) or example:NAME; may be left "
+        "out for a component of the SSP that model.fmu names",
+    )
     interface: Literal["auto", "cs", "me"] = "auto"
     step_size: PositiveFloat | None = None
     parameters: dict[str, Scalar] = {}

@@ -111,6 +111,8 @@ def from_experiment(experiment: Experiment) -> SystemDescription:
     components = dict(base.components) if base else {}
     for name, spec in section.components.items():
         old = components.get(name)
+        if not spec.fmu and old is None:
+            raise ConfigError(f"system.components.{name}.fmu: give the component's FMU{where}")
         fmu = _component_fmu(spec.fmu, experiment, name) if spec.fmu else (old.fmu if old else Path())
         parameters = {**(old.parameters if old else {}), **spec.parameters}
         components[name] = Component(
