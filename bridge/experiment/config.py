@@ -154,7 +154,7 @@ PROFILE_KINDS = ("constant", "step", "ramp", "sine", "table", "csv")
 class ModelSection(Strict):
     fmu: str = Field(
         default="",
-        description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] for a bundled model",
+        description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
     interface: Literal["auto", "cs", "me"] = "auto"
     step_size: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None

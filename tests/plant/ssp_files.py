@@ -25,7 +25,9 @@ def ssd_text(
     for comp, (source, connectors, parameters) in components.items():
         out.append(f'      <ssd:Component name="{comp}" source="{source}">\n        <ssd:Connectors>\n')
         for connector, kind in connectors.items():
-            out.append(f'          <ssd:Connector name="{connector}" kind="{kind}"><ssc:Real/></ssd:Connector>\n')
+            out.append(
+                f'          <ssd:Connector name="{connector}" kind="{kind}"><ssc:Real/></ssd:Connector>\n'
+            )
         out.append("        </ssd:Connectors>\n")
         if parameters:
             out.append(
@@ -33,7 +35,9 @@ def ssd_text(
                 '<ssv:ParameterSet version="1.0" name="p"><ssv:Parameters>\n'
             )
             for key, value in parameters.items():
-                out.append(f'          <ssv:Parameter name="{key}"><ssv:Real value="{value!r}"/></ssv:Parameter>\n')
+                out.append(
+                    f'          <ssv:Parameter name="{key}"><ssv:Real value="{value!r}"/></ssv:Parameter>\n'
+                )
             out.append(
                 "        </ssv:Parameters></ssv:ParameterSet></ssd:ParameterValues>"
                 "</ssd:ParameterBinding></ssd:ParameterBindings>\n"
@@ -42,7 +46,8 @@ def ssd_text(
     out.append("    </ssd:Elements>\n    <ssd:Connections>\n")
     for a, y, b, u in connections:
         out.append(
-            f'      <ssd:Connection startElement="{a}" startConnector="{y}" endElement="{b}" endConnector="{u}"/>\n'
+            f'      <ssd:Connection startElement="{a}" startConnector="{y}" '
+            f'endElement="{b}" endConnector="{u}"/>\n'
         )
     out.append("    </ssd:Connections>\n  </ssd:System>\n</ssd:SystemStructureDescription>\n")
     return "".join(out)

@@ -25,7 +25,11 @@ def motor_load_ssp(tmp_path: Path) -> Path:
             {"load_torque": "input", "omega": "output", "current": "output"},
             MOTOR,
         ),
-        "load": ("resources/gearload.fmu", {"omega_in": "input", "torque": "output", "omega": "output"}, LOAD),
+        "load": (
+            "resources/gearload.fmu",
+            {"omega_in": "input", "torque": "output", "omega": "output"},
+            LOAD,
+        ),
     }
     connections = [("motor", "omega", "load", "omega_in"), ("load", "torque", "motor", "load_torque")]
     fmus = {
@@ -62,7 +66,10 @@ def test_jacobi_matches_fmpy_simulate_ssp(tmp_path: Path) -> None:
     parameters = [SimpleNamespace(name=f"motor.{k}", value=v) for k, v in MOTOR.items()]
     parameters += [SimpleNamespace(name=f"load.{k}", value=v) for k, v in LOAD.items()]
     reference = simulate_ssp(
-        str(ssp), stop_time=steps * h - h / 2, step_size=h, parameter_set=SimpleNamespace(parameters=parameters)
+        str(ssp),
+        stop_time=steps * h - h / 2,
+        step_size=h,
+        parameter_set=SimpleNamespace(parameters=parameters),
     )
     with SystemPlant(system_experiment(str(ssp), tmp_path, h, 1.0)) as plant:
         ours = run(plant, steps)

@@ -47,7 +47,14 @@ def test_unknown_component(tmp_path: Path) -> None:
 
 
 def test_unknown_variable_suggests_close_names(tmp_path: Path) -> None:
-    fails(tmp_path, ["motor.omegaa -> load.omega_in"], "'omegaa'", "component 'motor'", "did you mean", "'omega'")
+    fails(
+        tmp_path,
+        ["motor.omegaa -> load.omega_in"],
+        "'omegaa'",
+        "component 'motor'",
+        "did you mean",
+        "'omega'",
+    )
 
 
 def test_output_to_output(tmp_path: Path) -> None:
@@ -83,12 +90,20 @@ def test_algebraic_loop_names_the_cycle(tmp_path: Path) -> None:
 
 
 def test_action_on_a_connected_input(tmp_path: Path) -> None:
-    fails(tmp_path, ["motor.omega -> load.tau_ext"], "actions.inputs", "load.tau_ext", "motor.omega -> load.tau_ext")
+    fails(
+        tmp_path,
+        ["motor.omega -> load.tau_ext"],
+        "actions.inputs",
+        "load.tau_ext",
+        "motor.omega -> load.tau_ext",
+    )
 
 
 def test_missing_fmu_in_ssp_archive(tmp_path: Path) -> None:
     ssd = ssd_text({"motor": ("resources/dcmotor.fmu", {}, {}), "load": ("resources/gone.fmu", {}, {})}, [])
-    ssp = write_ssp(tmp_path / "broken.ssp", ssd, {"resources/dcmotor.fmu": example_fmu("dcmotor", "2.0", "cs")})
+    ssp = write_ssp(
+        tmp_path / "broken.ssp", ssd, {"resources/dcmotor.fmu": example_fmu("dcmotor", "2.0", "cs")}
+    )
     data = {
         "model": {"fmu": "broken.ssp", "step_size": 0.001, "episode_duration": 1.0},
         "actions": {"inputs": ["load.tau_ext"]},
@@ -112,5 +127,5 @@ def test_ssp_that_is_not_a_zip(tmp_path: Path) -> None:
 
 
 def test_bad_connection_syntax_is_a_config_error(tmp_path: Path) -> None:
-    with pytest.raises(ConfigError, match="not of the form 'a.y -> b.u'"):
+    with pytest.raises(ConfigError, match=r"not of the form 'a\.y -> b\.u'"):
         experiment(tmp_path, ["motor.omega => load.omega_in"])

@@ -42,7 +42,9 @@ def check_system(system: SystemDescription, infos: Mapping[str, ModelInfo]) -> l
             )
     for name, component in system.components.items():
         for var_name in component.parameters:
-            var = _known(Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system)
+            var = _known(
+                Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system
+            )
             if not var.settable_at_init:
                 raise ConfigError(
                     f"system.components.{name}.parameters: {var_name!r} is a {var.variability} "

@@ -39,7 +39,9 @@ class FmuComponent(Plant):
 
     can_set_values = True
 
-    def __init__(self, component: Component, macro_step_s: float, start_time_s: float, where: str = "") -> None:
+    def __init__(
+        self, component: Component, macro_step_s: float, start_time_s: float, where: str = ""
+    ) -> None:
         self.component = component
         self.info = read_model_info(component.fmu)
         self.name = f"component {component.name!r} ({component.fmu.name})"

@@ -86,7 +86,9 @@ class SystemPlant(Plant):
         self._start = {
             n: np.array([_start(self.infos[n].variables[v]) for v in ins[n]], dtype=np.float64) for n in ins
         }
-        order = gauss_seidel_order(system, self.feedthrough) if system.algorithm == "gauss_seidel" else list(ins)
+        order = (
+            gauss_seidel_order(system, self.feedthrough) if system.algorithm == "gauss_seidel" else list(ins)
+        )
         self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
 
     # -- the plant interface -----------------------------------------------------------------------
@@ -156,6 +158,15 @@ class SystemPlant(Plant):
     def close(self) -> None:
         for plant in getattr(self, "plants", {}).values():
             plant.close()
+
+
+def describe_system(experiment: Experiment) -> ModelInfo:
+    """The system of ``experiment`` as one model (``component.variable``), FMUs read, none started."""
+    from bridge.fmu import read_model_info
+
+    system = from_experiment(experiment)
+    infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
+    return system_info(experiment, system, infos, system_timing(experiment, system))
 
 
 def _add(names: dict[str, list[str]], end: Endpoint) -> None:

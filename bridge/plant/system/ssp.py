@@ -16,6 +16,7 @@ import shutil
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,7 +26,12 @@ from bridge.plant.system.description import Component, Connection, Endpoint, Sys
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
 SSC = "{http://ssp-standard.org/SSP1/SystemStructureCommon}"
-_TYPES = {"Real": float, "Integer": int, "Boolean": lambda v: v.lower() in ("true", "1"), "String": str}
+_TYPES: dict[str, Callable[[str], Any]] = {
+    "Real": float,
+    "Integer": int,
+    "Boolean": lambda v: v.lower() in ("true", "1"),
+    "String": str,
+}
 
 
 def read_ssp(path: Path) -> SystemDescription:
@@ -34,7 +40,9 @@ def read_ssp(path: Path) -> SystemDescription:
         root = _extract(path)
         ssd = root / "SystemStructure.ssd"
         if not ssd.exists():
-            raise ConfigError(f"{path.name} has no SystemStructure.ssd at its root; not an SSP archive [{path}]")
+            raise ConfigError(
+                f"{path.name} has no SystemStructure.ssd at its root; not an SSP archive [{path}]"
+            )
         return _read_ssd(ssd, root, path)
     return _read_ssd(path, path.parent, path)
 
@@ -149,13 +157,16 @@ def _connections(system: ET.Element, components: dict[str, Component], origin: P
         a, b = element.attrib.get("startElement"), element.attrib.get("endElement")
         if not a or not b:
             continue  # a system-level connector: the variables are reached as component.variable
+        text = f"{a}.{element.attrib['startConnector']} -> {b}.{element.attrib['endConnector']}"
         for side in (a, b):
             if side not in components:
                 raise ConfigError(
-                    f"connection {a}.{element.attrib['startConnector']} -> {b}.{element.attrib['endConnector']}"
-                    f": {side!r} is not a component; components: {list(components)} [{origin}]"
+                    f"connection {text}: {side!r} is not a component; "
+                    f"components: {list(components)} [{origin}]"
                 )
         found.append(
-            Connection(Endpoint(a, element.attrib["startConnector"]), Endpoint(b, element.attrib["endConnector"]))
+            Connection(
+                Endpoint(a, element.attrib["startConnector"]), Endpoint(b, element.attrib["endConnector"])
+            )
         )
     return found
