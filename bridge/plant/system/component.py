@@ -11,12 +11,16 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import numpy as np
+
 from bridge.errors import ConfigError, FmuError, StepError
 from bridge.experiment.validate import Timing
 from bridge.fmu import Model, read_model_info, sha256
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.description import Component
+
+_EMPTY = np.zeros(0)
 
 
 def steps_per_macro(component: Component, macro_step_s: float, default_s: float | None, where: str) -> int:
@@ -69,9 +73,7 @@ class FmuComponent(Plant):
         return self.model.time_s
 
     def _read(self) -> FloatArray:
-        import numpy as np
-
-        return self._outputs.read() if self._outputs is not None else np.zeros(0)
+        return self._outputs.read() if self._outputs is not None else _EMPTY
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1

@@ -89,6 +89,7 @@ class SystemPlant(Plant):
         order = (
             gauss_seidel_order(system, self.feedthrough) if system.algorithm == "gauss_seidel" else list(ins)
         )
+        self._plant_list = list(self.plants.values())
         self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
 
     # -- the plant interface -----------------------------------------------------------------------
@@ -125,10 +126,11 @@ class SystemPlant(Plant):
 
     def step(self, inputs: Sequence[float] | None) -> FloatArray:
         self._write(self.master.inputs, inputs)
+        master, plants = self.master, self._plant_list
         for _ in range(self.timing.steps_per_sample):
-            self.master.step()
+            master.step()
             self._macro += 1
-            if any(p.terminated for p in self.plants.values()):
+            if any([p.terminated for p in plants]):
                 self.terminated = True
                 break
         self.sample += 1
