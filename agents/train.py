@@ -145,9 +145,7 @@ def train(
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
     # the variables the Task was built from: a deployed agent needs them, not the FMU
-    (run_dir / "model.json").write_text(
-        json.dumps(summary_of(model_info_for(experiment)), indent=2)
-    )
+    (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
     eval_env: Any = DummyVecEnv(
         [

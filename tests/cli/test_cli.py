@@ -59,8 +59,9 @@ def test_inspect_a_broken_file_exits_2_with_a_clear_message(tmp_path: Path) -> N
 
 def test_models_lists_and_builds_every_variant() -> None:
     rows = json.loads(invoke("models", "--json"))
-    assert {r["model"] for r in rows} == {"cartpole", "dcmotor", "bouncing_ball", "typed"}
-    assert len(rows) == 13 and all(Path(r["path"]).is_file() for r in rows)
+    models = {"cartpole", "dcmotor", "bouncing_ball", "typed", "gearload", "pi_controller", "motor_gearload"}
+    assert {r["model"] for r in rows} == models
+    assert len(rows) == 19 and all(Path(r["path"]).is_file() for r in rows)
     assert "cartpole" in invoke("models")  # and the table for people
 
 

@@ -46,6 +46,12 @@ class SystemPlant(Plant):
         _check_driven(exp, system)
         check_experiment(exp, self.info)
         self.plants: dict[str, Plant] = dict(plants or {})
+        remote = [n for n, c in system.components.items() if c.node and n not in self.plants]
+        if remote:
+            raise ConfigError(
+                f"system.components.{remote[0]}.node: components served by nodes are not supported yet; "
+                f"remove node: to run {remote} in this process{system.where}"
+            )
         try:
             for name, component in system.components.items():
                 if name not in self.plants:
