@@ -23,9 +23,8 @@ from agents.settings import TrainingSettings, linear_schedule_kwargs, package_ve
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
-from bridge.experiment.validate import resolve_fmu
-from bridge.fmu import read_model_info, sha256
 from bridge.fmu.vocab import summary_of
+from bridge.plant.factory import model_fingerprint, model_info_for
 
 _log = logging.getLogger(__name__)
 
@@ -149,9 +148,7 @@ def train(
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
     # the variables the Task was built from: a deployed agent needs them, not the FMU
-    (run_dir / "model.json").write_text(
-        json.dumps(summary_of(read_model_info(resolve_fmu(experiment))), indent=2)
-    )
+    (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
     eval_env: Any = DummyVecEnv(
         [
@@ -253,15 +250,15 @@ def _residual(experiment: Experiment, settings: TrainingSettings) -> dict[str, A
 def _run_info(
     settings: TrainingSettings, experiment: Experiment, residual: dict[str, Any] | None
 ) -> dict[str, Any]:
-    fmu = resolve_fmu(experiment)
+    fmu, fmu_sha256 = model_fingerprint(experiment)
     return {
         "experiment": experiment.name,
         "version": experiment.version,
         "algo": settings.algo,
         "seed": settings.seed,
         "settings": settings.model_dump(mode="json"),
-        "fmu": str(fmu),
-        "fmu_sha256": sha256(fmu),
+        "fmu": fmu,
+        "fmu_sha256": fmu_sha256,
         "packages": package_versions(),
         "residual": residual,
         "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),

@@ -436,6 +436,9 @@ def _load_plugins() -> None:
     from bridge.cli import recording as cli_recording
 
     cli_recording.register(app)
+    from bridge.cli import system as cli_system
+
+    cli_system.register(app)
     for entry in entry_points(group="fmu_bridge.commands"):
         try:
             register = entry.load()

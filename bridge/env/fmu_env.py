@@ -66,9 +66,9 @@ class FmuEnv(gym.Env[ObsType, Any]):
             )
         self.render_mode = render_mode
         if plant is None:
-            from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
+            from bridge.plant.factory import plant_for
 
-            plant = LocalFmuPlant(exp)
+            plant = plant_for(exp)
         self.plant = plant
         try:
             self.timing = t = plant.timing

@@ -15,6 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from bridge.errors import ConfigError
+from bridge.experiment.system import SystemSection
 
 Scalar = float | int | bool | str
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -152,7 +153,8 @@ PROFILE_KINDS = ("constant", "step", "ramp", "sine", "table", "csv")
 # -- model --------------------------------------------------------------------------------------
 class ModelSection(Strict):
     fmu: str = Field(
-        description="Path to the .fmu, or example:NAME[:FMI version][:cs|me] for a bundled model"
+        default="",
+        description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
     interface: Literal["auto", "cs", "me"] = "auto"
     step_size: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
@@ -385,6 +387,7 @@ class Experiment(Strict):
     node: dict[str, Any] = {}
     ros: dict[str, Any] = {}
     recording: dict[str, Any] = {}
+    system: SystemSection | None = None
     source: Path | None = Field(default=None, exclude=True)
 
     @model_validator(mode="after")
@@ -392,6 +395,8 @@ class Experiment(Strict):
         versions = set(self.versions) | {"v0"}
         if self.version not in versions:
             raise ValueError(f"version {self.version!r} is not defined; defined: {sorted(versions)}")
+        if not self.model.fmu and self.system is None:
+            raise ValueError("model.fmu: give the FMU (or an .ssp/.ssd), or a system: section")
         names = set(self.scenarios)
         for key, listed in (
             ("schedule.training", self.schedule.training),

@@ -20,6 +20,11 @@ from bridge.fmu.vocab import ModelInfo, Variable
 def resolve_fmu(experiment: Experiment) -> Path:
     """The FMU of ``model.fmu``: a path (relative to the experiment file) or ``example:NAME[:VER][:IF]``."""
     spec = experiment.model.fmu
+    if not spec or spec.lower().endswith((".ssp", ".ssd")):
+        raise ConfigError(
+            f"model.fmu: this experiment is a system of FMUs, not one FMU; use `fmu-bridge system ...` "
+            f"or bridge.plant.factory.plant_for(experiment) [{experiment.source}]"
+        )
     if spec.startswith("example:"):
         from bridge.models import example_fmu
 

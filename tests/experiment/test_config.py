@@ -12,8 +12,8 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment, parse_experiment
 from bridge.experiment.examples import example_experiment, example_names
-from bridge.experiment.validate import check_experiment, resolve_fmu
-from bridge.fmu import read_model_info
+from bridge.experiment.validate import check_experiment
+from bridge.plant.factory import model_info_for
 
 
 def base(**overrides: Any) -> dict[str, Any]:
@@ -39,7 +39,7 @@ def write(tmp_path: Path, data: dict[str, Any]) -> Path:
 
 
 def check_with_fmu(experiment: Experiment) -> None:
-    check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
+    check_experiment(experiment, model_info_for(experiment))
 
 
 def check(tmp_path: Path, data: dict[str, Any]) -> None:

@@ -679,7 +679,16 @@ def test_typed_fmu_state_restores_strings(fmus: Fmus, open_slave: OpenSlave) -> 
 
 
 def test_model_names_and_variants() -> None:
-    assert models.model_names() == ["bouncing_ball", "cartpole", "dcmotor", "stair", "typed"]
+    assert models.model_names() == [
+        "bouncing_ball",
+        "cartpole",
+        "dcmotor",
+        "gearload",
+        "motor_gearload",
+        "pi_controller",
+        "stair",
+        "typed",
+    ]
     by_model: dict[str, set[tuple[str, str]]] = {}
     for v in models.list_variants():
         by_model.setdefault(v.name, set()).add((v.fmi_version, v.interface))
@@ -689,10 +698,16 @@ def test_model_names_and_variants() -> None:
     assert by_model["bouncing_ball"] == {("2.0", "me"), ("3.0", "me"), ("2.0", "cs")}
     assert by_model["typed"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["stair"] == {(v, i) for v in ("1.0", "2.0", "3.0") for i in ("cs", "me")}
+    assert by_model["gearload"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
+    assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["motor_gearload"] == {("2.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    with pytest.raises(ConfigError, match="available: bouncing_ball, cartpole, dcmotor, stair, typed"):
+    with pytest.raises(
+        ConfigError,
+        match="available: bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed",
+    ):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
         models.example_fmu("typed", "2.0", "me")

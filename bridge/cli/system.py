@@ -1,0 +1,156 @@
+"""``fmu-bridge system inspect|check|simulate``: systems of coupled FMUs from the command line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from bridge.experiment.config import as_experiment
+
+system_app = typer.Typer(help="Systems of coupled FMUs: inspect, check, simulate.", no_args_is_help=True)
+console = Console()
+ExperimentArg = Annotated[Path, typer.Argument(help="An experiment file with a system: section or an .ssp.")]
+
+
+def _open(experiment: Path) -> Any:
+    from bridge.plant.system.plant import SystemPlant
+
+    return SystemPlant(as_experiment(experiment))
+
+
+def summary(plant: Any) -> dict[str, Any]:
+    """Components, connections, order and warnings of a system plant, as JSON-ready data."""
+    system = plant.system
+    return {
+        "algorithm": system.algorithm,
+        "macro_step_s": plant.timing.step_size_s,
+        "iterations": system.max_iterations,
+        "components": [
+            {
+                "name": n,
+                "fmu": str(c.fmu),
+                "model": plant.infos[n].model_name,
+                "fmi": plant.infos[n].fmi_version,
+                "feedthrough": plant.feedthrough[n],
+                "step_size_s": c.step_size_s or plant.timing.step_size_s,
+                "parameters": c.parameters,
+            }
+            for n, c in system.components.items()
+        ],
+        "connections": [str(c) for c in system.connections],
+        "warnings": plant.warnings,
+    }
+
+
+@system_app.command("inspect")
+def inspect_system(
+    experiment: ExperimentArg,
+    as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
+    dot: Annotated[Path | None, typer.Option(help="Write the connection graph as Graphviz DOT.")] = None,
+    png: Annotated[Path | None, typer.Option(help="Draw the connection graph into a PNG.")] = None,
+) -> None:
+    """A table of components and connections, and a picture of the connection graph."""
+    from bridge.plant.system.graph import to_dot
+
+    with _open(experiment) as plant:
+        data = summary(plant)
+        if dot is not None:
+            dot.write_text(to_dot(plant.system, plant.feedthrough))
+        if png is not None:
+            from bridge.plant.system.picture import draw_graph
+
+            draw_graph(plant.system, plant.feedthrough, png)
+    if as_json:
+        console.print_json(json.dumps(data))
+        return
+    table = Table("component", "model", "FMI", "step [s]", "feedthrough", title=f"{experiment}")
+    table.add_column("fmu", overflow="fold")
+    for c in data["components"]:
+        row = (c["name"], c["model"], c["fmi"], f"{c['step_size_s']:g}", str(c["feedthrough"]), c["fmu"])
+        table.add_row(*row)
+    console.print(table)
+    connections = Table("connection", title=f"{data['algorithm']}, macro step {data['macro_step_s']:g} s")
+    for text in data["connections"]:
+        connections.add_row(text)
+    console.print(connections)
+    for w in data["warnings"]:
+        console.print(f"warning: {w}", highlight=False)
+
+
+@system_app.command("check")
+def check_system_cmd(
+    experiment: ExperimentArg,
+    steps: Annotated[int, typer.Option(help="Samples to run after the checks.")] = 5,
+) -> None:
+    """Check every connection and name, then reset the system and run a few samples."""
+    from bridge.env.fmu_env import FmuEnv
+
+    with FmuEnv(experiment) as env:
+        plant = env.plant
+        _, info = env.reset(seed=0)
+        for _ in range(steps):
+            *_, info = env.step(env.action_space.sample() * 0)
+        for w in getattr(plant, "warnings", []):
+            console.print(f"warning: {w}", highlight=False)
+        n = len(plant.system.connections)  # type: ignore[attr-defined]
+        console.print(
+            f"ok: {plant.name}, {n} connections valid; t = {info['time_s']:g} s after {steps} samples"
+        )
+
+
+@system_app.command("simulate")
+def simulate_system(
+    experiment: ExperimentArg,
+    duration: Annotated[float | None, typer.Option(help="Seconds (default: the episode duration).")] = None,
+    csv: Annotated[Path | None, typer.Option(help="Write every observed output over time to CSV.")] = None,
+    every: Annotated[int, typer.Option(min=1, help="Print every n-th sample.")] = 10,
+    set_input: Annotated[
+        list[str] | None, typer.Option("--input", help="Hold a task input at a value: NAME=VALUE.")
+    ] = None,
+) -> None:
+    """Run the system open loop (task inputs at their start values) and print its outputs."""
+    exp = as_experiment(experiment)
+    with _open(experiment) as plant:
+        names = list(exp.observations.outputs)
+        inputs = list(exp.actions.inputs)
+        plant.bind(inputs, names)
+        held = _held(set_input or [], inputs)
+        start = [held.get(n, float(plant.info.variables[n].start or 0.0)) for n in inputs]
+        rows = [[plant.time_s, *plant.reset({**exp.model.parameters, **exp.model.start_values}, start)]]
+        total = round((duration or exp.model.episode_duration) / plant.timing.sampling_time_s)
+        for _ in range(total):
+            rows.append([plant.time_s + plant.timing.sampling_time_s, *plant.step(start)])
+    if csv is not None:
+        csv.write_text(
+            "\n".join([",".join(["time", *names])] + [",".join(f"{v:.17g}" for v in r) for r in rows]) + "\n"
+        )
+    table = Table("t [s]", *names, title=f"{experiment}")
+    for r in rows[::every] + ([rows[-1]] if (len(rows) - 1) % every else []):
+        table.add_row(*(f"{v:.6g}" for v in r))
+    console.print(table)
+
+
+def _held(items: list[str], inputs: list[str]) -> dict[str, float]:
+    from bridge.errors import ConfigError
+
+    held = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or name not in inputs:
+            raise ConfigError(
+                f"--input {item!r}: expected NAME=VALUE with NAME one of actions.inputs {inputs}"
+            )
+        try:
+            held[name] = float(value)
+        except ValueError:
+            raise ConfigError(f"--input {item!r}: {value!r} is not a number") from None
+    return held
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(system_app, name="system")

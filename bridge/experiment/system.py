@@ -1,0 +1,80 @@
+"""The ``system:`` section of an experiment: several FMUs coupled by connections.
+
+Components by name with their FMUs, connections written ``a.y -> b.u``, parameters per
+component, and the master algorithm. Variables of a system are named ``component.variable``
+everywhere else in the experiment (actions, observations, rewards, scenarios, termination).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+Scalar = float | int | bool | str
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+CONNECTION = re.compile(r"^\s*([A-Za-z_][\w]*)\.(\S+)\s*->\s*([A-Za-z_][\w]*)\.(\S+)\s*$")
+SYSTEM_SUFFIXES = (".ssp", ".ssd")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ComponentSection(_Strict):
+    """One FMU of the system. ``step_size`` must divide the macro step (multi-rate); ``node``
+    serves the component from a node of that name instead of this process."""
+
+    fmu: str = Field(
+        default="",
+        description="Path to the .fmu (relative to the experiment file) or example:NAME; may be left "
+        "out for a component of the SSP that model.fmu names",
+    )
+    interface: Literal["auto", "cs", "me"] = "auto"
+    step_size: PositiveFloat | None = None
+    parameters: dict[str, Scalar] = {}
+    feedthrough: bool | None = Field(
+        default=None,
+        description="whether an output depends directly on an input; default: the FMU's declared "
+        "dependencies, else true (FMI's rule for undeclared dependencies)",
+    )
+    node: str | None = None
+
+
+class IterationSection(_Strict):
+    """Fixed-point iteration of each macro step (with rollback of component states)."""
+
+    max_iterations: Annotated[int, Field(ge=1, le=1000)] = 10
+    tolerance: Annotated[float, Field(gt=0)] = 1e-10
+
+
+class SystemSection(_Strict):
+    """Components, connections and the master algorithm (``jacobi`` or ``gauss_seidel``)."""
+
+    components: dict[str, ComponentSection] = {}
+    connections: list[str] = []
+    algorithm: Literal["jacobi", "gauss_seidel"] = "jacobi"
+    iteration: IterationSection | None = None
+    order: list[str] = Field(default=[], description="Gauss-Seidel order; default: from the graph")
+
+    @field_validator("components")
+    @classmethod
+    def _names(cls, value: dict[str, ComponentSection]) -> dict[str, ComponentSection]:
+        bad = [name for name in value if not re.fullmatch(r"[A-Za-z_]\w*", name)]
+        if bad:
+            raise ValueError(f"component names are identifiers (letters, digits, _), got {bad}")
+        return value
+
+    @field_validator("connections")
+    @classmethod
+    def _connections(cls, value: list[str]) -> list[str]:
+        for text in value:
+            if not CONNECTION.match(text):
+                raise ValueError(f"connection {text!r} is not of the form 'a.y -> b.u'")
+        return value
+
+
+def is_system_file(fmu: str) -> bool:
+    """Whether ``model.fmu`` names an SSP archive or an SSD file rather than one FMU."""
+    return fmu.lower().endswith(SYSTEM_SUFFIXES)

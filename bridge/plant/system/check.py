@@ -1,0 +1,109 @@
+"""Checks of a system against its FMUs: every connection valid, before anything runs.
+
+Errors name the connection, the component, the variable and the file: an unknown component or
+variable, a connection that does not run from an output to an input, an input driven twice,
+types that do not convert, a parameter the FMU does not take. A unit mismatch is a warning.
+"""
+
+from __future__ import annotations
+
+import difflib
+import logging
+from collections.abc import Mapping
+
+from bridge.errors import ConfigError
+from bridge.fmu.vocab import ModelInfo, Variable
+from bridge.plant.system.description import Connection, Endpoint, SystemDescription
+
+_log = logging.getLogger(__name__)
+_FLOATS = ("Float32", "Float64")
+_INTEGERS = ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
+
+
+def check_system(system: SystemDescription, infos: Mapping[str, ModelInfo]) -> list[str]:
+    """Raise :class:`ConfigError` on the first invalid connection or parameter; return warnings."""
+    warnings: list[str] = []
+    driven: dict[Endpoint, Connection] = {}
+    for c in system.connections:
+        source = _variable(c, c.source, infos, system)
+        target = _variable(c, c.target, infos, system)
+        _check_roles(c, source, target, system)
+        if c.target in driven:
+            raise ConfigError(
+                f"connection {c}: input {c.target} is already driven by {driven[c.target]}; "
+                f"an input takes one connection{system.where}"
+            )
+        driven[c.target] = c
+        _check_types(c, source, target, system)
+        if source.unit and target.unit and source.unit != target.unit:
+            warnings.append(
+                f"connection {c}: unit {source.unit!r} of {c.source} differs from {target.unit!r} of "
+                f"{c.target}; values pass unconverted{system.where}"
+            )
+    for name, component in system.components.items():
+        for var_name in component.parameters:
+            var = _known(
+                Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system
+            )
+            if not var.settable_at_init:
+                raise ConfigError(
+                    f"system.components.{name}.parameters: {var_name!r} is a {var.variability} "
+                    f"{var.causality} of {infos[name].model_name} and cannot be set{system.where}"
+                )
+    for text in warnings:
+        _log.warning("%s", text)
+    return warnings
+
+
+def _variable(
+    c: Connection, end: Endpoint, infos: Mapping[str, ModelInfo], system: SystemDescription
+) -> Variable:
+    if end.component not in infos:
+        raise ConfigError(
+            f"connection {c}: {end.component!r} is not a component; components: "
+            f"{list(system.components)}{system.where}"
+        )
+    return _known(end, infos[end.component], f"connection {c}", system)
+
+
+def _known(end: Endpoint, info: ModelInfo, key: str, system: SystemDescription) -> Variable:
+    var = info.variables.get(end.variable)
+    if var is None:
+        close = difflib.get_close_matches(end.variable, list(info.variables), n=4, cutoff=0.5)
+        hint = f"did you mean {close}?" if close else f"`fmu-bridge inspect {info.path}` lists them"
+        raise ConfigError(
+            f"{key}: {end.variable!r} is not a variable of component {end.component!r} "
+            f"({info.path.name}); {hint}{system.where}"
+        )
+    return var
+
+
+def _check_roles(c: Connection, source: Variable, target: Variable, system: SystemDescription) -> None:
+    if source.causality not in ("output", "parameter", "calculatedParameter"):
+        raise ConfigError(
+            f"connection {c}: the source {c.source} is a{_an(source.causality)} {source.causality}; a "
+            f"connection starts at an output{system.where}"
+        )
+    if target.causality != "input":
+        raise ConfigError(
+            f"connection {c}: the target {c.target} is a{_an(target.causality)} {target.causality}, not an "
+            f"input; connections run from an output to an input (output -> output is not allowed)"
+            f"{system.where}"
+        )
+
+
+def _an(word: str) -> str:
+    return "n" if word[:1] in "aeiou" else ""
+
+
+def _check_types(c: Connection, source: Variable, target: Variable, system: SystemDescription) -> None:
+    if source.type == target.type or (source.type in _FLOATS and target.type in _FLOATS):
+        return
+    if source.type in (*_INTEGERS, "Boolean") and target.type in _FLOATS:
+        return  # exact: every integer and boolean value is a float value
+    if source.type in _INTEGERS and target.type in _INTEGERS:
+        return
+    raise ConfigError(
+        f"connection {c}: {c.source} is {source.type} and {c.target} is {target.type}; there is no "
+        f"lossless conversion (integers and booleans may feed floats, not the other way){system.where}"
+    )

@@ -1,0 +1,158 @@
+"""What a system is: components (FMUs), connections and parameter bindings.
+
+Built from the experiment's ``system:`` section (:func:`from_experiment`) or from an SSP 1.0
+file (:mod:`bridge.plant.system.ssp`); the two give the same :class:`SystemDescription`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment
+from bridge.experiment.system import CONNECTION, SystemSection, is_system_file
+
+Algorithm = Literal["jacobi", "gauss_seidel"]
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """``component.variable``; the variable name may itself contain dots (Modelica names)."""
+
+    component: str
+    variable: str
+
+    def __str__(self) -> str:
+        return f"{self.component}.{self.variable}"
+
+
+@dataclass(frozen=True)
+class Connection:
+    """An output of one component feeding an input of another, held over each macro step."""
+
+    source: Endpoint
+    target: Endpoint
+
+    def __str__(self) -> str:
+        return f"{self.source} -> {self.target}"
+
+
+@dataclass(frozen=True)
+class Component:
+    """One FMU of the system; ``step_size_s`` None means one FMU step per macro step."""
+
+    name: str
+    fmu: Path
+    parameters: dict[str, Any] = field(default_factory=dict)
+    step_size_s: float | None = None
+    interface: Literal["auto", "cs", "me"] = "auto"
+    feedthrough: bool | None = None
+    node: str | None = None
+
+
+@dataclass(frozen=True)
+class SystemDescription:
+    """Components in declaration order, connections, and how to step them."""
+
+    components: dict[str, Component]
+    connections: tuple[Connection, ...]
+    algorithm: Algorithm = "jacobi"
+    max_iterations: int = 1
+    tolerance: float = 1e-10
+    order: tuple[str, ...] = ()
+    step_size_s: float | None = None  # an SSP's default experiment step, if it gives one
+    source: Path | None = None
+
+    @property
+    def where(self) -> str:
+        return f" [{self.source}]" if self.source else ""
+
+    def inputs_driven(self) -> dict[Endpoint, Connection]:
+        """Each connected input and the connection that drives it."""
+        return {c.target: c for c in self.connections}
+
+
+def parse_connection(text: str, where: str = "") -> Connection:
+    """``"a.y -> b.u"`` as a :class:`Connection`."""
+    match = CONNECTION.match(text)
+    if match is None:
+        raise ConfigError(f"system.connections: {text!r} is not of the form 'a.y -> b.u'{where}")
+    a, y, b, u = match.groups()
+    return Connection(Endpoint(a, y), Endpoint(b, u))
+
+
+def split_name(name: str, components: dict[str, Component], key: str, where: str = "") -> Endpoint:
+    """``component.variable`` split at the first dot; the component must exist."""
+    component, dot, variable = name.partition(".")
+    if not dot or not variable:
+        raise ConfigError(
+            f"{key}: {name!r} is not of the form component.variable; components: {list(components)}{where}"
+        )
+    if component not in components:
+        raise ConfigError(
+            f"{key}: {name!r} names component {component!r}, which is not in the system; "
+            f"components: {list(components)}{where}"
+        )
+    return Endpoint(component, variable)
+
+
+def from_experiment(experiment: Experiment) -> SystemDescription:
+    """The system of ``experiment``: its ``system:`` section, or the SSP that ``model.fmu`` names
+    (merged with a ``system:`` section's algorithm, extra connections and parameters)."""
+    section = experiment.system or SystemSection()
+    where = f" [{experiment.source}]" if experiment.source else ""
+    base: SystemDescription | None = None
+    if is_system_file(experiment.model.fmu):
+        from bridge.plant.system.ssp import read_ssp
+
+        base = read_ssp(_path(experiment.model.fmu, experiment, "model.fmu"))
+    components = dict(base.components) if base else {}
+    for name, spec in section.components.items():
+        old = components.get(name)
+        if not spec.fmu and old is None:
+            raise ConfigError(f"system.components.{name}.fmu: give the component's FMU{where}")
+        fmu = _component_fmu(spec.fmu, experiment, name) if spec.fmu else (old.fmu if old else Path())
+        parameters = {**(old.parameters if old else {}), **spec.parameters}
+        components[name] = Component(
+            name, fmu, parameters, spec.step_size, spec.interface, spec.feedthrough, spec.node
+        )
+    if not components:
+        raise ConfigError(f"system.components: a system needs at least one component{where}")
+    connections = (base.connections if base else ()) + tuple(
+        parse_connection(c, where) for c in section.connections
+    )
+    iteration = section.iteration
+    return SystemDescription(
+        components=components,
+        connections=connections,
+        algorithm=section.algorithm,
+        max_iterations=iteration.max_iterations if iteration else 1,
+        tolerance=iteration.tolerance if iteration else 1e-10,
+        order=tuple(section.order),
+        step_size_s=base.step_size_s if base else None,
+        source=experiment.source,
+    )
+
+
+def _component_fmu(spec: str, experiment: Experiment, name: str) -> Path:
+    if spec.startswith("example:"):
+        from bridge.models import example_fmu
+
+        parts = spec.split(":")[1:]
+        version = parts[1] if len(parts) > 1 and parts[1] else "2.0"
+        return example_fmu(parts[0], version, parts[2] if len(parts) > 2 else "cs")
+    return _path(spec, experiment, f"system.components.{name}.fmu")
+
+
+def _path(spec: str, experiment: Experiment, key: str) -> Path:
+    path = Path(spec).expanduser()
+    if not path.is_absolute():
+        path = experiment.base_dir / path
+    if not path.exists():
+        raise ConfigError(
+            f"{key}: {spec!r} does not exist (looked at {path}); give a path relative to the "
+            f"experiment file or example:NAME [{experiment.source}]"
+        )
+    return path

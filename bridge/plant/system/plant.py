@@ -1,0 +1,235 @@
+"""``SystemPlant``: a system of coupled FMUs behind the Plant interface.
+
+Its variables are every component's, named ``component.variable``; the task drives the inputs no
+connection drives and reads any output. A sample is ``steps_per_sample`` macro steps of the
+master. Reset restarts the whole system (each component from its own state snapshot where it has
+one), so the same seed replays the same trajectory.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
+from bridge.experiment.validate import Timing, check_experiment
+from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
+from bridge.plant.base import FloatArray, Plant
+from bridge.plant.system.check import check_system
+from bridge.plant.system.description import Endpoint, SystemDescription, from_experiment, split_name
+from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
+from bridge.plant.system.master import Link, Master
+
+
+class SystemPlant(Plant):
+    """The system of ``experiment`` (its ``system:`` section, or the SSP ``model.fmu`` names)."""
+
+    def __init__(self, experiment: Experiment, *, plants: Mapping[str, Plant] | None = None) -> None:
+        from bridge.fmu import read_model_info
+
+        self.experiment = exp = experiment
+        self.system = system = from_experiment(exp)
+        self.infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
+        self.warnings = check_system(system, self.infos)
+        self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
+        loop = find_loop(system, self.feedthrough)
+        if loop and system.max_iterations <= 1:
+            raise loop_error(loop, system)
+        self.name = f"system {exp.name!r} ({len(system.components)} components)"
+        self.timing = system_timing(exp, system)
+        self.info = system_info(exp, system, self.infos, self.timing)
+        _check_driven(exp, system)
+        check_experiment(exp, self.info)
+        self.plants: dict[str, Plant] = dict(plants or {})
+        remote = [n for n, c in system.components.items() if c.node and n not in self.plants]
+        if remote:
+            raise ConfigError(
+                f"system.components.{remote[0]}.node: components served by nodes are not supported yet; "
+                f"remove node: to run {remote} in this process{system.where}"
+            )
+        try:
+            for name, component in system.components.items():
+                if name not in self.plants:
+                    from bridge.plant.system.component import FmuComponent
+
+                    t = self.timing
+                    self.plants[name] = FmuComponent(component, t.step_size_s, t.start_time_s, system.where)
+        except BaseException:
+            self.close()
+            raise
+        self._macro = 0
+        self._pending: Sequence[float] | None = None
+
+    # -- wiring ------------------------------------------------------------------------------------
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
+        super().bind(input_names, output_names)
+        system, where = self.system, self.system.where
+        ins: dict[str, list[str]] = {n: [] for n in system.components}
+        outs: dict[str, list[str]] = {n: [] for n in system.components}
+        external = [split_name(n, system.components, "actions", where) for n in self.input_names]
+        observed = [split_name(n, system.components, "observations", where) for n in self.output_names]
+        for c in system.connections:
+            _add(outs, c.source)
+            _add(ins, c.target)
+        for e in external:
+            _add(ins, e)
+        for e in observed:
+            _add(outs, e)
+        for name, plant in self.plants.items():
+            plant.bind(ins[name], outs[name])
+        self.links = [
+            Link(c.source.component, outs[c.source.component].index(c.source.variable),
+                 c.target.component, ins[c.target.component].index(c.target.variable))
+            for c in system.connections
+        ]  # fmt: skip
+        self._external = [(e.component, ins[e.component].index(e.variable)) for e in external]
+        self._observed = [(e.component, outs[e.component].index(e.variable)) for e in observed]
+        self._start = {
+            n: np.array([_start(self.infos[n].variables[v]) for v in ins[n]], dtype=np.float64) for n in ins
+        }
+        order = (
+            gauss_seidel_order(system, self.feedthrough) if system.algorithm == "gauss_seidel" else list(ins)
+        )
+        self._plant_list = list(self.plants.values())
+        self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
+
+    # -- the plant interface -----------------------------------------------------------------------
+    @property
+    def time_s(self) -> float:
+        return self.timing.start_time_s + self._macro * self.timing.step_size_s
+
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        self.episode += 1
+        self.sample, self.terminated, self._macro = 0, False, 0
+        by_component: dict[str, dict[str, Any]] = {n: {} for n in self.system.components}
+        for name, value in values.items():
+            end = split_name(name, self.system.components, "values", self.system.where)
+            by_component[end.component][end.variable] = value
+        start = {n: u.copy() for n, u in self._start.items()}
+        self._write(start, inputs)
+        self.master.initialize(by_component, start)
+        return self._read()
+
+    def _write(self, target: Mapping[str, FloatArray], inputs: Sequence[float] | None) -> None:
+        if inputs is not None:
+            for (name, j), value in zip(self._external, inputs):
+                target[name][j] = value
+
+    def _read(self) -> FloatArray:
+        outputs = self.master.outputs
+        return np.array([outputs[name][i] for name, i in self._observed], dtype=np.float64)
+
+    def send(self, inputs: Sequence[float] | None) -> None:
+        self._pending = inputs
+
+    def receive(self) -> FloatArray:
+        return self.step(self._pending)
+
+    def step(self, inputs: Sequence[float] | None) -> FloatArray:
+        self._write(self.master.inputs, inputs)
+        master, plants = self.master, self._plant_list
+        for _ in range(self.timing.steps_per_sample):
+            master.step()
+            self._macro += 1
+            if any([p.terminated for p in plants]):
+                self.terminated = True
+                break
+        self.sample += 1
+        return self._read()
+
+    def component_outputs(self) -> dict[str, dict[str, float]]:
+        """Every bound output of every component now, by component (for recording)."""
+        return {
+            n: dict(zip(p.output_names, map(float, self.master.outputs[n]))) for n, p in self.plants.items()
+        }
+
+    @property
+    def can_set_values(self) -> bool:  # type: ignore[override]
+        return all(p.can_set_values for p in self.plants.values())
+
+    def set_values(self, values: Mapping[str, Any]) -> None:
+        grouped: dict[str, dict[str, Any]] = {}
+        for name, value in values.items():
+            end = split_name(name, self.system.components, "hooks.state", self.system.where)
+            grouped.setdefault(end.component, {})[end.variable] = value
+        for name, group in grouped.items():
+            self.plants[name].set_values(group)
+
+    def provenance(self) -> dict[str, str]:
+        return {"fmu": str(self.system.source or ""), "fmu_sha256": "", "node": ""}
+
+    def close(self) -> None:
+        for plant in getattr(self, "plants", {}).values():
+            plant.close()
+
+
+def describe_system(experiment: Experiment) -> ModelInfo:
+    """The system of ``experiment`` as one model (``component.variable``), FMUs read, none started."""
+    from bridge.fmu import read_model_info
+
+    system = from_experiment(experiment)
+    infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
+    return system_info(experiment, system, infos, system_timing(experiment, system))
+
+
+def _add(names: dict[str, list[str]], end: Endpoint) -> None:
+    if end.variable not in names[end.component]:
+        names[end.component].append(end.variable)
+
+
+def _start(var: Variable) -> float:
+    try:
+        return float(var.start) if var.start is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0
+
+
+def system_timing(exp: Experiment, system: SystemDescription) -> Timing:
+    """Macro step ``model.step_size`` (or the SSP's), samples of whole macro steps."""
+    h = exp.model.step_size or system.step_size_s
+    if h is None:
+        raise ConfigError(
+            f"model.step_size: a system needs its macro step (seconds); set model.step_size{system.where}"
+        )
+    n = sampling_ratio(exp.model.sampling_time or h, h)
+    return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=exp.model.start_time)
+
+
+def system_info(
+    exp: Experiment, system: SystemDescription, infos: Mapping[str, ModelInfo], t: Timing
+) -> ModelInfo:
+    """The system as one model: every component's variables as ``component.variable``."""
+    variables = {
+        f"{n}.{v.name}": dataclasses.replace(v, name=f"{n}.{v.name}")
+        for n, info in infos.items()
+        for v in info.variables.values()
+    }
+    return ModelInfo(
+        path=system.source or Path(exp.name),
+        fmi_version="2.0",
+        model_name=exp.name,
+        guid="",
+        interfaces=("cs",),
+        model_identifiers={},
+        default_experiment=DefaultExperiment(t.start_time_s, None, t.step_size_s, None),
+        platforms=(),
+        variables=variables,
+        can_get_set_state={"cs": all(i.can_get_set_state.get("cs", False) for i in infos.values())},
+        description=f"system of {', '.join(system.components)}",
+    )
+
+
+def _check_driven(exp: Experiment, system: SystemDescription) -> None:
+    driven = {str(c.target): c for c in system.connections}
+    for key, names in (("actions.inputs", exp.actions.inputs), ("scenarios.inputs", scenario_inputs(exp))):
+        for name in names:
+            if name in driven:
+                raise ConfigError(
+                    f"{key}: {name!r} is driven by the connection {driven[name]}; the task can only "
+                    f"drive inputs no connection drives{system.where}"
+                )
