@@ -225,18 +225,22 @@ class BatchPlant:
         return self._failed(i, FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log))
 
     def _failed(self, i: int, exc: FmuError, **fields: Any) -> StepError:
-        """The plant's StepError for instance ``i``, in the message shape of every plant."""
         detail = exc.detail if isinstance(exc, StepError) else str(exc)
+        return self.failure(i, MODEL_FAILED, detail, log=exc.log, **fields)
+
+    def failure(self, i: int, what: str, detail: str, *, log: list[str] | None = None, **fields: Any) -> StepError:
+        """A StepError for instance ``i`` in the message shape of every plant:
+        ``<plant>: instance <i>: <what> at step <k> of episode <e> (t = <t> s): <detail>; <hint>``."""
         step = fields.pop("step", int(self.sample[i]) + 1)
         where = f" at step {step}" if step is not None else " at reset"
         time_s = self.time_s(i)
         message = (
-            f"{self.name}: instance {i}: {MODEL_FAILED}{where} of episode {int(self.episode[i])} "
+            f"{self.name}: instance {i}: {what}{where} of episode {int(self.episode[i])} "
             f"(t = {time_s:g} s): {detail}; {MODEL_FAILED_HINT}"
         )
         return StepError(
             message, plant=self.name, episode=int(self.episode[i]), step=step, time_s=time_s,
-            detail=detail, log=exc.log,
+            detail=detail, log=log,
         )  # fmt: skip
 
     # -- end ----------------------------------------------------------------------------------------
