@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
 
@@ -93,15 +94,24 @@ class BatchEnv:
             raise self.plant.failure(i, "the model returned non-finite outputs", str(exc), step=0) from exc
         self.samples[i] = 0
         self.outputs[i] = outputs
-        return {"time_s": self.plant.time_s(i), "step": 0, "scenario": spec.scenario, "drawn": dict(spec.drawn)}
+        return {
+            "time_s": self.plant.time_s(i),
+            "step": 0,
+            "scenario": spec.scenario,
+            "drawn": dict(spec.drawn),
+        }
 
     def reset_all(
         self, seeds: list[int | None], scenarios: list[str | None] | None = None
     ) -> tuple[ObsArray, list[dict[str, Any]]]:
-        infos = [self._reset_or_recover(i, seeds[i], (scenarios or [None] * self.n)[i]) for i in range(self.n)]
+        infos = [
+            self._reset_or_recover(i, seeds[i], (scenarios or [None] * self.n)[i]) for i in range(self.n)
+        ]
         return self.obs.copy(), infos
 
-    def _reset_or_recover(self, i: int, seed: int | None = None, scenario: str | None = None) -> dict[str, Any]:
+    def _reset_or_recover(
+        self, i: int, seed: int | None = None, scenario: str | None = None
+    ) -> dict[str, Any]:
         try:
             return self.reset_one(i, seed, scenario)
         except StepError as exc:
@@ -110,7 +120,9 @@ class BatchEnv:
             _log.warning("env %d: reset failed, trying once more: %s", i, exc)
             return {**self.reset_one(i, None, scenario), "plant_error": str(exc)}
 
-    def step(self, actions: Any) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
+    def step(
+        self, actions: Any
+    ) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
         """One step of every env; ends and resets episodes in the same step.
 
         Returns:
@@ -128,7 +140,9 @@ class BatchEnv:
         for i in np.flatnonzero(bad).tolist():
             if i not in errors:
                 detail = str(task.tasks[i]._bad_output(result.outputs[i].tolist(), int(self.samples[i])))
-                errors[i] = plant.failure(i, "the model returned non-finite outputs", detail, step=int(self.samples[i]))
+                errors[i] = plant.failure(
+                    i, "the model returned non-finite outputs", detail, step=int(self.samples[i])
+                )
                 plant.ready[i] = False
         if errors and self.on_error == "raise":
             raise errors[min(errors)]
@@ -141,7 +155,7 @@ class BatchEnv:
         return obs, reward, terminated, truncated, ended
 
     def _end_episodes(
-        self, obs: ObsArray, terminated: Any, truncated: Any, code: Any, errors: dict[int, BridgeError]
+        self, obs: ObsArray, terminated: Any, truncated: Any, code: Any, errors: Mapping[int, BridgeError]
     ) -> dict[int, dict[str, Any]]:
         ended: dict[int, dict[str, Any]] = {}
         reasons = self.task.reasons
@@ -243,7 +257,9 @@ class BatchVecEnv:
     def step_async(self, actions: Any) -> None:
         self._actions = actions
 
-    def step_wait(self) -> tuple[ObsArray, npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
+    def step_wait(
+        self,
+    ) -> tuple[ObsArray, npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
         obs, reward, terminated, truncated, ended = self.engine.step(self._actions)
         infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         for i, end in ended.items():
@@ -306,7 +322,11 @@ class BatchVecEnv:
         return getattr(self, name)
 
     def getattr_depth_check(self, name: str, already_found: bool) -> str | None:
-        return f"{type(self).__module__}.{type(self).__name__}" if hasattr(self, name) and already_found else None
+        return (
+            f"{type(self).__module__}.{type(self).__name__}"
+            if hasattr(self, name) and already_found
+            else None
+        )
 
 
 def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:

@@ -357,7 +357,9 @@ class Model:
         """
         b = self._backend
         if self.interface != "cs" or b.major < 2 or not b.component:
-            raise FmuError(f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 CS instance")
+            raise FmuError(
+                f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 CS instance"
+            )
 
         def address(name: str) -> int:
             fn = b.functions.get(name)

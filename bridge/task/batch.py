@@ -36,7 +36,9 @@ _POWER = re.compile(r"\*\* 2\b")
 class BatchTask:
     """The task side of ``n`` envs over one experiment (reasons: see :attr:`reasons`)."""
 
-    def __init__(self, experiment: Experiment, variables: Mapping[str, Variable], timing: Timing, n: int) -> None:
+    def __init__(
+        self, experiment: Experiment, variables: Mapping[str, Variable], timing: Timing, n: int
+    ) -> None:
         if experiment.hooks.state:
             raise ConfigError("hooks.state: a batch cannot change model variables between steps; use FmuEnv")
         self.n = n
@@ -88,7 +90,11 @@ class BatchTask:
             self.reasons.append(f"bounds:{name}")
         self._on_fmu = exp.termination.on_fmu_terminate
         self.reasons += ["fmu", "fmu-truncated", "time"]
-        self._fmu, self._fmu_trunc, self._time = len(self.reasons) - 3, len(self.reasons) - 2, len(self.reasons) - 1
+        self._fmu, self._fmu_trunc, self._time = (
+            len(self.reasons) - 3,
+            len(self.reasons) - 2,
+            len(self.reasons) - 1,
+        )
 
     # -- episodes -----------------------------------------------------------------------------------
     def new_episode(self, i: int, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
@@ -117,7 +123,9 @@ class BatchTask:
     def initial_inputs(self, i: int) -> list[float]:
         return self.tasks[i].initial_inputs()
 
-    def first_observation(self, i: int, outputs: list[float], rng: np.random.Generator) -> npt.NDArray[np.float32]:
+    def first_observation(
+        self, i: int, outputs: list[float], rng: np.random.Generator
+    ) -> npt.NDArray[np.float32]:
         """Env ``i``'s first observation (scalar Task), which also seeds its history and inputs."""
         task = self.tasks[i]
         obs = task.first_observation(outputs, rng)
@@ -137,22 +145,22 @@ class BatchTask:
         if self._kind == "continuous":
             a = np.asarray(actions, dtype=np.float64).reshape(self.n, n)
             if not np.isfinite(a).all():
-                raise self._bad_action(actions, ~np.isfinite(a).all(axis=1))
+                raise self._bad_action(actions, np.asarray(~np.isfinite(a).all(axis=1)))
             u[:, :n] = self._centre + self._half * np.clip(a, -1.0, 1.0)
         elif self._kind == "discrete":
-            a = np.asarray(actions).reshape(self.n)
-            bad = (a < 0) | (a >= len(self._table)) | (a != np.floor(a))
+            index = np.asarray(actions).reshape(self.n)
+            bad = np.asarray((index < 0) | (index >= len(self._table)) | (index != np.floor(index)))
             if bad.any():
                 raise self._bad_action(actions, bad)
-            u[:, :n] = self._table[a.astype(np.int64)]
+            u[:, :n] = self._table[index.astype(np.int64)]
         else:
-            a = np.asarray(actions).reshape(self.n, n)
+            levels_index = np.asarray(actions).reshape(self.n, n)
             sizes = np.array([len(levels) for levels in self._levels])
-            bad = ((a < 0) | (a >= sizes)).any(axis=1)
+            bad = np.asarray(((levels_index < 0) | (levels_index >= sizes)).any(axis=1))
             if bad.any():
                 raise self._bad_action(actions, bad)
             for j, levels in enumerate(self._levels):
-                u[:, j] = levels[a[:, j].astype(np.int64)]
+                u[:, j] = levels[levels_index[:, j].astype(np.int64)]
         row = self._row(samples)
         if self._noise_cols:
             u[:, self._noise_cols] += self._tables["act_noise"][self._all, row]
@@ -163,8 +171,9 @@ class BatchTask:
     def _bad_action(self, actions: Any, bad: BoolArray) -> BridgeError:
         envs = np.flatnonzero(bad).tolist()
         return BridgeError(
-            f"invalid actions for envs {envs[:10]}: {np.asarray(actions)[envs[:3]].tolist()}; expected elements "
-            f"of {self.action_space} (for {list(self.action_inputs)}); a NaN usually means the policy diverged"
+            f"invalid actions for envs {envs[:10]}: {np.asarray(actions)[envs[:3]].tolist()}; "
+            f"expected elements of {self.action_space} (for {list(self.action_inputs)}); "
+            "a NaN usually means the policy diverged"
         )
 
     def step_result(
@@ -175,15 +184,15 @@ class BatchTask:
         garbage: the env reports them as the plant's error."""
         row = self._row(samples)
         s = np.concatenate([outputs, self.inputs, self._tables["refs"][self._all, row]], axis=1)
-        bad = ~np.isfinite(outputs).all(axis=1)
+        bad: BoolArray = np.asarray(~np.isfinite(outputs).all(axis=1))
         code = np.zeros(self.n, dtype=np.int64)
         for i, low, high, reason in reversed(self._bounds):
             x = s[:, i]
             code[~((low <= x) & (x <= high))] = reason
         if self._on_fmu:
             code[(code == 0) & fmu_terminated] = self._fmu
-        terminated = code != 0
-        truncated = ~terminated & ((samples >= self.n_samples) | fmu_terminated)
+        terminated: BoolArray = code != 0
+        truncated: BoolArray = ~terminated & ((samples >= self.n_samples) | fmu_terminated)
         code[truncated] = np.where(fmu_terminated[truncated], self._fmu_trunc, self._time)
         reward = self._reward(s, terminated, bad)
         obs = self._observations(s, row)

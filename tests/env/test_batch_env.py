@@ -53,7 +53,9 @@ schedule: {mode: fixed}
 """
 
 
-def experiment_of(name: str, tmp_path: Path, text: str | None = None, version: str | None = None) -> Experiment:
+def experiment_of(
+    name: str, tmp_path: Path, text: str | None = None, version: str | None = None
+) -> Experiment:
     if text is None:
         return load_experiment(example_experiment(name), version=version)
     path = tmp_path / f"{name}.yaml"
@@ -82,9 +84,7 @@ def test_batch_vector_env_equals_sync_vector_env_over_fmu_envs_bit_for_bit(
 ) -> None:
     exp = experiment_of(name, tmp_path, text, version)
     batch = BatchVectorEnv(exp, N, native=native)
-    reference = SyncVectorEnv(
-        [lambda: FmuEnv(exp) for _ in range(N)], autoreset_mode=AutoresetMode.SAME_STEP
-    )
+    reference = SyncVectorEnv([lambda: FmuEnv(exp) for _ in range(N)], autoreset_mode=AutoresetMode.SAME_STEP)
     assert batch.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     assert batch.observation_space == reference.observation_space
     obs, info = batch.reset(seed=7)
@@ -135,7 +135,9 @@ def test_batch_vec_env_equals_sb3_dummy_vec_env_bit_for_bit() -> None:
         np.testing.assert_array_equal(dones, r_dones)
         for i in np.flatnonzero(r_dones):
             dones_seen += 1
-            np.testing.assert_array_equal(infos[i]["terminal_observation"], r_infos[i]["terminal_observation"])
+            np.testing.assert_array_equal(
+                infos[i]["terminal_observation"], r_infos[i]["terminal_observation"]
+            )
             assert infos[i]["TimeLimit.truncated"] == r_infos[i]["TimeLimit.truncated"]
     assert dones_seen == N  # 300-sample episodes: every env truncated once
     batch.close()
@@ -151,7 +153,7 @@ def test_a_failing_env_is_truncated_and_reset_while_the_others_go_on(tmp_path: P
     for _ in range(2):
         _, _, terminated, truncated, info = env.step(zero)
         assert not (terminated | truncated).any()
-    obs, reward, terminated, truncated, info = env.step(zero)  # doStep 3 of env 1 fails
+    _, reward, terminated, truncated, info = env.step(zero)  # doStep 3 of env 1 fails
     assert truncated.tolist() == [False, True, False] and not terminated.any()
     assert reward[1] == 0.0
     final = {key: value[1] for key, value in info["final_info"].items()}

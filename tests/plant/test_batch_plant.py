@@ -90,7 +90,9 @@ def test_a_failing_instance_ends_alone_and_resets(experiment: Path, native: bool
 
 
 @pytest.mark.parametrize("native", [True, False])
-def test_termination_requested_by_one_instance_is_reported_for_it_only(experiment: Path, native: bool) -> None:
+def test_termination_requested_by_one_instance_is_reported_for_it_only(
+    experiment: Path, native: bool
+) -> None:
     with open_plant(experiment, 3, native=native) as plant:
         for i, v in enumerate([{}, {"terminate_at_time": 0.3}, {}]):
             plant.reset(i, v, [0.0])

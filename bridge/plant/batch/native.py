@@ -75,6 +75,7 @@ class NativeStepper:
     def step(
         self,
         spec: BatchSpec,
+        *,
         comps: npt.NDArray[np.uintp],
         active: npt.NDArray[np.uint8],
         inputs: npt.NDArray[np.float64],
@@ -102,7 +103,9 @@ class NativeStepper:
         self, spec: BatchSpec, comps: npt.NDArray[np.uintp], k: npt.NDArray[np.int64], samples: int
     ) -> int:
         """``samples`` samples of doStep calls only, over every instance (the benchmark's floor)."""
-        return int(self._do_steps(ctypes.addressof(spec), len(comps), comps.ctypes.data, k.ctypes.data, samples))
+        return int(
+            self._do_steps(ctypes.addressof(spec), len(comps), comps.ctypes.data, k.ctypes.data, samples)
+        )
 
 
 def library_key() -> str:
@@ -124,7 +127,9 @@ def build(target: Path) -> None:
     """Compile ``batch.c`` into ``target`` (written next to it, then moved in place)."""
     gcc = shutil.which("gcc")
     if gcc is None:
-        raise BridgeError("gcc is not installed; install it (sudo apt-get install gcc) for native batch stepping")
+        raise BridgeError(
+            "gcc is not installed; install it (sudo apt-get install gcc) for native batch stepping"
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=".build-batch-", dir=target.parent) as tmp:
         partial = Path(tmp) / "batch.so"

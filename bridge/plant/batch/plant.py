@@ -54,13 +54,17 @@ class BatchPlant:
         native: use the native stepper (None: when it can be built and the signals allow it).
     """
 
-    def __init__(self, experiment: Experiment, n: int, *, threads: int = 1, native: bool | None = None) -> None:
+    def __init__(
+        self, experiment: Experiment, n: int, *, threads: int = 1, native: bool | None = None
+    ) -> None:
         if n < 1 or threads < 1:
-            raise ConfigError(f"a batch needs n >= 1 instances and threads >= 1, got n={n}, threads={threads}")
+            raise ConfigError(
+                f"a batch needs n >= 1 instances and threads >= 1, got n={n}, threads={threads}"
+            )
         self.experiment = exp = experiment
         self.fmu_path = resolve_fmu(exp)
         self.info = check_experiment(exp, read_model_info(self.fmu_path))
-        self.timing = t = timing(exp, self.info)
+        self.timing = timing(exp, self.info)
         self.name = f"FMU {self.fmu_path.name} (batch of {n})"
         self.n, self.threads, self._want_native = n, threads, native
         self.models: list[Model] = []
@@ -133,7 +137,9 @@ class BatchPlant:
 
     def _native_refusal(self, model: Model) -> str | None:
         if model.interface != "cs" or self.info.fmi_major < 2:
-            return f"it needs FMI 2.0/3.0 co-simulation, this is FMI {self.info.fmi_version} {model.interface}"
+            return (
+                f"it needs FMI 2.0/3.0 co-simulation, this is FMI {self.info.fmi_version} {model.interface}"
+            )
         names = [*self.input_names, *self.output_names]
         other = [n for n in names if self.info.variables[n].type != "Float64"]
         if other:
@@ -194,7 +200,14 @@ class BatchPlant:
         assert self._stepper is not None and self._spec is not None
         status = np.empty(self.n, dtype=np.int32)
         self._stepper.step(
-            self._spec, self._comps, mask.view(np.uint8), inputs, self._outputs_buf, self.k, status, self.threads
+            self._spec,
+            comps=self._comps,
+            active=mask.view(np.uint8),
+            inputs=inputs,
+            outputs=self._outputs_buf,
+            k=self.k,
+            status=status,
+            threads=self.threads,
         )
         result = BatchStep(self._outputs_buf, status == nat.TERMINATED)
         for i in np.flatnonzero((status > 1) & (status != nat.TERMINATED)).tolist():
@@ -210,7 +223,9 @@ class BatchPlant:
     def _native_error(self, i: int, status: int) -> StepError:
         model = self.models[i]
         if status >= nat.SET_FAILED:
-            what, names = ("get", self.output_names) if status >= nat.GET_FAILED else ("set", self.input_names)
+            what, names = (
+                ("get", self.output_names) if status >= nat.GET_FAILED else ("set", self.input_names)
+            )
             code = status & 15
             exc = FmuError(
                 f"{self.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[code]} "
@@ -228,7 +243,9 @@ class BatchPlant:
         detail = exc.detail if isinstance(exc, StepError) else str(exc)
         return self.failure(i, MODEL_FAILED, detail, log=exc.log, **fields)
 
-    def failure(self, i: int, what: str, detail: str, *, log: list[str] | None = None, **fields: Any) -> StepError:
+    def failure(
+        self, i: int, what: str, detail: str, *, log: list[str] | None = None, **fields: Any
+    ) -> StepError:
         """A StepError for instance ``i`` in the message shape of every plant:
         ``<plant>: instance <i>: <what> at step <k> of episode <e> (t = <t> s): <detail>; <hint>``."""
         step = fields.pop("step", int(self.sample[i]) + 1)
