@@ -51,6 +51,8 @@ class BatchEnv:
         threads: native threads stepping the FMUs.
         native: force (True) or forbid (False) the native stepper; None: where possible.
         on_error: ``"truncate"`` (default) or ``"raise"`` when one env's model fails.
+        autoreset: reset an env whose episode ended in the same step; else it stops stepping
+            (``active[i]`` False) until ``reset_one`` (evaluation runs one episode per env).
     """
 
     def __init__(
@@ -62,11 +64,13 @@ class BatchEnv:
         threads: int = 1,
         native: bool | None = None,
         on_error: OnError = "truncate",
+        autoreset: bool = True,
     ) -> None:
         if on_error not in ("raise", "truncate"):
             raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
         self.experiment = exp = as_experiment(experiment, version)
-        self.n, self.on_error = n_envs, on_error
+        self.n, self.on_error, self.autoreset = n_envs, on_error, autoreset
+        self.active = np.ones(n_envs, dtype=bool)
         self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)
         try:
             self.task = BatchTask(exp, plant.info.variables, plant.timing, n_envs)
@@ -92,7 +96,7 @@ class BatchEnv:
         except NonFiniteOutputs as exc:
             self.plant.ready[i] = False
             raise self.plant.failure(i, "the model returned non-finite outputs", str(exc), step=0) from exc
-        self.samples[i] = 0
+        self.samples[i], self.active[i] = 0, True
         self.outputs[i] = outputs
         return {
             "time_s": self.plant.time_s(i),
@@ -131,11 +135,15 @@ class BatchEnv:
         """
         task, plant = self.task, self.plant
         inputs = task.actions_to_inputs(actions, self.samples)
-        result = plant.step(inputs)
-        self.samples += 1
+        active = self.active.copy()
+        result = plant.step(inputs, active)
+        self.samples[active] += 1
         obs, reward, terminated, truncated, code, bad = task.step_result(
             result.outputs, self.samples, result.terminated
         )
+        bad &= active
+        terminated &= active
+        truncated &= active
         errors = result.errors
         for i in np.flatnonzero(bad).tolist():
             if i not in errors:
@@ -169,6 +177,10 @@ class BatchEnv:
             if i in errors:
                 info["plant_error"] = str(errors[i])
             final_obs = obs[i].copy()
+            if not self.autoreset:
+                self.active[i] = False
+                ended[i] = {"final_obs": final_obs, "final_info": info, "reset_info": {}}
+                continue
             reset_info = self._reset_or_recover(i)
             obs[i] = self.obs[i]
             ended[i] = {"final_obs": final_obs, "final_info": info, "reset_info": reset_info}

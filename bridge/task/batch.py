@@ -184,6 +184,7 @@ class BatchTask:
         garbage: the env reports them as the plant's error."""
         row = self._row(samples)
         s = np.concatenate([outputs, self.inputs, self._tables["refs"][self._all, row]], axis=1)
+        self.signals = s  # [outputs | inputs | references] per env, in ``signal_names`` order
         bad: BoolArray = np.asarray(~np.isfinite(outputs).all(axis=1))
         code = np.zeros(self.n, dtype=np.int64)
         for i, low, high, reason in reversed(self._bounds):
