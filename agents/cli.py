@@ -189,7 +189,7 @@ def train_cmd(
     algo: Annotated[str | None, typer.Option(help="PPO, SAC, TD3, A2C or DQN.")] = None,
     timesteps: Annotated[int | None, typer.Option(help="Environment steps to train for.")] = None,
     n_envs: Annotated[int | None, typer.Option("--n-envs", help="Parallel environments.")] = None,
-    vec: Annotated[str | None, typer.Option(help="dummy, subproc or remote.")] = None,
+    vec: Annotated[str | None, typer.Option(help="dummy, subproc, remote or batch.")] = None,
     seed: Annotated[int | None, typer.Option()] = None,
     run_dir: Annotated[Path | None, typer.Option("--run-dir", help="Where the run goes.")] = None,
     resume: Annotated[Path | None, typer.Option(help="A run directory to continue.")] = None,
@@ -254,6 +254,9 @@ def evaluate_cmd(
         bool, typer.Option("--record/--no-record", help="MCAP recordings of every episode.")
     ] = True,
     version: Annotated[str | None, typer.Option("--version")] = None,
+    batch: Annotated[
+        bool, typer.Option("--batch", help="All episodes of a cell in one batch env (implies --no-record).")
+    ] = False,
 ) -> None:
     """Evaluate agents and baselines over scenarios: metrics table, results.csv/json, report."""
     import time
@@ -270,7 +273,8 @@ def evaluate_cmd(
         episodes=episodes,
         workers=workers,
         seed=seed,
-        record_dir=Path("recordings") / out.name if record else None,
+        record_dir=Path("recordings") / out.name if record and not batch else None,
+        batch=batch,
     )
     paths = write(result, out, title=f"Evaluation of {config.stem}")
     rows = summary(result)

@@ -146,8 +146,14 @@ def evaluate(
     workers: int = 1,
     seed: int = 0,
     record_dir: Path | None = None,
+    batch: bool = False,
 ) -> EvaluationResult:
-    """Evaluate every agent on every scenario for ``episodes`` seeded episodes."""
+    """Evaluate every agent on every scenario for ``episodes`` seeded episodes.
+
+    ``batch``: run all episodes of a cell at once in a batch env (``agents.evaluate_batch``):
+    the same seeds and results, a large grid in seconds; no recordings."""
+    if batch and record_dir is not None:
+        raise ConfigError("evaluate --batch does not record episodes; pass --no-record (or drop --batch)")
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
     names = _agent_names(agents)
@@ -168,7 +174,7 @@ def evaluate(
         for sc in (chosen or [None])
     ]
     result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
-    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers)):
+    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch)):
         result.rows += rows
         result.traces[(cell.agent_name, cell.scenario or "")] = traces
         if recording is not None:
@@ -176,12 +182,19 @@ def evaluate(
     return result
 
 
-def _map(cells: list[Cell], workers: int) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
+def _map(
+    cells: list[Cell], workers: int, batch: bool = False
+) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
+    run: Any = run_cell
+    if batch:
+        from agents.evaluate_batch import run_cell_batch
+
+        run = run_cell_batch
     if workers <= 1 or len(cells) == 1:
-        return [run_cell(c) for c in cells]
+        return [run(c) for c in cells]
     context = multiprocessing.get_context("spawn")  # a fresh process per worker: no inherited FMU state
     with ProcessPoolExecutor(max_workers=min(workers, len(cells)), mp_context=context) as pool:
-        return list(pool.map(run_cell, cells))
+        return list(pool.map(run, cells))
 
 
 def _agent_names(agents: Sequence[str]) -> list[str]:

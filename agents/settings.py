@@ -46,7 +46,7 @@ class TrainingSettings(BaseModel):
     algo: Algo = "PPO"
     timesteps: int = Field(default=100_000, ge=1)
     n_envs: int = Field(default=4, ge=1)
-    vec: Literal["dummy", "subproc", "remote"] = "dummy"
+    vec: Literal["dummy", "subproc", "remote", "batch"] = "dummy"
     seed: int = 0
     hyperparams: dict[str, Any] = {}
     normalize: bool | dict[str, Any] = False

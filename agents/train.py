@@ -100,12 +100,29 @@ def build_vec_env(
         )
         vec.seed(seed)
         return vec
+    if settings.vec == "batch":
+        return _batch_vec_env(settings, experiment, path, residual, seed)
     from stable_baselines3.common.env_util import make_vec_env
 
     cls = SubprocVecEnv if settings.vec == "subproc" else DummyVecEnv
     return make_vec_env(
         make_env_fn(path, experiment.version, residual), n_envs=settings.n_envs, seed=seed, vec_env_cls=cls
     )
+
+
+def _batch_vec_env(
+    settings: TrainingSettings, experiment: Experiment, path: Path, residual: dict[str, Any] | None, seed: int
+) -> Any:
+    """All ``n_envs`` FMU instances stepped in one native call (``bridge.env.batch``)."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from bridge.env.batch import BatchVecEnv
+
+    if residual:
+        raise ConfigError("residual training wraps single envs: use --vec dummy or subproc, not batch")
+    vec = VecMonitor(BatchVecEnv(path, settings.n_envs, version=experiment.version))  # type: ignore[arg-type]
+    vec.seed(seed)
+    return vec
 
 
 def prepare_run_dir(

@@ -385,6 +385,40 @@ class Model:
         self.step_index = k
         return False
 
+    def native_handles(self) -> dict[str, int]:
+        """Addresses for a native stepper that calls this instance's FMI functions directly.
+
+        Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
+        ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
+        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised.
+        """
+        b = self._backend
+        if self.interface != "cs" or b.major < 2 or not b.component:
+            raise FmuError(
+                f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 CS instance"
+            )
+
+        def address(name: str) -> int:
+            fn = b.functions.get(name)
+            return int(ctypes.cast(fn, ctypes.c_void_p).value or 0) if fn is not None else 0
+
+        v = f"fmi{b.major}"
+        real = "Real" if b.major == 2 else "Float64"
+        return {
+            "component": int(ctypes.cast(b.component, ctypes.c_void_p).value or 0),
+            "major": b.major,
+            "set_real": address(f"{v}Set{real}"),
+            "get_real": address(f"{v}Get{real}"),
+            "do_step": address(f"{v}DoStep"),
+            "bool_status": address("fmi2GetBooleanStatus") if b.major == 2 else 0,
+        }
+
+    def native_step_failed(self, step_index: int, status: int) -> bool:
+        """Account for a doStep that a native stepper made at step ``step_index`` and that returned
+        ``status`` (> Warning): True if the FMU asked to terminate, else :class:`StepError`."""
+        self.step_index = step_index
+        return self._step_failed(status)
+
     def _advance_me(self, n: int) -> bool:
         assert self._me is not None  # guarded by the caller
         start = self.time_s

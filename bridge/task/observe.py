@@ -112,6 +112,7 @@ class ObservationBuilder:
         if clip is not None:
             terms = [f"min(max({t}, {-clip!r}), {clip!r})" for t in terms]
         source = f"lambda s, u, nz: [{', '.join(terms)}]"
+        self.source = source  # also evaluated over whole batches by bridge.task.batch
         return eval(source, {"__builtins__": {}, "min": min, "max": max})  # type: ignore[no-any-return]
 
     # -- per sample ---------------------------------------------------------------------------------

@@ -70,8 +70,14 @@ def compile_terms(terms: Sequence[RewardTerm], index: dict[str, int], action_inp
     enter it), so this is a code template, not evaluation of user text; one expression costs a
     fraction of a chain of closures.
     """
-    body = " + ".join(f"({_term_source(t, index, action_inputs)})" for t in terms) or "0.0"
+    body = terms_source(terms, index, action_inputs)
     return eval(f"lambda s, u, p: {body}", {"__builtins__": {}, "abs": abs})  # type: ignore[no-any-return]
+
+
+def terms_source(terms: Sequence[RewardTerm], index: dict[str, int], action_inputs: Sequence[str]) -> str:
+    """The weighted sum of ``terms`` as one expression over ``s``, ``u`` and ``p`` (also evaluated
+    over whole batches by ``bridge.task.batch``)."""
+    return " + ".join(f"({_term_source(t, index, action_inputs)})" for t in terms) or "0.0"
 
 
 class Reward:

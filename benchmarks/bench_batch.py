@@ -1,0 +1,188 @@
+"""Batched stepping, side by side in one run (medians of interleaved repeats).
+
+Rates are per CPU second of this process (``time.process_time``), so they are per core and not
+diluted by other load on the machine; PPO is in wall-clock timesteps/s.
+
+Run: python benchmarks/bench_batch.py [--n 256] [--repeats 5] [--ppo-timesteps 8192] [--no-ppo]
+
+1. Raw batch stepping on the trivial ``typed`` FMU (FMI 2.0 CS): the native call alone and
+   ``BatchPlant.step`` (inputs in, outputs out), in instance-steps per second on one core.
+2. The batch env (SB3 interface, Task included) at N envs vs SB3's ``DummyVecEnv`` over N
+   ``FmuEnv``, and vs the same FMU's doStep-only loop in C over the same N instances, on the
+   cart-pole (a balancing state feedback, so episodes run their 500 samples) and the DC motor
+   (random voltages, 300-sample episodes with scenarios, uncertainty and sensor noise).
+3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters).
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from common import table
+
+from bridge.env.batch import BatchVecEnv
+from bridge.env.fmu_env import FmuEnv
+from bridge.experiment.config import load_experiment
+from bridge.experiment.examples import example_experiment
+from bridge.plant.batch import BatchPlant
+
+TYPED = "model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 1.0}\n" \
+    "actions: {inputs: [real_in], low: {real_in: -1}, high: {real_in: 1}}\n" \
+    "observations: {outputs: [real_out]}\nreward: {terms: [{alive: 1.0}]}\n"  # fmt: skip
+GAINS = np.array([1.0, 1.5, 30.0, 5.0])  # a stabilising state feedback for the cart-pole
+
+
+def interleaved(named: dict[str, Callable[[int], None]], steps: int, repeats: int) -> dict[str, float]:
+    """Median steps per CPU second of each candidate (this process's CPU time, so a figure per
+    core that other load on the machine does not dilute), measured in alternation."""
+    for fn in named.values():
+        fn(min(steps, 1000))
+    rates: dict[str, list[float]] = {name: [] for name in named}
+    for _ in range(repeats):
+        for name, fn in named.items():
+            start = time.process_time()
+            fn(steps)
+            rates[name].append(steps / max(time.process_time() - start, 1e-9))
+    return {name: statistics.median(values) for name, values in rates.items()}
+
+
+def raw_stepping(n: int, repeats: int) -> list[tuple[str, ...]]:
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "typed.yaml"
+        path.write_text(TYPED)
+        plant = BatchPlant(load_experiment(path), n, native=True)
+    plant.bind(["real_in"], ["real_out"])
+    for i in range(n):
+        plant.reset(i, {}, [0.0])
+    stepper, spec = plant._stepper, plant._spec
+    assert stepper is not None and spec is not None
+    inputs = np.random.default_rng(0).uniform(-1, 1, size=(n, 1))
+    outputs, status, active = np.zeros((n, 1)), np.zeros(n, dtype=np.int32), np.ones(n, dtype=np.uint8)
+
+    def native(samples: int) -> None:
+        for _ in range(samples // n):
+            stepper.step(
+                spec, comps=plant._comps, active=active, inputs=inputs, outputs=outputs,
+                k=plant.k, status=status,
+            )  # fmt: skip
+
+    def plant_step(samples: int) -> None:
+        for _ in range(samples // n):
+            plant.step(inputs)
+
+    def do_steps(samples: int) -> None:
+        stepper.do_steps(spec, plant._comps, plant.k, samples // n)
+
+    rates = interleaved(
+        {"native call": native, "BatchPlant.step": plant_step, "doStep only": do_steps}, n * 4000, repeats
+    )
+    plant.close()
+    return [(f"typed, N={n}: {name}", f"{rate / 1e6:.1f} M") for name, rate in rates.items()]
+
+
+def cartpole_policy(obs: np.ndarray) -> np.ndarray:
+    return (obs @ GAINS > 0).astype(np.int64)
+
+
+def dcmotor_policy(rng: np.random.Generator, n: int) -> Callable[[np.ndarray], np.ndarray]:
+    table_ = rng.uniform(-1, 1, size=(64, n, 1)).astype(np.float32)
+    counter = iter(range(1 << 62))
+    return lambda obs: table_[next(counter) % 64]
+
+
+def env_loop(env: Any, policy: Callable[[np.ndarray], np.ndarray], n: int) -> Callable[[int], None]:
+    state = {"obs": env.reset()}
+
+    def run(samples: int) -> None:
+        obs = state["obs"]
+        for _ in range(samples // n):
+            obs, _, _, _ = env.step(policy(obs))
+        state["obs"] = obs
+
+    return run
+
+
+def env_comparison(name: str, n: int, repeats: int) -> list[tuple[str, ...]]:
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    exp = load_experiment(example_experiment(name))
+    batch = BatchVecEnv(exp, n)
+    dummy = DummyVecEnv([lambda: FmuEnv(exp) for _ in range(n)])
+    for env in (batch, dummy):
+        env.seed(0)
+    rng = np.random.default_rng(0)
+    policy = cartpole_policy if name.startswith("cartpole") else dcmotor_policy(rng, n)
+    batch_loop, dummy_loop = env_loop(batch, policy, n), env_loop(dummy, policy, n)
+    plant = batch.engine.plant
+    stepper, spec = plant._stepper, plant._spec
+    assert stepper is not None and spec is not None
+    k = plant.k.copy()
+
+    def floor(samples: int) -> None:
+        stepper.do_steps(spec, plant._comps, k, samples // n)
+        k[:] = 0  # stay inside the episode's time range
+
+    rates = interleaved({"batch": batch_loop, "dummy": dummy_loop, "c": floor}, n * 300, repeats)
+    batch.close()
+    dummy.close()
+    return [
+        (f"{name}, N={n}: BatchVecEnv", f"{rates['batch'] / 1e3:.0f} k"),
+        (f"{name}, N={n}: DummyVecEnv over FmuEnv", f"{rates['dummy'] / 1e3:.1f} k"),
+        (f"{name}, N={n}: doStep-only loop in C", f"{rates['c'] / 1e3:.0f} k"),
+        (f"{name}: batch / DummyVecEnv", f"{rates['batch'] / rates['dummy']:.0f}x"),
+        (f"{name}: doStep-only C / batch", f"{rates['c'] / rates['batch']:.1f}x"),
+    ]
+
+
+def ppo_comparison(timesteps: int, repeats: int) -> list[tuple[str, ...]]:
+    from bench_train import HYPERPARAMS
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    exp = load_experiment(example_experiment("cartpole_balance"))
+    makers = {
+        "BatchVecEnv": lambda: BatchVecEnv(exp, 8),
+        "DummyVecEnv": lambda: DummyVecEnv([lambda: FmuEnv(exp) for _ in range(8)]),
+    }
+    rates: dict[str, list[float]] = {name: [] for name in makers}
+    for _ in range(repeats):
+        for name, make in makers.items():
+            env = make()
+            model = PPO("MlpPolicy", env, seed=0, device="cpu", **HYPERPARAMS)  # type: ignore[arg-type]
+            start = time.perf_counter()
+            model.learn(total_timesteps=timesteps)
+            rates[name].append(timesteps / (time.perf_counter() - start))
+            env.close()
+    medians = {name: statistics.median(values) for name, values in rates.items()}
+    ratio = medians["BatchVecEnv"] / medians["DummyVecEnv"]
+    return [(f"PPO, cart-pole, 8 envs: {n}", f"{r:.0f}") for n, r in medians.items()] + [
+        ("PPO: batch / DummyVecEnv", f"{ratio:.2f}x")
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--n", type=int, default=256)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--ppo-timesteps", type=int, default=8192)
+    parser.add_argument("--no-ppo", action="store_true")
+    args = parser.parse_args()
+    rows = raw_stepping(max(args.n, 1024), args.repeats)
+    print(table(rows, ("what (median, one core)", "steps/s")), flush=True)
+    for name in ("cartpole_balance", "dcmotor_tracking"):
+        rows += env_comparison(name, args.n, args.repeats)
+        print(table(rows[-5:], ("what (median, one core)", "steps/s or ratio")), flush=True)
+    if not args.no_ppo:
+        rows += ppo_comparison(args.ppo_timesteps, max(1, args.repeats // 2))
+    print(table(rows, ("what (median, one core)", "steps/s or ratio")))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,356 @@
+"""Batched envs: N episodes of one experiment over a ``BatchPlant`` and a ``BatchTask``.
+
+``BatchEnv`` is the engine (one native call steps every FMU instance, the Task's math runs
+with numpy over the batch); two interfaces sit on it:
+
+- :class:`BatchVectorEnv`, a Gymnasium ``VectorEnv`` with ``autoreset_mode`` SAME_STEP: an
+  env whose episode ended is reset in the same step, its last observation and info in
+  ``infos["final_obs"]`` / ``infos["final_info"]`` (masks ``_final_obs`` / ``_final_info``);
+- :class:`BatchVecEnv`, stable-baselines3's ``VecEnv`` interface (``terminal_observation`` and
+  ``TimeLimit.truncated`` in ``infos[i]``), registered as a virtual subclass of SB3's ``VecEnv``
+  whenever SB3 is loaded (bridge never imports SB3).
+
+Env ``i`` draws from its own generator, seeded ``seed + i`` by ``reset(seed=seed)``, exactly as
+an ``FmuEnv`` reset with that seed: the trajectories are bit-identical. A failed FMU step or
+non-finite outputs end that env's episode only (``on_error="truncate"``, the default: the error
+in its info's ``plant_error``, the episode truncated and reset); ``on_error="raise"`` raises it.
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from bridge.errors import BridgeError, ConfigError, StepError
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.plant.batch import BatchPlant
+from bridge.task.batch import BatchTask
+from bridge.task.core import NonFiniteOutputs
+
+_log = logging.getLogger(__name__)
+OnError = Literal["raise", "truncate"]
+ObsArray = npt.NDArray[np.float32]
+
+
+class BatchEnv:
+    """``n_envs`` episodes of ``experiment``, stepped together (the engine of both interfaces).
+
+    Args:
+        experiment: an :class:`Experiment` or the path of an experiment YAML file.
+        n_envs: how many envs (FMU instances).
+        version: the env version to use.
+        threads: native threads stepping the FMUs.
+        native: force (True) or forbid (False) the native stepper; None: where possible.
+        on_error: ``"truncate"`` (default) or ``"raise"`` when one env's model fails.
+        autoreset: reset an env whose episode ended in the same step; else it stops stepping
+            (``active[i]`` False) until ``reset_one`` (evaluation runs one episode per env).
+    """
+
+    def __init__(
+        self,
+        experiment: Experiment | str | Path,
+        n_envs: int,
+        *,
+        version: str | None = None,
+        threads: int = 1,
+        native: bool | None = None,
+        on_error: OnError = "truncate",
+        autoreset: bool = True,
+    ) -> None:
+        if on_error not in ("raise", "truncate"):
+            raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
+        self.experiment = exp = as_experiment(experiment, version)
+        self.n, self.on_error, self.autoreset = n_envs, on_error, autoreset
+        self.active = np.ones(n_envs, dtype=bool)
+        self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)
+        try:
+            self.task = BatchTask(exp, plant.info.variables, plant.timing, n_envs)
+            plant.bind(self.task.input_names, self.task.output_names)
+        except BaseException:
+            plant.close()
+            raise
+        self.rngs = [seeding.np_random()[0] for _ in range(n_envs)]
+        self.samples = np.zeros(n_envs, dtype=np.int64)
+        self.obs = np.zeros((n_envs, *self.task.observation_space.shape), dtype=np.float32)
+        self.outputs = np.zeros((n_envs, len(self.task.output_names)))
+
+    def reset_one(self, i: int, seed: int | None = None, scenario: str | None = None) -> dict[str, Any]:
+        """Start env ``i``'s next episode (``seed``: a fresh generator, as ``FmuEnv.reset``)."""
+        if seed is not None:
+            self.rngs[i] = seeding.np_random(seed)[0]
+            self.task.tasks[i].sampler.restart()
+        rng, task = self.rngs[i], self.task
+        spec = task.new_episode(i, rng, scenario)
+        outputs = self.plant.reset(i, spec.values, task.initial_inputs(i))
+        try:
+            self.obs[i] = task.first_observation(i, outputs.tolist(), rng)
+        except NonFiniteOutputs as exc:
+            self.plant.ready[i] = False
+            raise self.plant.failure(i, "the model returned non-finite outputs", str(exc), step=0) from exc
+        self.samples[i], self.active[i] = 0, True
+        self.outputs[i] = outputs
+        return {
+            "time_s": self.plant.time_s(i),
+            "step": 0,
+            "scenario": spec.scenario,
+            "drawn": dict(spec.drawn),
+        }
+
+    def reset_all(
+        self, seeds: list[int | None], scenarios: list[str | None] | None = None
+    ) -> tuple[ObsArray, list[dict[str, Any]]]:
+        infos = [
+            self._reset_or_recover(i, seeds[i], (scenarios or [None] * self.n)[i]) for i in range(self.n)
+        ]
+        return self.obs.copy(), infos
+
+    def _reset_or_recover(
+        self, i: int, seed: int | None = None, scenario: str | None = None
+    ) -> dict[str, Any]:
+        try:
+            return self.reset_one(i, seed, scenario)
+        except StepError as exc:
+            if self.on_error == "raise":
+                raise
+            _log.warning("env %d: reset failed, trying once more: %s", i, exc)
+            return {**self.reset_one(i, None, scenario), "plant_error": str(exc)}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
+        """One step of every env; ends and resets episodes in the same step.
+
+        Returns:
+            obs (of the new episode where one ended), reward, terminated, truncated, and for
+            each env whose episode ended: ``final_obs``, ``final_info`` and ``reset_info``.
+        """
+        task, plant = self.task, self.plant
+        inputs = task.actions_to_inputs(actions, self.samples)
+        active = self.active.copy()
+        result = plant.step(inputs, active)
+        self.samples[active] += 1
+        obs, reward, terminated, truncated, code, bad = task.step_result(
+            result.outputs, self.samples, result.terminated
+        )
+        bad &= active
+        terminated &= active
+        truncated &= active
+        errors = result.errors
+        for i in np.flatnonzero(bad).tolist():
+            if i not in errors:
+                detail = str(task.tasks[i]._bad_output(result.outputs[i].tolist(), int(self.samples[i])))
+                errors[i] = plant.failure(
+                    i, "the model returned non-finite outputs", detail, step=int(self.samples[i])
+                )
+                plant.ready[i] = False
+        if errors and self.on_error == "raise":
+            raise errors[min(errors)]
+        for i, error in errors.items():
+            obs[i], reward[i], terminated[i], truncated[i] = self.obs[i], 0.0, False, True
+            _log.warning("env %d: episode truncated by a plant error: %s", i, error)
+        self.outputs[:] = result.outputs
+        ended = self._end_episodes(obs, terminated, truncated, code, errors)
+        self.obs = obs
+        return obs, reward, terminated, truncated, ended
+
+    def _end_episodes(
+        self, obs: ObsArray, terminated: Any, truncated: Any, code: Any, errors: Mapping[int, BridgeError]
+    ) -> dict[int, dict[str, Any]]:
+        ended: dict[int, dict[str, Any]] = {}
+        reasons = self.task.reasons
+        for i in np.flatnonzero(terminated | truncated).tolist():
+            info: dict[str, Any] = {
+                "time_s": self.plant.time_s(i),
+                "step": int(self.samples[i]),
+                "outputs": self.outputs[i].copy(),
+                "reason": "plant_error" if i in errors else reasons[int(code[i])],
+            }
+            if i in errors:
+                info["plant_error"] = str(errors[i])
+            final_obs = obs[i].copy()
+            if not self.autoreset:
+                self.active[i] = False
+                ended[i] = {"final_obs": final_obs, "final_info": info, "reset_info": {}}
+                continue
+            reset_info = self._reset_or_recover(i)
+            obs[i] = self.obs[i]
+            ended[i] = {"final_obs": final_obs, "final_info": info, "reset_info": reset_info}
+        return ended
+
+    def close(self) -> None:
+        plant = getattr(self, "plant", None)
+        if plant is not None:
+            plant.close()
+
+
+class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
+    """A Gymnasium ``VectorEnv`` over :class:`BatchEnv` (autoreset in the same step).
+
+    ``infos`` holds per-env arrays ``step`` and ``time_s``; for envs whose episode ended, the
+    last observation and info in ``final_obs`` / ``final_info`` and the new episode's reset
+    info (``scenario``, ``drawn``) in ``reset_info`` (each with a ``_``-prefixed mask).
+    """
+
+    metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+
+    def __init__(self, experiment: Experiment | str | Path, n_envs: int, **kwargs: Any) -> None:
+        self.engine = BatchEnv(experiment, n_envs, **kwargs)
+        self.num_envs = n_envs
+        task = self.engine.task
+        self.single_observation_space, self.single_action_space = task.observation_space, task.action_space
+        self.observation_space = batch_space(task.observation_space, n_envs)
+        self.action_space = batch_space(task.action_space, n_envs)
+        self.render_mode = None
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[ObsArray, dict[str, Any]]:
+        seeds = _seeds(seed, self.num_envs)
+        scenario = (options or {}).get("scenario")
+        scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
+        obs, infos = self.engine.reset_all(seeds, scenarios)
+        merged: dict[str, Any] = {}
+        for i, info in enumerate(infos):
+            merged = self._add_info(merged, info, i)
+        return obs, merged
+
+    def step(self, actions: Any) -> tuple[ObsArray, Any, Any, Any, dict[str, Any]]:
+        obs, reward, terminated, truncated, ended = self.engine.step(actions)
+        engine = self.engine
+        infos: dict[str, Any] = {
+            "step": engine.samples.copy(),
+            "time_s": engine.plant.timing.start_time_s + engine.plant.k * engine.plant.timing.step_size_s,
+        }
+        for i, end in ended.items():
+            infos = self._add_info(infos, end, i)
+        return obs, reward, terminated, truncated, infos
+
+    def close_extras(self, **kwargs: Any) -> None:
+        self.engine.close()
+
+
+class BatchVecEnv:
+    """stable-baselines3's ``VecEnv`` interface over :class:`BatchEnv` (same arguments).
+
+    ``infos[i]`` is empty while env ``i``'s episode runs; when it ends it holds
+    ``terminal_observation``, ``TimeLimit.truncated``, ``reason``, ``step``, ``time_s``,
+    ``outputs`` (and ``plant_error`` after a failed step).
+    """
+
+    def __init__(self, experiment: Experiment | str | Path, n_envs: int, **kwargs: Any) -> None:
+        _register_with_sb3()
+        self.engine = BatchEnv(experiment, n_envs, **kwargs)
+        self.num_envs = n_envs
+        self.observation_space = self.engine.task.observation_space
+        self.action_space = self.engine.task.action_space
+        self.render_mode = None
+        self.metadata: dict[str, Any] = {"render_modes": []}
+        self._seeds: list[int | None] = [None] * n_envs
+        self._options: dict[str, Any] = {}
+        self.reset_infos: list[dict[str, Any]] = [{} for _ in range(n_envs)]
+        self._actions: Any = None
+
+    def reset(self) -> ObsArray:
+        scenario = self._options.get("scenario")
+        scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
+        obs, self.reset_infos = self.engine.reset_all(self._seeds, scenarios)
+        self._seeds, self._options = [None] * self.num_envs, {}
+        return obs
+
+    def step_async(self, actions: Any) -> None:
+        self._actions = actions
+
+    def step_wait(
+        self,
+    ) -> tuple[ObsArray, npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
+        obs, reward, terminated, truncated, ended = self.engine.step(self._actions)
+        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        for i, end in ended.items():
+            info = infos[i] = end["final_info"]
+            info["terminal_observation"] = end["final_obs"]
+            info["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
+            self.reset_infos[i] = end["reset_info"]
+        return obs, reward.astype(np.float32), terminated | truncated, infos
+
+    def step(self, actions: Any) -> tuple[ObsArray, Any, Any, list[dict[str, Any]]]:
+        self.step_async(actions)
+        return self.step_wait()
+
+    def seed(self, seed: int | None = None) -> list[int | None]:
+        if seed is None:
+            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        self._seeds = _seeds(seed, self.num_envs)
+        return list(self._seeds)
+
+    def set_options(self, options: list[dict[str, Any]] | dict[str, Any] | None = None) -> None:
+        if isinstance(options, list):
+            self._options = {"scenario": [o.get("scenario") for o in options]}
+        else:
+            self._options = dict(options or {})
+
+    def close(self) -> None:
+        self.engine.close()
+
+    def _indices(self, indices: Any) -> list[int]:
+        if indices is None:
+            return list(range(self.num_envs))
+        return [indices] if isinstance(indices, int) else list(indices)
+
+    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        return [getattr(self, attr_name)] * len(self._indices(indices))
+
+    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        setattr(self, attr_name, value)
+
+    def has_attr(self, attr_name: str) -> bool:
+        return hasattr(self, attr_name)
+
+    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list[Any]:
+        return [getattr(self, method_name)(*args, **kwargs) for _ in self._indices(indices)]
+
+    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
+        return [False for _ in self._indices(indices)]
+
+    def get_images(self) -> list[None]:
+        return [None] * self.num_envs
+
+    def render(self, mode: str | None = None) -> None:
+        return None
+
+    @property
+    def unwrapped(self) -> BatchVecEnv:
+        return self
+
+    def getattr_recursive(self, name: str) -> Any:
+        return getattr(self, name)
+
+    def getattr_depth_check(self, name: str, already_found: bool) -> str | None:
+        return (
+            f"{type(self).__module__}.{type(self).__name__}"
+            if hasattr(self, name) and already_found
+            else None
+        )
+
+
+def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
+    if isinstance(seed, list):
+        if len(seed) != n:
+            raise ConfigError(f"reset(seed=[...]) needs {n} seeds (one per env), got {len(seed)}")
+        return list(seed)
+    return [None] * n if seed is None else [seed + i for i in range(n)]
+
+
+def _register_with_sb3() -> None:
+    """Make ``isinstance(batch_vec_env, VecEnv)`` true in SB3, without importing SB3 here."""
+    module = sys.modules.get("stable_baselines3.common.vec_env.base_vec_env")
+    if module is not None:
+        module.VecEnv.register(BatchVecEnv)

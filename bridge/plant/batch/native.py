@@ -1,0 +1,158 @@
+"""The native batch stepper: ``batch.c`` built with gcc on first use, cached, bound with ctypes.
+
+The library is keyed by a hash of its source, the FMI headers it includes (FMPy's copy) and the
+compiler flags, and moved into the per-user cache atomically (like the example models), so
+parallel processes never load a half-written file. ctypes releases the GIL for the duration of
+a foreign call, so other Python threads run while the batch steps.
+
+``load()`` returns None (and logs why) when there is no compiler: the caller then steps with
+the pure-Python path, which gives the same results.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import logging
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Final
+
+import numpy as np
+import numpy.typing as npt
+
+from bridge.errors import BridgeError
+from bridge.models import cache_dir
+from bridge.models.build import _fmi_headers_dir
+
+_log = logging.getLogger(__name__)
+SOURCE: Final = Path(__file__).with_name("batch.c")
+CFLAGS: Final = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-pthread")
+HEADERS: Final = ("fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
+TERMINATED, SET_FAILED, GET_FAILED, INACTIVE = 5, 16, 32, -1
+
+
+class BatchSpec(ctypes.Structure):
+    """The C ``BatchSpec``: which FMI functions, which value references, the time grid."""
+
+    _fields_ = [
+        ("major", ctypes.c_int),
+        ("set_real", ctypes.c_void_p),
+        ("get_real", ctypes.c_void_p),
+        ("do_step", ctypes.c_void_p),
+        ("bool_status", ctypes.c_void_p),
+        ("n_in", ctypes.c_int),
+        ("in_vr", ctypes.c_void_p),
+        ("n_out", ctypes.c_int),
+        ("out_vr", ctypes.c_void_p),
+        ("t0", ctypes.c_double),
+        ("h", ctypes.c_double),
+        ("steps", ctypes.c_int),
+    ]
+
+
+@dataclass
+class NativeStepper:
+    """``batch_step`` and ``batch_do_steps`` of the loaded library."""
+
+    library: ctypes.CDLL
+    path: Path
+
+    def __post_init__(self) -> None:
+        p = ctypes.c_void_p
+        self._step = self.library.batch_step
+        self._step.argtypes = [p, ctypes.c_int, p, p, p, p, p, p, ctypes.c_int]
+        self._step.restype = ctypes.c_int
+        self._do_steps = self.library.batch_do_steps
+        self._do_steps.argtypes = [p, ctypes.c_int, p, p, ctypes.c_int]
+        self._do_steps.restype = ctypes.c_int
+
+    def step(
+        self,
+        spec: BatchSpec,
+        *,
+        comps: npt.NDArray[np.uintp],
+        active: npt.NDArray[np.uint8],
+        inputs: npt.NDArray[np.float64],
+        outputs: npt.NDArray[np.float64],
+        k: npt.NDArray[np.int64],
+        status: npt.NDArray[np.int32],
+        threads: int = 1,
+    ) -> int:
+        """One sample for every active instance (arrays C-contiguous); how many did not succeed."""
+        return int(
+            self._step(
+                ctypes.addressof(spec),
+                len(comps),
+                comps.ctypes.data,
+                active.ctypes.data,
+                inputs.ctypes.data,
+                outputs.ctypes.data,
+                k.ctypes.data,
+                status.ctypes.data,
+                threads,
+            )
+        )
+
+    def do_steps(
+        self, spec: BatchSpec, comps: npt.NDArray[np.uintp], k: npt.NDArray[np.int64], samples: int
+    ) -> int:
+        """``samples`` samples of doStep calls only, over every instance (the benchmark's floor)."""
+        return int(
+            self._do_steps(ctypes.addressof(spec), len(comps), comps.ctypes.data, k.ctypes.data, samples)
+        )
+
+
+def library_key() -> str:
+    """sha256 over the C source, the FMI headers it includes and the flags."""
+    digest = hashlib.sha256(SOURCE.read_bytes())
+    headers = _fmi_headers_dir()
+    for name in HEADERS:
+        digest.update(name.encode() + b"\0" + (headers / name).read_bytes())
+    digest.update(" ".join(CFLAGS).encode())
+    return digest.hexdigest()
+
+
+def library_path() -> Path:
+    """Where the built library lives in the per-user cache."""
+    return cache_dir().parent / "native" / f"batch-{library_key()[:16]}.so"
+
+
+def build(target: Path) -> None:
+    """Compile ``batch.c`` into ``target`` (written next to it, then moved in place)."""
+    gcc = shutil.which("gcc")
+    if gcc is None:
+        raise BridgeError(
+            "gcc is not installed; install it (sudo apt-get install gcc) for native batch stepping"
+        )
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(prefix=".build-batch-", dir=target.parent) as tmp:
+        partial = Path(tmp) / "batch.so"
+        command = [gcc, *CFLAGS, f"-I{_fmi_headers_dir()}", "-o", str(partial), str(SOURCE)]
+        result = subprocess.run(command, capture_output=True, text=True, check=False)
+        if result.returncode != 0:
+            raise BridgeError(
+                f"gcc failed to build the batch stepper (exit code {result.returncode}):\n"
+                f"{result.stderr.strip()}\ncommand: {' '.join(command)}"
+            )
+        os.replace(partial, target)
+
+
+@lru_cache(maxsize=1)
+def load() -> NativeStepper | None:
+    """The native stepper, built on first use; None when it cannot be built (no gcc, no headers)."""
+    if os.environ.get("FMU_BRIDGE_NO_NATIVE"):
+        return None
+    try:
+        target = library_path()
+        if not target.is_file():
+            build(target)
+        return NativeStepper(ctypes.CDLL(str(target)), target)
+    except (BridgeError, OSError) as exc:
+        _log.warning("native batch stepping unavailable, stepping in Python instead: %s", exc)
+        return None
