@@ -5,9 +5,10 @@ gathered, so plants in other processes or nodes step in parallel and the trainer
 vector step. Episodes auto-reset exactly as SB3 expects: the last observation is in
 ``infos[i]["terminal_observation"]`` and ``TimeLimit.truncated`` marks truncation.
 
-Errors (``PlantError``: a failed step, a timeout, a dead plant) either stop the run
-(``on_error="raise"``) or truncate that env's episode (``on_error="truncate"``, the error in
-``infos[i]["plant_error"]``) and reset it. ``RemoteVecEnv`` builds one over nodes found by name
+Errors (``PlantError``: a failed step, a timeout, a dead plant) truncate that env's episode
+and reset it (``on_error="truncate"``, the default of every vector env here: one env's error
+ends its episode, not the run; the error is in ``infos[i]["plant_error"]``), or stop the run
+(``on_error="raise"``). ``RemoteVecEnv`` builds one over nodes found by name
 or pattern and, with ``replace_dead=True``, replaces a node that died or hung by a spare.
 
 bridge never imports stable-baselines3: this class implements the VecEnv interface and
@@ -45,10 +46,10 @@ class PlantVecEnv:
 
     Args:
         envs: the envs (they share the observation and action spaces); owned from then on.
-        on_error: ``"raise"`` (default) or ``"truncate"`` the episode of an env whose plant fails.
+        on_error: ``"truncate"`` (default) the episode of an env whose plant fails, or ``"raise"``.
     """
 
-    def __init__(self, envs: Sequence[FmuEnv], *, on_error: OnError = "raise") -> None:
+    def __init__(self, envs: Sequence[FmuEnv], *, on_error: OnError = "truncate") -> None:
         _register_with_sb3()
         if not envs:
             raise ConfigError("a vector env needs at least one env")
@@ -218,8 +219,8 @@ class RemoteVecEnv(PlantVecEnv):
         n_envs: how many envs (default: every listed or matching node); extra matches are spares.
         replace_dead: replace a node that died or stopped answering by a spare and truncate its
             episode, instead of raising (needs ``nodes`` as a pattern).
-        on_error: what a failed model step does (``"raise"`` or ``"truncate"``); dead and hung
-            nodes follow ``replace_dead``.
+        on_error: what a failed model step does (``"truncate"``, the default, or ``"raise"``);
+            dead and hung nodes are replaced first where ``replace_dead`` allows.
     """
 
     def __init__(
@@ -233,7 +234,7 @@ class RemoteVecEnv(PlantVecEnv):
         prefix: str = proto.DEFAULT_PREFIX,
         timeout_s: float = 5.0,
         replace_dead: bool = False,
-        on_error: OnError = "raise",
+        on_error: OnError = "truncate",
         discovery_timeout_s: float = 10.0,
     ) -> None:
         self.experiment = as_experiment(experiment)
