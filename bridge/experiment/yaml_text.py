@@ -1,0 +1,112 @@
+"""YAML read with bounds: file size, nesting depth and what aliases expand to.
+
+A YAML alias (``*name``) repeats an anchored node without copying it in the file, so nine lines of
+nested aliases (the "billion laughs" file) describe 10^9 values: ``yaml.safe_load`` would build
+them all, and whatever serialises the config later (recording metadata, run directories) would
+write them all. The node graph is composed first (aliases are shared nodes there, so that is
+cheap), its expanded size is counted with each shared node counted once per use, and only a
+document within the limits is constructed into Python values.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+from bridge.errors import ConfigError
+
+MAX_FILE_BYTES = 1 << 20  # experiment files are a few KB; a megabyte is already far beyond any
+MAX_EXPANDED_SIZE = 1_000_000  # nodes plus scalar characters once aliases are expanded
+MAX_DEPTH = 100  # nesting levels; the parser and pydantic recurse once per level
+
+
+class _Loader(yaml.SafeLoader):
+    """PyYAML's safe loader (no Python objects), used here only to compose and construct."""
+
+
+def read_yaml(file: Path) -> Any:
+    """The data of the YAML file ``file``, or a ConfigError naming the file and what is wrong."""
+    try:
+        size = file.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ConfigError(
+                f"experiment file is {size} bytes; the limit is {MAX_FILE_BYTES} (experiment files "
+                f"are a few KB: is this the right file?) [{file}]"
+            )
+        text = file.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read experiment file: {exc.strerror} [{file}]") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"experiment file is not UTF-8 text ({exc.reason} at byte {exc.start}) [{file}]"
+        ) from exc
+    return parse_yaml(text, file)
+
+
+def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
+    """Parse ``text`` with the bounds of :func:`read_yaml` (``file`` only names it in errors)."""
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        _check_size(node, file)
+        return loader.construct_document(node)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(
+            f"{file}: the YAML nests too deeply to read; experiment files need a few levels, "
+            f"at most {MAX_DEPTH} are accepted"
+        ) from None
+    finally:
+        loader.dispose()
+
+
+def _check_size(root: Node, file: Path | str) -> None:
+    """Raise unless ``root`` expands to at most MAX_EXPANDED_SIZE and nests at most MAX_DEPTH deep."""
+    sizes: dict[int, tuple[int, int]] = {}  # id(node) -> (expanded size, height): shared nodes once
+    on_path: set[int] = set()
+
+    def measure(node: Node, depth: int) -> tuple[int, int]:
+        key = id(node)
+        if key in on_path:
+            raise ConfigError(
+                f"{file}: line {node.start_mark.line + 1}: an alias refers to a node that contains "
+                "it (a recursive structure); experiment files are trees"
+            )
+        size, height = sizes.get(key, (0, 0))
+        if depth + height > MAX_DEPTH:
+            raise ConfigError(
+                f"{file}: line {node.start_mark.line + 1}: nested more than {MAX_DEPTH} levels deep; "
+                "experiment files need a few levels"
+            )
+        if key in sizes:
+            return size, height
+        on_path.add(key)
+        children = [measure(child, depth + 1) for child in _children(node)]
+        on_path.discard(key)
+        own = len(str(node.value)) if isinstance(node, ScalarNode) else 0
+        size = 1 + own + sum(s for s, _ in children)
+        height = 1 + max((h for _, h in children), default=0)
+        if size > MAX_EXPANDED_SIZE:
+            raise ConfigError(
+                f"{file}: the YAML expands to more than {MAX_EXPANDED_SIZE:,} values and characters "
+                f"(around line {node.start_mark.line + 1}: aliases (*name) repeating anchors "
+                f"(&name) multiply); write the values out, or use fewer nested aliases"
+            )
+        sizes[key] = size, height
+        return size, height
+
+    measure(root, 0)
+
+
+def _children(node: Node) -> list[Node]:
+    if isinstance(node, SequenceNode):
+        return list(node.value)
+    if isinstance(node, MappingNode):
+        return [part for pair in node.value for part in pair]
+    return []
