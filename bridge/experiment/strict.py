@@ -64,8 +64,13 @@ def suggestion(name: str, known: Iterable[str], what: str = "keys here") -> str:
 def format_validation_error(exc: ValidationError, source: Path | None, prefix: str = "") -> str:
     """Every error of ``exc`` on one line: the dotted key (after ``prefix``), what is wrong, the value."""
     lines: list[str] = []
+    union_keys: set[str] = set()
     for error in exc.errors():
         key = prefix + _dotted(error["loc"])
+        if any(_is_type_label(p) for p in error["loc"]):
+            if key in union_keys:
+                continue  # one line per key: the first union member's complaint is the telling one
+            union_keys.add(key)
         if error["type"] == UNKNOWN_KEYS:
             for name, hint in error["ctx"]["hints"]:
                 where = f"{key}.{name}" if key else name

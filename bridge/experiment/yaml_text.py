@@ -14,17 +14,19 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from yaml.events import CollectionEndEvent, CollectionStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from bridge.errors import ConfigError
 
-MAX_FILE_BYTES = 1 << 20  # experiment files are a few KB; a megabyte is already far beyond any
-MAX_EXPANDED_SIZE = 1_000_000  # nodes plus scalar characters once aliases are expanded
+MAX_FILE_BYTES = 256 << 10  # experiment files are a few KB; long tables belong in a csv: profile
+MAX_ALIAS_GROWTH = 100_000  # values plus characters that aliases may add to what the file spells out
 MAX_DEPTH = 100  # nesting levels; the parser and pydantic recurse once per level
 
 
-class _Loader(yaml.SafeLoader):
-    """PyYAML's safe loader (no Python objects), used here only to compose and construct."""
+# libyaml's parser where it is installed (ten times faster); it composes recursively in C, so the
+# nesting depth is checked on its (iterative) event stream first: a deep file would crash it
+_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 
 def read_yaml(file: Path) -> Any:
@@ -48,6 +50,7 @@ def read_yaml(file: Path) -> Any:
 
 def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
     """Parse ``text`` with the bounds of :func:`read_yaml` (``file`` only names it in errors)."""
+    _check_depth(text, file)
     loader = _Loader(text)
     try:
         node = loader.get_single_node()
@@ -66,10 +69,33 @@ def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
         loader.dispose()
 
 
+def _check_depth(text: str, file: Path | str) -> None:
+    """Raise if collections nest more than MAX_DEPTH deep (a YAML syntax error is left to compose)."""
+    loader = _Loader(text)
+    depth = 0
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            if isinstance(event, CollectionStartEvent):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    raise ConfigError(
+                        f"{file}: line {event.start_mark.line + 1}: nested more than {MAX_DEPTH} levels "
+                        "deep; experiment files need a few levels"
+                    )
+            elif isinstance(event, CollectionEndEvent):
+                depth -= 1
+    except yaml.YAMLError:
+        return
+    finally:
+        loader.dispose()
+
+
 def _check_size(root: Node, file: Path | str) -> None:
-    """Raise unless ``root`` expands to at most MAX_EXPANDED_SIZE and nests at most MAX_DEPTH deep."""
+    """Raise unless aliases grow ``root`` by at most MAX_ALIAS_GROWTH and it nests at most MAX_DEPTH."""
     sizes: dict[int, tuple[int, int]] = {}  # id(node) -> (expanded size, height): shared nodes once
     on_path: set[int] = set()
+    literal: list[int] = []  # the size of each node as written, each once
 
     def measure(node: Node, depth: int) -> tuple[int, int]:
         key = id(node)
@@ -92,16 +118,17 @@ def _check_size(root: Node, file: Path | str) -> None:
         own = len(str(node.value)) if isinstance(node, ScalarNode) else 0
         size = 1 + own + sum(s for s, _ in children)
         height = 1 + max((h for _, h in children), default=0)
-        if size > MAX_EXPANDED_SIZE:
-            raise ConfigError(
-                f"{file}: the YAML expands to more than {MAX_EXPANDED_SIZE:,} values and characters "
-                f"(around line {node.start_mark.line + 1}: aliases (*name) repeating anchors "
-                f"(&name) multiply); write the values out, or use fewer nested aliases"
-            )
         sizes[key] = size, height
+        literal.append(1 + own)
         return size, height
 
-    measure(root, 0)
+    expanded, _ = measure(root, 0)
+    if expanded - sum(literal) > MAX_ALIAS_GROWTH:
+        raise ConfigError(
+            f"{file}: aliases (*name) repeating anchors (&name) expand this YAML to {expanded:,} values "
+            f"and characters, {sum(literal):,} written out; aliases may add at most "
+            f"{MAX_ALIAS_GROWTH:,}: write the values out, or use fewer nested aliases"
+        )
 
 
 def _children(node: Node) -> list[Node]:
