@@ -79,6 +79,12 @@ def check_samples(key: str, duration_s: float, sampling_time_s: float | None) ->
     if sampling_time_s is None:
         return
     samples = duration_s / sampling_time_s
+    if samples < 1 - 1e-9:
+        raise invalid(
+            key,
+            f"{duration_s:g} s is shorter than one sample ({sampling_time_s:g} s): an episode needs at "
+            "least one; lengthen the episode or sample more often",
+        )
     if samples > MAX_SAMPLES:
         raise invalid(
             key,
@@ -384,6 +390,11 @@ def parse_experiment(
 def sampling_ratio(sampling_time_s: float, step_size_s: float) -> int:
     """How many FMU steps make one sample; the ratio must be a whole number."""
     ratio = sampling_time_s / step_size_s
+    if not ratio <= MAX_SAMPLES:
+        raise ConfigError(
+            f"model.sampling_time: {sampling_time_s:g} s is {ratio:.3g} FMU steps of {step_size_s:g} s; "
+            f"at most {MAX_SAMPLES:.0e} steps per sample are allowed: check both values"
+        )
     n = round(ratio)
     if n < 1 or not math.isclose(ratio, n, rel_tol=1e-9, abs_tol=1e-9):
         raise ConfigError(

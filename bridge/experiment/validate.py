@@ -62,7 +62,10 @@ def timing(experiment: Experiment, info: ModelInfo) -> Timing:
             f"(seconds) [{experiment.source}]"
         )
     ts = model.sampling_time or h
-    n = sampling_ratio(ts, h)
+    try:
+        n = sampling_ratio(ts, h)
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} [{experiment.source}]") from None
     _check_episode_lengths(experiment, n * h)
     return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=model.start_time)
 
@@ -75,6 +78,11 @@ def _check_episode_lengths(experiment: Experiment, sampling_time_s: float) -> No
             durations[f"scenarios.{name}.episode_duration"] = sc.episode_duration
     for key, duration_s in durations.items():
         samples = duration_s / sampling_time_s
+        if samples < 1 - 1e-9:
+            raise ConfigError(
+                f"{key}: {duration_s:g} s is shorter than one sample ({sampling_time_s:g} s): an episode "
+                f"needs at least one; lengthen the episode or sample more often [{experiment.source}]"
+            )
         if samples > MAX_SAMPLES:
             raise ConfigError(
                 f"{key}: {duration_s:g} s at {sampling_time_s:g} s per sample is {samples:.3g} samples; "

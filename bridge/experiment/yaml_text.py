@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from yaml.events import CollectionEndEvent, CollectionStartEvent
+from yaml.events import AliasEvent, CollectionEndEvent, CollectionStartEvent
 from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
 
 from bridge.errors import ConfigError
@@ -50,13 +50,14 @@ def read_yaml(file: Path) -> Any:
 
 def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
     """Parse ``text`` with the bounds of :func:`read_yaml` (``file`` only names it in errors)."""
-    _check_depth(text, file)
+    has_aliases = _check_depth(text, file)
     loader = _Loader(text)
     try:
         node = loader.get_single_node()
         if node is None:
             return None
-        _check_size(node, file)
+        if has_aliases:
+            _check_size(node, file)
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
@@ -69,10 +70,13 @@ def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
         loader.dispose()
 
 
-def _check_depth(text: str, file: Path | str) -> None:
-    """Raise if collections nest more than MAX_DEPTH deep (a YAML syntax error is left to compose)."""
+def _check_depth(text: str, file: Path | str) -> bool:
+    """Raise if collections nest more than MAX_DEPTH deep; whether ``text`` has aliases.
+
+    A YAML syntax error is left for the composer to report.
+    """
     loader = _Loader(text)
-    depth = 0
+    depth, aliases = 0, False
     try:
         while loader.check_event():
             event = loader.get_event()
@@ -85,10 +89,13 @@ def _check_depth(text: str, file: Path | str) -> None:
                     )
             elif isinstance(event, CollectionEndEvent):
                 depth -= 1
+            elif isinstance(event, AliasEvent):
+                aliases = True
     except yaml.YAMLError:
-        return
+        return True
     finally:
         loader.dispose()
+    return aliases
 
 
 def _check_size(root: Node, file: Path | str) -> None:
