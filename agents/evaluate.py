@@ -156,7 +156,9 @@ def evaluate(
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
     names = _agent_names(agents)
-    chosen = list(scenarios or config.scenarios or experiment.schedule.evaluation or experiment.scenarios)
+    chosen: list[str | None] = list(
+        scenarios or config.scenarios or experiment.schedule.evaluation or experiment.scenarios
+    )
     unknown = [s for s in chosen if s not in experiment.scenarios]
     if unknown:
         raise ConfigError(

@@ -82,7 +82,7 @@ class TrainingSection(Strict):
 
 
 # -- evaluation -----------------------------------------------------------------------------------
-PID_KEYS = ("output", "reference", "input", "kp", "ki", "kd", "limits", "anti_windup")
+PID_KEYS: tuple[str, ...] = ("output", "reference", "input", "kp", "ki", "kd", "limits", "anti_windup")
 PID_KEYS += ("tracking_time_s", "feedforward")
 BASELINE_KEYS = {"pid": PID_KEYS, "constant": ("value",), "python": ("callable",)}
 

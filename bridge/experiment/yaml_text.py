@@ -83,8 +83,9 @@ def _check_depth(text: str, file: Path | str) -> bool:
             if isinstance(event, CollectionStartEvent):
                 depth += 1
                 if depth > MAX_DEPTH:
+                    line = event.start_mark.line + 1 if event.start_mark else "?"
                     raise ConfigError(
-                        f"{file}: line {event.start_mark.line + 1}: nested more than {MAX_DEPTH} levels "
+                        f"{file}: line {line}: nested more than {MAX_DEPTH} levels "
                         "deep; experiment files need a few levels"
                     )
             elif isinstance(event, CollectionEndEvent):

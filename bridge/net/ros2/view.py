@@ -21,8 +21,10 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from bridge.errors import ConfigError
-from bridge.experiment.sections import RosSection as RosViewSettings  # the ``ros:`` section
+from bridge.experiment.sections import RosSection
 from bridge.recording import cdr
+
+RosViewSettings = RosSection  # the ``ros:`` section of an experiment
 
 _log = logging.getLogger(__name__)
 
