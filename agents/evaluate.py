@@ -37,20 +37,25 @@ class EvaluationResult:
 
 def metric_spec(experiment: Experiment) -> MetricSpec:
     """Metrics from ``evaluation.metrics``; tracking pairs default to the reward's tracking terms."""
-    config = experiment.evaluation.get("metrics", {})
-    tracking = [tuple(pair) for pair in config.get("tracking", [])] or [
+    config = experiment.evaluation.metrics
+    tracking = list(config.tracking) or [
         (t.tracking.output, t.tracking.reference) for t in experiment.reward.terms if t.tracking
     ]
     from bridge.task.core import load_callable
 
     return MetricSpec(
-        tracking=tracking,  # type: ignore[arg-type]
-        effort=list(config.get("effort", experiment.actions.inputs)),
-        constraints={k: (v[0], v[1]) for k, v in config.get("constraints", {}).items()},
-        success=config.get("success"),
-        user=[load_callable(path, "evaluation.metrics.user") for path in config.get("user", [])],
-        band=float(config.get("settling_band", 0.02)),
+        tracking=tracking,
+        effort=list(experiment.actions.inputs if config.effort is None else config.effort),
+        constraints=dict(config.constraints),
+        success=config.success,
+        user=[load_callable(path, "evaluation.metrics.user") for path in config.user],
+        band=config.settling_band,
     )
+
+
+def baseline_settings(experiment: Experiment) -> dict[str, dict[str, Any]]:
+    """``evaluation.baselines`` as the keys each gives (what ``make_policy`` takes)."""
+    return {name: spec.settings() for name, spec in experiment.evaluation.baselines.items()}
 
 
 def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Trace:
@@ -96,7 +101,7 @@ class Cell:
 def run_cell(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], Path | None]:
     """Worker entry point: every episode of one agent on one scenario."""
     experiment = load_experiment(cell.experiment, version=cell.version)
-    policy = make_policy(cell.agent, experiment.evaluation.get("baselines", {}), name=cell.agent_name)
+    policy = make_policy(cell.agent, baseline_settings(experiment), name=cell.agent_name)
     spec = metric_spec(experiment)
     env: Any = FmuEnv(experiment)
     recording = None
@@ -157,8 +162,8 @@ def evaluate(
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
     names = _agent_names(agents)
-    chosen = list(
-        scenarios or config.get("scenarios") or experiment.schedule.evaluation or experiment.scenarios
+    chosen: list[str | None] = list(
+        scenarios or config.scenarios or experiment.schedule.evaluation or experiment.scenarios
     )
     unknown = [s for s in chosen if s not in experiment.scenarios]
     if unknown:
@@ -166,7 +171,7 @@ def evaluate(
             f"scenarios {unknown} are not defined in {experiment_path}; "
             f"defined: {sorted(experiment.scenarios) or 'none'}"
         )
-    n = episodes or int(config.get("episodes", 5))
+    n = episodes or config.episodes
     seeds = tuple(seed + i for i in range(n))
     cells = [
         Cell(experiment_path.resolve(), version, spec, name, sc, seeds, record_dir)

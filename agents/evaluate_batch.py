@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import Cell, metric_spec
+from agents.evaluate import Cell, baseline_settings, metric_spec
 from agents.metrics import Trace, compute
 from agents.policies import Policy, Sb3Policy, make_policy
 from bridge.env.batch import BatchEnv
@@ -43,7 +43,7 @@ def run_cell_batch(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], None]
 
 
 def _policies(cell: Cell, experiment: Experiment, n: int) -> list[Policy]:
-    baselines = experiment.evaluation.get("baselines", {})
+    baselines = baseline_settings(experiment)
     first = make_policy(cell.agent, baselines, name=cell.agent_name)
     if isinstance(first, Sb3Policy) and not first.residual:
         return [first]  # stateless: one model acts on the batch

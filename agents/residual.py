@@ -16,6 +16,7 @@ import numpy as np
 from agents.policies import Pid, PidSpec
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment
+from bridge.experiment.sections import ResidualSection
 from bridge.task.core import Task
 
 
@@ -36,10 +37,10 @@ def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Pi
     return Pid(PidSpec.model_validate(residual["config"]), str(residual["baseline"]))
 
 
-def residual_setup(experiment: Experiment, residual: Mapping[str, Any]) -> dict[str, Any]:
+def residual_setup(experiment: Experiment, residual: ResidualSection) -> dict[str, Any]:
     """Resolve ``training.residual`` ({baseline: NAME, scale: S}) against ``evaluation.baselines``."""
-    baselines = experiment.evaluation.get("baselines", {})
-    name = residual.get("baseline")
+    baselines = experiment.evaluation.baselines
+    name = residual.baseline
     if name not in baselines:
         raise ConfigError(
             f"training.residual.baseline: {name!r} is not in evaluation.baselines "
@@ -47,12 +48,11 @@ def residual_setup(experiment: Experiment, residual: Mapping[str, Any]) -> dict[
         )
     if experiment.actions.type != "continuous":
         raise ConfigError("training.residual needs continuous actions (actions.type: continuous)")
-    scale = float(residual.get("scale", 1.0))
-    if not scale > 0:
+    if baselines[name].type != "pid":
         raise ConfigError(
-            f"training.residual.scale must be > 0 (physical units per unit action), got {scale}"
+            f"training.residual.baseline: {name!r} is a {baselines[name].type} baseline; use a pid"
         )
-    return {"baseline": name, "config": dict(baselines[name]), "scale": scale}
+    return {"baseline": name, "config": baselines[name].settings(), "scale": residual.scale}
 
 
 class ResidualWrapper(gym.Wrapper[Any, Any, Any, Any]):

@@ -3,30 +3,21 @@
 from __future__ import annotations
 
 from importlib.metadata import PackageNotFoundError, version
-from typing import Any, Literal
+from pathlib import Path
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ValidationError
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, format_validation_error
+from bridge.experiment.sections import NormalizeSection, RemoteSection, TrainingSection
 from bridge.net.transport import ZenohOptions
 
-Algo = Literal["PPO", "SAC", "TD3", "A2C", "DQN"]
 
-
-class RemoteSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    nodes: str = "*"
-    connect: list[str] = []
-    listen: list[str] = []
-    zenoh_config: str | None = None
-    zenoh_mode: str | None = None
-    timeout_s: float = 5.0
-    replace_dead: bool = False
+class RemoteSettings(RemoteSection):
+    """``training.remote``, with the Zenoh options it gives."""
 
     def options(self) -> ZenohOptions:
-        from pathlib import Path
-
         from bridge.net.transport import session_mode
 
         config = Path(self.zenoh_config) if self.zenoh_config else None
@@ -39,39 +30,28 @@ class RemoteSettings(BaseModel):
         )
 
 
-class TrainingSettings(BaseModel):
-    """``training:`` in the experiment file; every key may be overridden on the command line."""
+class TrainingSettings(TrainingSection):
+    """``training:`` in the experiment file, with the command-line overrides applied."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    algo: Algo = "PPO"
-    timesteps: int = Field(default=100_000, ge=1)
-    n_envs: int = Field(default=4, ge=1)
-    vec: Literal["dummy", "subproc", "remote", "batch"] = "dummy"
-    seed: int = 0
-    hyperparams: dict[str, Any] = {}
-    normalize: bool | dict[str, Any] = False
-    checkpoint_every: int = Field(default=50_000, ge=1)
-    eval_every: int = Field(default=10_000, ge=1)
-    eval_episodes: int = Field(default=5, ge=1)
-    eval_scenarios: list[str] | None = None
-    residual: dict[str, Any] | None = None
     remote: RemoteSettings = RemoteSettings()
 
     @classmethod
     def from_experiment(cls, experiment: Experiment, overrides: dict[str, Any]) -> TrainingSettings:
-        data = {**experiment.training, **{k: v for k, v in overrides.items() if v is not None}}
+        given = experiment.training.model_dump(exclude_unset=True)
+        data = {**given, **{k: v for k, v in overrides.items() if v is not None}}
         try:
             return cls.model_validate(data)
         except ValidationError as exc:
-            raise ConfigError(
-                format_validation_error(exc, experiment.source).replace("  ", "  training.")
-            ) from None
+            raise ConfigError(format_validation_error(exc, experiment.source, "training.")) from None
 
     def evaluation_scenarios(self, experiment: Experiment) -> list[str]:
         return list(self.eval_scenarios or experiment.schedule.evaluation)
 
     def normalize_kwargs(self, eval_env: bool = False) -> dict[str, Any]:
-        kwargs = dict(self.normalize) if isinstance(self.normalize, dict) else {}
+        """VecNormalize keyword arguments given in ``training.normalize`` (SB3's defaults otherwise)."""
+        if not isinstance(self.normalize, NormalizeSection):
+            return {}
+        kwargs = self.normalize.model_dump(exclude_unset=True)
         if eval_env:
             kwargs.pop("norm_reward", None)
             kwargs.pop("training", None)

@@ -186,7 +186,9 @@ def simulate(
     record: Annotated[
         bool, typer.Option("--record/--no-record", help="Record to MCAP (recordings/).")
     ] = True,
-    recordings: Annotated[Path, typer.Option(help="Directory for recordings.")] = Path("recordings"),
+    recordings: Annotated[
+        Path | None, typer.Option(help="Directory for recordings [recording.directory or recordings].")
+    ] = None,
 ) -> None:
     """Run open-loop episodes, print a table, and record them (MCAP) unless --no-record."""
     from bridge.errors import ConfigError
@@ -195,12 +197,23 @@ def simulate(
         raise ConfigError(f"--policy {policy!r} is unknown; use zero, random or constant:VALUE")
     from bridge.cli.simulate import make_policy, run_episodes
     from bridge.env.fmu_env import FmuEnv
+    from bridge.experiment.config import load_experiment
 
-    env: Any = FmuEnv(experiment, version=version)
+    loaded = load_experiment(experiment, version=version)
+    env: Any = FmuEnv(loaded)
     if record:
         from bridge.recording.env_recorder import record_env
 
-        env = record_env(env, directory=recordings, agent=f"policy:{policy}", seed=seed)
+        settings = loaded.recording  # the experiment's recording: section; --recordings wins
+        recordings = recordings or settings.directory
+        env = record_env(
+            env,
+            directory=recordings,
+            agent=f"policy:{policy}",
+            seed=seed,
+            chunk_size=settings.chunk_size,
+            compression=settings.compression,
+        )
     with env:
         results = run_episodes(
             env,
@@ -273,19 +286,26 @@ def _zenoh_options(
 @app.command()
 def node(
     experiment: ExperimentArg,
-    name: Annotated[str, typer.Option("--name", help="Node name (unique per prefix).")] = "fmu",
-    mode: Annotated[str, typer.Option("--mode", help="lockstep (training) or realtime.")] = "lockstep",
+    name: Annotated[
+        str | None, typer.Option("--name", help="Node name, unique per prefix [node.name or fmu].")
+    ] = None,
+    mode: Annotated[
+        str | None, typer.Option("--mode", help="lockstep (training) or realtime [node.mode or lockstep].")
+    ] = None,
     rate: Annotated[
-        float,
+        float | None,
         typer.Option(
-            "--rate", help="Real-time factor: 1 = real time, 2 = twice as fast, 0 = as fast as possible."
+            "--rate",
+            help="Real-time factor: 1 = real time, 2 = 2x faster, 0 = as fast as possible [node.rate, 1].",
         ),
-    ] = 1.0,
+    ] = None,
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
     zenoh_mode: ZenohModeOpt = None,
-    prefix: PrefixOpt = "fmu_bridge",
+    prefix: Annotated[
+        str | None, typer.Option("--prefix", help="Key expression prefix [node.prefix or fmu_bridge].")
+    ] = None,
     version: VersionOpt = None,
     ros: Annotated[
         bool, typer.Option("--ros/--no-ros", help="Also serve the ROS 2 view (see docs/ros2.md).")
@@ -301,17 +321,20 @@ def node(
     from bridge.env.fmu_env import as_experiment
     from bridge.net.node import FmuNode
 
-    if mode not in ("lockstep", "realtime"):
+    if mode not in (None, "lockstep", "realtime"):
         raise BridgeError(f"--mode {mode!r} is unknown; use lockstep or realtime")
     loaded = as_experiment(experiment, version)
+    defaults = loaded.node  # the experiment's node: section; options given here win
+    name, mode = name or defaults.name, mode or defaults.mode
+    rate, prefix = defaults.rate if rate is None else rate, prefix or defaults.prefix
     view = None
     if ros or ros_backend:
         from bridge.net.ros2.args import current
         from bridge.net.ros2.view import settings_from
 
-        section = current().apply(
-            {**loaded.ros, **({"domain_id": ros_domain} if ros_domain is not None else {})}
-        )
+        section = loaded.ros.model_dump(exclude_unset=True)
+        section.update({"domain_id": ros_domain} if ros_domain is not None else {})
+        section = current().apply(section)
         view = settings_from(section, backend=ros_backend)
     server = FmuNode(
         loaded,

@@ -11,143 +11,47 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from bridge.errors import ConfigError
+from bridge.experiment.profiles import PROFILE_KINDS, Distribution, Profile
+from bridge.experiment.sections import (
+    EvaluationSection,
+    NodeSection,
+    RecordingSection,
+    RosSection,
+    TrainingSection,
+    check_import_path,
+    check_ordered,
+)
+from bridge.experiment.strict import (
+    FiniteFloat,
+    NonNegativeFloat,
+    PositiveFloat,
+    Strict,
+    format_validation_error,
+    invalid,
+    suggestion,
+)
 from bridge.experiment.system import SystemSection
+from bridge.experiment.yaml_text import read_yaml
 
-Scalar = float | int | bool | str
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+__all__ = [
+    "PROFILE_KINDS",
+    "Distribution",
+    "Experiment",
+    "Profile",
+    "format_validation_error",
+    "load_experiment",
+    "parse_experiment",
+    "sampling_ratio",
+]
 
-
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-# -- random distributions ---------------------------------------------------------------------
-class Distribution(Strict):
-    """Exactly one of: ``uniform: [low, high]``, ``normal: [mean, std]``,
-    ``truncnormal: [mean, std, low, high]``, ``lognormal: [median, sigma]``, ``choice: [values]``
-    (with optional ``weights``)."""
-
-    uniform: tuple[FiniteFloat, FiniteFloat] | None = None
-    normal: tuple[FiniteFloat, FiniteFloat] | None = None
-    truncnormal: tuple[FiniteFloat, FiniteFloat, FiniteFloat, FiniteFloat] | None = None
-    lognormal: tuple[FiniteFloat, FiniteFloat] | None = None
-    choice: list[FiniteFloat] | None = None
-    weights: list[FiniteFloat] | None = None
-
-    @model_validator(mode="after")
-    def _one_kind(self) -> Distribution:
-        kinds = [k for k in ("uniform", "normal", "truncnormal", "lognormal", "choice") if getattr(self, k)]
-        if len(kinds) != 1:
-            raise ValueError(
-                "give exactly one of uniform: [low, high], normal: [mean, std], truncnormal: "
-                f"[mean, std, low, high], lognormal: [median, sigma], choice: [values]; got {kinds or 'none'}"
-            )
-        if self.uniform and self.uniform[0] > self.uniform[1]:
-            raise ValueError(f"uniform: low must not exceed high, got {list(self.uniform)}")
-        for name, std in (("normal", self.normal), ("lognormal", self.lognormal)):
-            if std and std[1] < 0:
-                raise ValueError(f"{name}: the spread must be >= 0, got {std[1]}")
-        if self.truncnormal and not (self.truncnormal[2] < self.truncnormal[3] and self.truncnormal[1] >= 0):
-            raise ValueError(f"truncnormal: need std >= 0 and low < high, got {list(self.truncnormal)}")
-        if self.lognormal and self.lognormal[0] <= 0:
-            raise ValueError(f"lognormal: the median must be > 0, got {self.lognormal[0]}")
-        if self.weights is not None:
-            if not self.choice or len(self.weights) != len(self.choice):
-                raise ValueError("weights go with choice and need one weight per value")
-            if min(self.weights) < 0 or sum(self.weights) <= 0:
-                raise ValueError(f"weights must be >= 0 with a positive sum, got {self.weights}")
-        return self
-
-    @property
-    def kind(self) -> str:
-        return next(
-            k for k in ("uniform", "normal", "truncnormal", "lognormal", "choice") if getattr(self, k)
-        )
-
-
-# -- time profiles ----------------------------------------------------------------------------
-class StepSpec(Strict):
-    time: FiniteFloat
-    before: FiniteFloat = 0.0
-    after: FiniteFloat
-
-
-class RampSpec(Strict):
-    start_time: FiniteFloat
-    end_time: FiniteFloat
-    start: FiniteFloat = 0.0
-    end: FiniteFloat
-
-    @model_validator(mode="after")
-    def _ordered(self) -> RampSpec:
-        if self.end_time <= self.start_time:
-            raise ValueError(f"ramp: end_time ({self.end_time}) must be after start_time ({self.start_time})")
-        return self
-
-
-class SineSpec(Strict):
-    amplitude: FiniteFloat
-    frequency_hz: Annotated[float, Field(gt=0, allow_inf_nan=False)]
-    phase_rad: FiniteFloat = 0.0
-    offset: FiniteFloat = 0.0
-
-
-class TableSpec(Strict):
-    time: list[FiniteFloat]
-    value: list[FiniteFloat]
-    interpolation: Literal["linear", "hold"] = "linear"
-
-    @model_validator(mode="after")
-    def _table(self) -> TableSpec:
-        if len(self.time) != len(self.value) or not self.time:
-            raise ValueError(
-                f"table: time and value need the same non-zero length, got {len(self.time)} "
-                f"and {len(self.value)}"
-            )
-        if any(b < a for a, b in zip(self.time, self.time[1:])):
-            raise ValueError("table: time must be non-decreasing")
-        return self
-
-
-class CsvSpec(Strict):
-    file: Path
-    column: str
-    time_column: str = "time"
-    interpolation: Literal["linear", "hold"] = "linear"
-
-
-class Profile(Strict):
-    """A signal over time: exactly one of constant, step, ramp, sine, table, csv.
-
-    ``add`` sums further profiles onto it (e.g. a step plus a sine disturbance).
-    """
-
-    constant: FiniteFloat | None = None
-    step: StepSpec | None = None
-    ramp: RampSpec | None = None
-    sine: SineSpec | None = None
-    table: TableSpec | None = None
-    csv: CsvSpec | None = None
-    add: list[Profile] = []
-
-    @model_validator(mode="before")
-    @classmethod
-    def _number_is_constant(cls, data: Any) -> Any:
-        return {"constant": data} if isinstance(data, int | float) and not isinstance(data, bool) else data
-
-    @model_validator(mode="after")
-    def _one_kind(self) -> Profile:
-        kinds = [k for k in PROFILE_KINDS if getattr(self, k) is not None]
-        if len(kinds) != 1:
-            raise ValueError(f"give exactly one of {', '.join(PROFILE_KINDS)}; got {kinds or 'none'}")
-        return self
-
-
-PROFILE_KINDS = ("constant", "step", "ramp", "sine", "table", "csv")
+Scalar = FiniteFloat | int | bool | str
+MAX_SAMPLES = 10**7
+"""Samples per episode at most: each reference and input profile is precomputed as one float64 per
+sample (80 MB per signal at this limit), and an episode longer than this is almost always a
+mistyped duration or sampling time (1e12 s instead of 1e2 s); run several episodes instead."""
 
 
 # -- model --------------------------------------------------------------------------------------
@@ -157,14 +61,39 @@ class ModelSection(Strict):
         description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
     interface: Literal["auto", "cs", "me"] = "auto"
-    step_size: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
-    sampling_time: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
-    episode_duration: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    step_size: PositiveFloat | None = None
+    sampling_time: PositiveFloat | None = None
+    episode_duration: PositiveFloat
     start_time: FiniteFloat = 0.0
     parameters: dict[str, Scalar] = {}
     start_values: dict[str, Scalar] = {}
     reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
-    tolerance: Annotated[float, Field(gt=0)] | None = None
+    tolerance: PositiveFloat | None = None
+
+    @model_validator(mode="after")
+    def _samples(self) -> ModelSection:
+        check_samples("episode_duration", self.episode_duration, self.sampling_time or self.step_size)
+        return self
+
+
+def check_samples(key: str, duration_s: float, sampling_time_s: float | None) -> None:
+    """At most MAX_SAMPLES samples per episode, where the sampling time is known."""
+    if sampling_time_s is None:
+        return
+    samples = duration_s / sampling_time_s
+    if samples < 1 - 1e-9:
+        raise invalid(
+            key,
+            f"{duration_s:g} s is shorter than one sample ({sampling_time_s:g} s): an episode needs at "
+            "least one; lengthen the episode or sample more often",
+        )
+    if samples > MAX_SAMPLES:
+        raise invalid(
+            key,
+            f"{duration_s:g} s at {sampling_time_s:g} s per sample is {samples:.3g} samples; "
+            f"at most {MAX_SAMPLES:.0e} per episode are allowed (profiles are precomputed per sample): "
+            "shorten the episode or sample less often",
+        )
 
 
 # -- actions --------------------------------------------------------------------------------------
@@ -199,6 +128,8 @@ class ActionSection(Strict):
         for name, levels in self.levels.items():
             if len(levels) < 2:
                 raise ValueError(f"levels of {name!r} need at least two values, got {levels}")
+        for name in set(self.low) & set(self.high):
+            check_ordered(f"low/high.{name}", self.low[name], self.high[name])
         return self
 
 
@@ -213,7 +144,7 @@ class ObservationSection(Strict):
     include_action: bool = False
     scale: Literal["auto", "none"] | dict[str, tuple[FiniteFloat, FiniteFloat]] = "auto"
     history: Annotated[int, Field(ge=1, le=1000)] = 1
-    clip: FiniteFloat | None = None
+    clip: PositiveFloat | None = None
 
     @model_validator(mode="after")
     def _nonempty(self) -> ObservationSection:
@@ -221,8 +152,7 @@ class ObservationSection(Strict):
             raise ValueError("observe at least one output, reference or error")
         if isinstance(self.scale, dict):
             for name, (low, high) in self.scale.items():
-                if not low < high:
-                    raise ValueError(f"scale of {name!r}: need low < high, got [{low}, {high}]")
+                check_ordered(f"scale.{name}", low, high)
         return self
 
 
@@ -232,14 +162,14 @@ class TrackingTerm(Strict):
     reference: str
     norm: Literal["abs", "squared"] = "abs"
     weight: FiniteFloat = 1.0
-    scale: Annotated[float, Field(gt=0)] = 1.0
+    scale: PositiveFloat = 1.0
 
 
 class SignalTerm(Strict):
     name: str
     norm: Literal["abs", "squared", "linear"] = "squared"
     weight: FiniteFloat = 1.0
-    scale: Annotated[float, Field(gt=0)] = 1.0
+    scale: PositiveFloat = 1.0
 
 
 class RewardTerm(Strict):
@@ -256,11 +186,10 @@ class RewardTerm(Strict):
     @classmethod
     def _known(cls, data: Any) -> Any:
         if isinstance(data, dict):
-            unknown = [k for k in data if k not in REWARD_TERMS]
+            unknown = [str(k) for k in data if k not in REWARD_TERMS]
             if unknown:
-                raise ValueError(
-                    f"unknown reward term {unknown[0]!r}; known terms: {', '.join(REWARD_TERMS)}"
-                )
+                hint = suggestion(unknown[0], REWARD_TERMS, "known terms")
+                raise ValueError(f"unknown reward term {unknown[0]!r}; {hint}")
             if len(data) != 1:
                 raise ValueError(f"each reward term has exactly one key, got {list(data)}")
         return data
@@ -284,7 +213,7 @@ class RewardSection(Strict):
         if not (self.terms or self.expression or self.callable):
             raise ValueError("give reward terms, an expression or a callable")
         if self.callable is not None:
-            _check_import_path(self.callable)
+            check_import_path(self.callable)
         return self
 
 
@@ -294,6 +223,12 @@ class TerminationSection(Strict):
 
     bounds: dict[str, tuple[FiniteFloat | None, FiniteFloat | None]] = {}
     on_fmu_terminate: bool = True
+
+    @model_validator(mode="after")
+    def _ordered(self) -> TerminationSection:
+        for name, (low, high) in self.bounds.items():
+            check_ordered(f"bounds.{name}", low, high)
+        return self
 
 
 class VersionSection(Strict):
@@ -331,7 +266,7 @@ class Scenario(Strict):
     )
     references: dict[str, Profile] = {}
     randomization: Randomization = Randomization()
-    episode_duration: Annotated[float, Field(gt=0)] | None = None
+    episode_duration: PositiveFloat | None = None
 
 
 class ScheduleSection(Strict):
@@ -340,7 +275,7 @@ class ScheduleSection(Strict):
 
     mode: Literal["fixed", "round_robin", "random", "weighted"] = "round_robin"
     training: list[str] = []
-    weights: dict[str, Annotated[float, Field(ge=0)]] = {}
+    weights: dict[str, NonNegativeFloat] = {}
     evaluation: list[str] = []
 
 
@@ -354,15 +289,7 @@ class HooksSection(Strict):
     @field_validator("episode", "state")
     @classmethod
     def _import_path(cls, value: str | None) -> str | None:
-        if value is not None:
-            _check_import_path(value)
-        return value
-
-
-def _check_import_path(value: str) -> None:
-    module, sep, attr = value.partition(":")
-    if not sep or not module or not attr:
-        raise ValueError(f"expected 'module:function', got {value!r}")
+        return None if value is None else check_import_path(value)
 
 
 class Experiment(Strict):
@@ -382,11 +309,11 @@ class Experiment(Strict):
     randomization: Randomization = Randomization()
     noise: Noise = Noise()
     hooks: HooksSection = HooksSection()
-    training: dict[str, Any] = {}
-    evaluation: dict[str, Any] = {}
-    node: dict[str, Any] = {}
-    ros: dict[str, Any] = {}
-    recording: dict[str, Any] = {}
+    training: TrainingSection = TrainingSection()
+    evaluation: EvaluationSection = EvaluationSection()
+    node: NodeSection = NodeSection()
+    ros: RosSection = RosSection()
+    recording: RecordingSection = RecordingSection()
     system: SystemSection | None = None
     source: Path | None = Field(default=None, exclude=True)
 
@@ -402,10 +329,23 @@ class Experiment(Strict):
             ("schedule.training", self.schedule.training),
             ("schedule.evaluation", self.schedule.evaluation),
             ("schedule.weights", list(self.schedule.weights)),
+            ("evaluation.scenarios", self.evaluation.scenarios),
+            ("training.eval_scenarios", self.training.eval_scenarios or []),
         ):
             missing = [n for n in listed if n not in names]
             if missing:
-                raise ValueError(f"{key}: {missing} are not scenarios; defined: {sorted(names) or 'none'}")
+                raise invalid(key, f"{missing} are not scenarios; defined: {sorted(names) or 'none'}")
+        residual = self.training.residual
+        if residual is not None and residual.baseline not in self.evaluation.baselines:
+            raise invalid(
+                "training.residual.baseline",
+                f"{residual.baseline!r} is not in evaluation.baselines "
+                f"({sorted(self.evaluation.baselines) or 'none defined'})",
+            )
+        sampling_s = self.model.sampling_time or self.model.step_size
+        for name, sc in self.scenarios.items():
+            if sc.episode_duration is not None:
+                check_samples(f"scenarios.{name}.episode_duration", sc.episode_duration, sampling_s)
         return self
 
     def resolved(self, version: str | None = None) -> Experiment:
@@ -433,14 +373,7 @@ class Experiment(Strict):
 def load_experiment(path: str | Path, *, version: str | None = None) -> Experiment:
     """Read and validate an experiment file (structure only; see ``config_check`` for FMU checks)."""
     file = Path(path)
-    try:
-        text = file.read_text()
-    except OSError as exc:
-        raise ConfigError(f"cannot read experiment file: {exc.strerror} [{file}]") from exc
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
+    data = read_yaml(file)
     if not isinstance(data, dict):
         raise ConfigError(
             f"{file}: expected a mapping of sections (model, actions, ...), got {type(data).__name__}"
@@ -459,23 +392,14 @@ def parse_experiment(
     return experiment.resolved(version)
 
 
-def format_validation_error(exc: ValidationError, source: Path | None) -> str:
-    lines = []
-    for error in exc.errors():
-        key = ".".join(str(part) for part in error["loc"]) or "(top level)"
-        message = error["msg"].removeprefix("Value error, ")
-        if error["type"] == "extra_forbidden":
-            message = "unknown key (check its spelling and indentation)"
-        value = error.get("input")
-        shown = "" if isinstance(value, dict) else f" (got {value!r})"
-        lines.append(f"  {key}: {message}{shown}")
-    where = f" [{source}]" if source else ""
-    return f"invalid experiment{where}:\n" + "\n".join(lines)
-
-
 def sampling_ratio(sampling_time_s: float, step_size_s: float) -> int:
     """How many FMU steps make one sample; the ratio must be a whole number."""
     ratio = sampling_time_s / step_size_s
+    if not ratio <= MAX_SAMPLES:
+        raise ConfigError(
+            f"model.sampling_time: {sampling_time_s:g} s is {ratio:.3g} FMU steps of {step_size_s:g} s; "
+            f"at most {MAX_SAMPLES:.0e} steps per sample are allowed: check both values"
+        )
     n = round(ratio)
     if n < 1 or not math.isclose(ratio, n, rel_tol=1e-9, abs_tol=1e-9):
         raise ConfigError(

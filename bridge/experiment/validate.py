@@ -13,7 +13,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridge.errors import ConfigError
-from bridge.experiment.config import Experiment, known_references, sampling_ratio, scenario_inputs
+from bridge.experiment.config import (
+    MAX_SAMPLES,
+    Experiment,
+    known_references,
+    sampling_ratio,
+    scenario_inputs,
+)
 from bridge.fmu.vocab import ModelInfo, Variable
 
 
@@ -61,8 +67,33 @@ def timing(experiment: Experiment, info: ModelInfo) -> Timing:
             f"(seconds) [{experiment.source}]"
         )
     ts = model.sampling_time or h
-    n = sampling_ratio(ts, h)
+    try:
+        n = sampling_ratio(ts, h)
+    except ConfigError as exc:
+        raise ConfigError(f"{exc} [{experiment.source}]") from None
+    _check_episode_lengths(experiment, n * h)
     return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=model.start_time)
+
+
+def _check_episode_lengths(experiment: Experiment, sampling_time_s: float) -> None:
+    """The sample limit of the config, also where the sampling time comes from the FMU."""
+    durations = {"model.episode_duration": experiment.model.episode_duration}
+    for name, sc in experiment.scenarios.items():
+        if sc.episode_duration is not None:
+            durations[f"scenarios.{name}.episode_duration"] = sc.episode_duration
+    for key, duration_s in durations.items():
+        samples = duration_s / sampling_time_s
+        if samples < 1 - 1e-9:
+            raise ConfigError(
+                f"{key}: {duration_s:g} s is shorter than one sample ({sampling_time_s:g} s): an episode "
+                f"needs at least one; lengthen the episode or sample more often [{experiment.source}]"
+            )
+        if samples > MAX_SAMPLES:
+            raise ConfigError(
+                f"{key}: {duration_s:g} s at {sampling_time_s:g} s per sample is {samples:.3g} samples; "
+                f"at most {MAX_SAMPLES:.0e} per episode are allowed (profiles are precomputed per "
+                f"sample): shorten the episode or sample less often [{experiment.source}]"
+            )
 
 
 def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
@@ -75,6 +106,7 @@ def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     _check_observations(experiment, variables, where)
     signals = set(variables) | known_references(experiment)
     _check_reward_and_termination(experiment, variables, signals, where)
+    _check_evaluation(experiment, signals, where)
     return info
 
 
@@ -241,3 +273,26 @@ def _check_reward_and_termination(
     extra_inputs = [n for n in scenario_inputs(exp) if n not in variables]
     if extra_inputs:
         raise _unknown("scenarios.inputs", extra_inputs[0], variables, where)
+
+
+def _check_evaluation(exp: Experiment, signals: set[str], where: str) -> None:
+    """Names in ``evaluation.metrics`` and ``evaluation.baselines`` are signals and action inputs."""
+    metrics, inputs = exp.evaluation.metrics, exp.actions.inputs
+    for i, pair in enumerate(metrics.tracking):
+        for part, name in zip(("output", "reference"), pair):
+            if name not in signals:
+                raise _unknown(f"evaluation.metrics.tracking[{i}] ({part})", name, signals, where, "a signal")
+    for name in metrics.effort or []:
+        if name not in inputs:
+            raise _unknown("evaluation.metrics.effort", name, inputs, where, "an action input")
+    for name in metrics.constraints:
+        if name not in signals:
+            raise _unknown("evaluation.metrics.constraints", name, signals, where, "a signal")
+    for base_name, base in exp.evaluation.baselines.items():
+        key = f"evaluation.baselines.{base_name}"
+        for part in ("output", "reference"):
+            name = getattr(base, part)
+            if name is not None and name not in signals:
+                raise _unknown(f"{key}.{part}", name, signals, where, "a signal")
+        if base.input is not None and base.input not in inputs:
+            raise _unknown(f"{key}.input", base.input, inputs, where, "an action input")

@@ -49,6 +49,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         agent: what acts (a model file, a policy name): stored in the metadata.
         seed: the run's seed, if known up front (the seed of every reset is in the events).
         chunk_size: uncompressed bytes per MCAP chunk (at most this is lost to a crash).
+        compression: of the chunks, ``zstd`` or ``none``.
         overwrite: replace an existing recording at ``path``.
     """
 
@@ -60,6 +61,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         agent: str | None = None,
         seed: int | None = None,
         chunk_size: int = 128 * 1024,
+        compression: str = "zstd",
         overwrite: bool = False,
     ) -> None:
         super().__init__(env)
@@ -78,7 +80,9 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             meta.AGENT_ACTION: meta.action_names(task, env.action_space),
             meta.OUTPUTS: list(task.output_names),
         }
-        self.writer = writer = McapWriter(path, chunk_size=chunk_size, overwrite=overwrite)
+        self.writer = writer = McapWriter(
+            path, chunk_size=chunk_size, compression=compression, overwrite=overwrite
+        )
         try:
             self.channels = ch = meta.open_channels(writer, [*STEP_TOPICS, meta.SCENARIO, meta.EVENTS], names)
             self._layouts = {t: cdr.JointStateLayout.of(n) for t, n in names.items()}
@@ -273,6 +277,8 @@ def record_env(
     agent: str | None = None,
     *,
     seed: int | None = None,
+    chunk_size: int = 128 * 1024,
+    compression: str = "zstd",
 ) -> RecordMcap:
     """Wrap ``env`` to record into ``directory/<run_name>.mcap`` (a free name is chosen).
 
@@ -286,4 +292,4 @@ def record_env(
     while path.exists() or path.with_name(path.name + ".part").exists():
         path = folder / f"{base}-{counter}.mcap"
         counter += 1
-    return RecordMcap(env, path, agent=agent, seed=seed)
+    return RecordMcap(env, path, agent=agent, seed=seed, chunk_size=chunk_size, compression=compression)

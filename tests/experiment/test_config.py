@@ -82,7 +82,7 @@ def test_unknown_reward_term(tmp_path: Path) -> None:
     data = base(reward={"terms": [{"bonus": 1.0}]})
     with pytest.raises(ConfigError) as caught:
         check(tmp_path, data)
-    assert "reward.terms.0" in str(caught.value)
+    assert "reward.terms[0]" in str(caught.value)
     assert "unknown reward term 'bonus'; known terms: alive, tracking, effort, rate, signal" in str(
         caught.value
     )

@@ -17,31 +17,15 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any, Literal
-
-from pydantic import BaseModel, ConfigDict, Field
+from typing import Any
 
 from bridge.errors import ConfigError
+from bridge.experiment.sections import RosSection
 from bridge.net.ros2 import cdr
 
+RosViewSettings = RosSection  # the ``ros:`` section of an experiment
+
 _log = logging.getLogger(__name__)
-
-
-class RosViewSettings(BaseModel):
-    """The ``ros:`` section of an experiment (all optional)."""
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
-    domain_id: int | None = Field(default=None, ge=0, le=232)
-    namespace: str = "/"
-    node_name: str | None = None
-    outputs_topic: str = "~/outputs"
-    actions_topic: str = "~/actions"
-    reset_service: str = "~/reset"
-    clock: bool = True
-    per_variable: bool = False
-    reliability: Literal["reliable", "best_effort"] = "reliable"
-    depth: int = Field(default=10, ge=1)
-    backend: Literal["zenoh", "rclpy"] = "zenoh"
 
 
 def settings_from(section: dict[str, Any], *, backend: str | None = None) -> RosViewSettings:
@@ -53,7 +37,7 @@ def settings_from(section: dict[str, Any], *, backend: str | None = None) -> Ros
     try:
         return RosViewSettings.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(format_validation_error(exc, None).replace("  ", "  ros.")) from None
+        raise ConfigError(format_validation_error(exc, None, "ros.")) from None
 
 
 def ros_node_name(name: str) -> str:

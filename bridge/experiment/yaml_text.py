@@ -1,0 +1,147 @@
+"""YAML read with bounds: file size, nesting depth and what aliases expand to.
+
+A YAML alias (``*name``) repeats an anchored node without copying it in the file, so nine lines of
+nested aliases (the "billion laughs" file) describe 10^9 values: ``yaml.safe_load`` would build
+them all, and whatever serialises the config later (recording metadata, run directories) would
+write them all. The node graph is composed first (aliases are shared nodes there, so that is
+cheap), its expanded size is counted with each shared node counted once per use, and only a
+document within the limits is constructed into Python values.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+from yaml.events import AliasEvent, CollectionEndEvent, CollectionStartEvent
+from yaml.nodes import MappingNode, Node, ScalarNode, SequenceNode
+
+from bridge.errors import ConfigError
+
+MAX_FILE_BYTES = 256 << 10  # experiment files are a few KB; long tables belong in a csv: profile
+MAX_ALIAS_GROWTH = 100_000  # values plus characters that aliases may add to what the file spells out
+MAX_DEPTH = 100  # nesting levels; the parser and pydantic recurse once per level
+
+
+# libyaml's parser where it is installed (ten times faster); it composes recursively in C, so the
+# nesting depth is checked on its (iterative) event stream first: a deep file would crash it
+_Loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def read_yaml(file: Path) -> Any:
+    """The data of the YAML file ``file``, or a ConfigError naming the file and what is wrong."""
+    try:
+        size = file.stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ConfigError(
+                f"experiment file is {size} bytes; the limit is {MAX_FILE_BYTES} (experiment files "
+                f"are a few KB: is this the right file?) [{file}]"
+            )
+        text = file.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read experiment file: {exc.strerror} [{file}]") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"experiment file is not UTF-8 text ({exc.reason} at byte {exc.start}) [{file}]"
+        ) from exc
+    return parse_yaml(text, file)
+
+
+def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
+    """Parse ``text`` with the bounds of :func:`read_yaml` (``file`` only names it in errors)."""
+    has_aliases = _check_depth(text, file)
+    loader = _Loader(text)
+    try:
+        node = loader.get_single_node()
+        if node is None:
+            return None
+        if has_aliases:
+            _check_size(node, file)
+        return loader.construct_document(node)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
+    except RecursionError:
+        raise ConfigError(
+            f"{file}: the YAML nests too deeply to read; experiment files need a few levels, "
+            f"at most {MAX_DEPTH} are accepted"
+        ) from None
+    finally:
+        loader.dispose()
+
+
+def _check_depth(text: str, file: Path | str) -> bool:
+    """Raise if collections nest more than MAX_DEPTH deep; whether ``text`` has aliases.
+
+    A YAML syntax error is left for the composer to report.
+    """
+    loader = _Loader(text)
+    depth, aliases = 0, False
+    try:
+        while loader.check_event():
+            event = loader.get_event()
+            if isinstance(event, CollectionStartEvent):
+                depth += 1
+                if depth > MAX_DEPTH:
+                    line = event.start_mark.line + 1 if event.start_mark else "?"
+                    raise ConfigError(
+                        f"{file}: line {line}: nested more than {MAX_DEPTH} levels "
+                        "deep; experiment files need a few levels"
+                    )
+            elif isinstance(event, CollectionEndEvent):
+                depth -= 1
+            elif isinstance(event, AliasEvent):
+                aliases = True
+    except yaml.YAMLError:
+        return True
+    finally:
+        loader.dispose()
+    return aliases
+
+
+def _check_size(root: Node, file: Path | str) -> None:
+    """Raise unless aliases grow ``root`` by at most MAX_ALIAS_GROWTH and it nests at most MAX_DEPTH."""
+    sizes: dict[int, tuple[int, int]] = {}  # id(node) -> (expanded size, height): shared nodes once
+    on_path: set[int] = set()
+    literal: list[int] = []  # the size of each node as written, each once
+
+    def measure(node: Node, depth: int) -> tuple[int, int]:
+        key = id(node)
+        if key in on_path:
+            raise ConfigError(
+                f"{file}: line {node.start_mark.line + 1}: an alias refers to a node that contains "
+                "it (a recursive structure); experiment files are trees"
+            )
+        size, height = sizes.get(key, (0, 0))
+        if depth + height > MAX_DEPTH:
+            raise ConfigError(
+                f"{file}: line {node.start_mark.line + 1}: nested more than {MAX_DEPTH} levels deep; "
+                "experiment files need a few levels"
+            )
+        if key in sizes:
+            return size, height
+        on_path.add(key)
+        children = [measure(child, depth + 1) for child in _children(node)]
+        on_path.discard(key)
+        own = len(str(node.value)) if isinstance(node, ScalarNode) else 0
+        size = 1 + own + sum(s for s, _ in children)
+        height = 1 + max((h for _, h in children), default=0)
+        sizes[key] = size, height
+        literal.append(1 + own)
+        return size, height
+
+    expanded, _ = measure(root, 0)
+    if expanded - sum(literal) > MAX_ALIAS_GROWTH:
+        raise ConfigError(
+            f"{file}: aliases (*name) repeating anchors (&name) expand this YAML to {expanded:,} values "
+            f"and characters, {sum(literal):,} written out; aliases may add at most "
+            f"{MAX_ALIAS_GROWTH:,}: write the values out, or use fewer nested aliases"
+        )
+
+
+def _children(node: Node) -> list[Node]:
+    if isinstance(node, SequenceNode):
+        return list(node.value)
+    if isinstance(node, MappingNode):
+        return [part for pair in node.value for part in pair]
+    return []
