@@ -55,6 +55,17 @@ mistyped duration or sampling time (1e12 s instead of 1e2 s); run several episod
 
 
 # -- model --------------------------------------------------------------------------------------
+class IsolationSection(Strict):
+    """``model.isolation``: run the FMU in a child process behind a deadline (untrusted or
+    unstable FMUs: a hang, a crash or a leak becomes an error instead of a dead trainer)."""
+
+    timeout: PositiveFloat = Field(default=10.0, description="seconds a reset or one sample may take")
+    memory_limit_mb: PositiveFloat | None = Field(
+        default=None, description="resident memory the FMU's process may add after loading"
+    )
+    restart: bool = Field(default=True, description="start a fresh process at the next reset")
+
+
 class ModelSection(Strict):
     fmu: str = Field(
         default="",
@@ -69,6 +80,7 @@ class ModelSection(Strict):
     start_values: dict[str, Scalar] = {}
     reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
     tolerance: PositiveFloat | None = None
+    isolation: IsolationSection | None = None
 
     @model_validator(mode="after")
     def _samples(self) -> ModelSection:

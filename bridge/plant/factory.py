@@ -16,11 +16,22 @@ def is_system(experiment: Experiment) -> bool:
 
 
 def plant_for(experiment: Experiment) -> Plant:
-    """A :class:`SystemPlant` for a system, else the FMU in this process (``LocalFmuPlant``)."""
+    """A :class:`SystemPlant` for a system; the FMU in a child process where ``model.isolation``
+    asks for it (``IsolatedFmuPlant``); else the FMU in this process (``LocalFmuPlant``)."""
     if is_system(experiment):
         from bridge.plant.system.plant import SystemPlant
 
         return SystemPlant(experiment)
+    isolation = experiment.model.isolation
+    if isolation is not None:
+        from bridge.plant.isolated import IsolatedFmuPlant
+
+        return IsolatedFmuPlant(
+            experiment,
+            timeout_s=isolation.timeout,
+            memory_limit_mb=isolation.memory_limit_mb,
+            restart=isolation.restart,
+        )
     from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
 
     return LocalFmuPlant(experiment)

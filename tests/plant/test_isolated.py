@@ -131,3 +131,14 @@ def test_vector_env_truncates_the_episode_of_a_hung_plant_and_goes_on(typed: Pat
         assert dones_at == [2]
     finally:
         vec.close()
+
+
+def test_model_isolation_in_the_experiment_file_gives_the_isolated_plant(tmp_path: Path) -> None:
+    path = tmp_path / "isolated.yaml"
+    path.write_text(
+        TYPED.replace("episode_duration: 5.0}", "episode_duration: 5.0, isolation: {timeout: 1}}")
+    )
+    with FmuEnv(path) as env:
+        assert isinstance(env.plant, IsolatedFmuPlant) and env.plant.timeout_s == 1.0
+        with pytest.raises(StepTimeout, match="no answer within 1 s"):
+            steps(env, "hangs", 5)
