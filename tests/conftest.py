@@ -7,6 +7,7 @@ import subprocess
 import sys
 import tarfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pytest
 
@@ -225,3 +226,16 @@ def _wait_for_node(net: Loopback, name: str, timeout_s: float) -> None:
             return
         time.sleep(0.05)
     pytest.fail(f"node {name!r} did not appear under {net.prefix}/ within {timeout_s} s")
+
+
+if TYPE_CHECKING:
+    from bridge.experiment.config import Experiment
+    from bridge.fmu.vocab import ModelInfo
+
+
+def check_with_model(experiment: Experiment) -> ModelInfo:
+    """``check_experiment`` against the model the experiment names (read from its FMU or system)."""
+    from bridge.experiment.validate import check_experiment
+    from bridge.plant.factory import model_info_for
+
+    return check_experiment(experiment, model_info_for(experiment))

@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest import check_with_model
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
@@ -158,7 +159,10 @@ def outcome(path: Path, info: ModelInfo, fmu: str) -> tuple[str, str]:
     """('accepted', '') or ('rejected', message); anything else raises and fails the test."""
     try:
         experiment = load_experiment(path)
-        check_experiment(experiment, info if experiment.model.fmu == fmu else None)
+        if experiment.model.fmu == fmu:
+            check_experiment(experiment, info)
+        else:
+            check_with_model(experiment)
     except BridgeError as exc:
         return "rejected", str(exc)
     wrong = nonsense(experiment, info)
@@ -183,7 +187,7 @@ def test_mutated_experiments_give_a_clear_error_or_a_sensible_experiment(name: s
     text = source.read_text()
     parsed = yaml.safe_load(text)
     original = load_experiment(source)
-    info = check_experiment(original)
+    info = check_with_model(original)
     rng = random.Random(f"experiment-fuzz-{name}")
     counts: Counter[str] = Counter()
     cli_runs = Counter[int]()

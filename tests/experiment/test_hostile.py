@@ -12,11 +12,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import check_with_model
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import MAX_SAMPLES, load_experiment
 from bridge.experiment.examples import example_experiment
-from bridge.experiment.validate import check_experiment
 from bridge.experiment.yaml_text import MAX_DEPTH, parse_yaml
 
 CARTPOLE = example_experiment("cartpole_balance")
@@ -33,7 +33,7 @@ def edited(tmp_path: Path, source: Path, old: str, new: str) -> Path:
 
 def rejected(path: Path) -> str:
     with pytest.raises(ConfigError) as caught:
-        check_experiment(load_experiment(path))
+        check_with_model(load_experiment(path))
     message = str(caught.value)
     assert str(path) in message, message
     return message

@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 import yaml
+from conftest import check_with_model
 
 from agents.evaluate import baseline_settings, metric_spec
 from agents.policies import PidSpec
@@ -18,7 +19,6 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.experiment.sections import PID_KEYS, RosSection
-from bridge.experiment.validate import check_experiment
 from bridge.net.ros2.view import RosViewSettings, settings_from
 
 MOTOR = example_experiment("dcmotor_tracking")
@@ -164,14 +164,14 @@ def test_names_in_metrics_and_baselines_are_checked_against_the_fmu(tmp_path: Pa
     with pytest.raises(
         ConfigError, match=r"evaluation\.metrics\.tracking\[0\] \(output\): 'omegaa' .* did you mean"
     ):
-        check_experiment(load_experiment(path))
+        check_with_model(load_experiment(path))
     data = yaml.safe_load(MOTOR.read_text())
     data["evaluation"]["baselines"]["pid"]["input"] = "current"
     path.write_text(yaml.safe_dump(data))
     with pytest.raises(
         ConfigError, match=r"evaluation\.baselines\.pid\.input: 'current' is not an action input"
     ):
-        check_experiment(load_experiment(path))
+        check_with_model(load_experiment(path))
 
 
 def test_residual_needs_a_baseline_of_the_file(tmp_path: Path) -> None:
