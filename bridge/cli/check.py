@@ -16,8 +16,8 @@ from rich.table import Table
 from bridge.cli.simulate import make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import load_experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import read_model_info
+from bridge.experiment.validate import check_experiment, timing
+from bridge.plant.factory import model_info_for
 from bridge.task.core import Task
 from bridge.task.scenario import describe
 
@@ -27,7 +27,7 @@ def check_and_report(path: Path, *, version: str | None, steps: int, console: Co
     from gymnasium.utils.env_checker import check_env as gym_check
 
     experiment = load_experiment(path, version=version)
-    info = check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
+    info = check_experiment(experiment, model_info_for(experiment))
     console.print(
         f"[green]config ok[/green]: {path} (version {experiment.version}) against {info.model_name}"
     )
@@ -90,7 +90,7 @@ def _few_steps(env: FmuEnv, steps: int, console: Console) -> None:
 
 def scenario_report(path: Path, *, sample: int, seed: int, console: Console) -> None:
     experiment = load_experiment(path)
-    info = check_experiment(experiment, read_model_info(resolve_fmu(experiment)))
+    info = check_experiment(experiment, model_info_for(experiment))
     task = Task(experiment, info.variables, timing(experiment, info))
     table = Table("scenario", "use", "description", "parameters", "references", "inputs")
     sampler = task.sampler

@@ -79,7 +79,7 @@ def format_validation_error(exc: ValidationError, source: Path | None, prefix: s
         if error["type"] == "extra_forbidden":
             lines.append(f"  {key}: unknown key (check its spelling and indentation)")
             continue
-        if error["type"] == INVALID_KEY:
+        if error["type"] == INVALID_KEY and "ctx" in error:  # ours; pydantic's own has no ctx
             ctx = error["ctx"]
             lines.append(f"  {key + '.' if key else ''}{ctx['key']}: {ctx['message']}")
             continue

@@ -12,7 +12,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-Scalar = float | int | bool | str
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 CONNECTION = re.compile(r"^\s*([A-Za-z_][\w]*)\.(\S+)\s*->\s*([A-Za-z_][\w]*)\.(\S+)\s*$")
 SYSTEM_SUFFIXES = (".ssp", ".ssd")

@@ -174,6 +174,7 @@ def describe_system(experiment: Experiment) -> ModelInfo:
 
     system = from_experiment(experiment)
     infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
+    check_system(system, infos)  # connections and parameters, as the plant checks them
     return system_info(experiment, system, infos, system_timing(experiment, system))
 
 
