@@ -256,6 +256,7 @@ class FmuNode:
         try:
             if self.mode == "realtime":
                 self._latest_inputs = values
+                self.counters["held"] += 1
             else:
                 self._lockstep(frame, values, (client, payload[proto.HEADER.size :]))
         finally:
@@ -450,15 +451,15 @@ class FmuNode:
     def _ros_actions(self, values: dict[str, float]) -> None:
         """Input values by name from the ROS view: held in real time, one sample each in lockstep."""
         if self.lease.holder is not None:
-            self.counters["rejected_not_holder"] += 1
+            self.counters["ros_rejected_not_holder"] += 1
             return
         current = self._latest_inputs or self._held_inputs
         merged = [float(values.get(name, current[i])) for i, name in enumerate(self.input_names)]
         if self.rules.inputs(merged) is not None:
-            self.counters["rejected_out_of_range"] += 1
+            self.counters["ros_rejected_out_of_range"] += 1
             return
         if self.health == "hung" or not self._lock.acquire(timeout=self.step_timeout_s):
-            self.counters["rejected_unhealthy"] += 1
+            self.counters["ros_rejected_unhealthy"] += 1
             return
         try:
             if self.mode == "realtime":
