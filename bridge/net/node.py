@@ -36,7 +36,7 @@ import threading
 import time
 from collections import Counter
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
@@ -49,8 +49,11 @@ from bridge.net.requests import BadRequest, RequestRules, check_empty, parse_res
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import ZenohOptions, open_session, undeclare
 from bridge.net.watchdog import Watchdog
-from bridge.plant.base import Plant
 from bridge.task.core import Task
+
+if TYPE_CHECKING:
+    from bridge.plant.isolated import IsolatedFmuPlant
+    from bridge.plant.local import LocalFmuPlant
 
 _log = logging.getLogger(__name__)
 Mode = Literal["lockstep", "realtime"]
@@ -104,7 +107,7 @@ class FmuNode:
         self.isolated, self.step_timeout_s = isolate, step_timeout_s
         self.keys = proto.Keys(prefix, name)
         self.plant = plant = self._make_plant(exp)
-        self.fmu_path, self.info, self.timing = plant.fmu_path, plant.info, plant.timing  # type: ignore[attr-defined]
+        self.fmu_path, self.info, self.timing = plant.fmu_path, plant.info, plant.timing
         task = Task(exp, self.info.variables, self.timing)  # for the input/output names only
         self.input_names, self.output_names = task.input_names, task.output_names
         plant.bind(self.input_names, self.output_names)
@@ -131,7 +134,7 @@ class FmuNode:
         self.closed_cleanly = True
         self._declare()
 
-    def _make_plant(self, exp: Experiment) -> Plant:
+    def _make_plant(self, exp: Experiment) -> LocalFmuPlant | IsolatedFmuPlant:
         if self.isolated:
             from bridge.plant.isolated import IsolatedFmuPlant
 
