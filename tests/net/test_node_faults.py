@@ -163,3 +163,30 @@ def test_replace_dead_truncates_failed_model_steps_instead_of_aborting(loopback:
             assert vec.on_error == "truncate"
         finally:
             vec.close()
+
+
+def test_nodes_command_shows_health_and_holder_and_speaks_json(loopback: Loopback) -> None:
+    import json
+    import os
+    import subprocess
+    import sys
+
+    with node_process(CARTPOLE, "held", loopback):
+        env = RemoteFmuEnv(CARTPOLE, "held", session=loopback.session, prefix=loopback.prefix)
+        try:
+            env.reset(seed=0)
+            holder = f"{env.plant.client.client_id:016x}"  # type: ignore[attr-defined]
+            cmd = [sys.executable, "-m", "bridge.cli", "nodes", "--connect", loopback.endpoint]
+            cmd += ["--prefix", loopback.prefix]
+            run_env = {**os.environ, "COLUMNS": "250"}
+            table = subprocess.run(cmd, capture_output=True, text=True, timeout=60, env=run_env, check=False)
+            listed = subprocess.run(
+                [*cmd, "--json"], capture_output=True, text=True, timeout=60, env=run_env, check=False
+            )
+        finally:
+            env.close()
+    assert table.returncode == 0 and listed.returncode == 0, table.stderr + listed.stderr
+    entries = json.loads(listed.stdout)
+    assert [e["node"] for e in entries] == ["held"] and entries[0]["health"] == "ok"
+    assert entries[0]["holder"]["zid"] == str(loopback.session.zid())  # type: ignore[attr-defined]
+    assert entries[0]["holder"]["client"] == holder and holder in table.stdout and "ok" in table.stdout
