@@ -314,8 +314,23 @@ def node(
         str | None, typer.Option(help="zenoh (rmw_zenoh wire, no ROS install) or rclpy.")
     ] = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID for the ROS view.")] = None,
+    isolate: Annotated[
+        bool,
+        typer.Option(
+            "--isolate/--no-isolate",
+            help="Run the FMU in a child process: a hung or crashing FMU is killed at the step "
+            "deadline and restarted by the next reset (one pipe round trip more per step).",
+        ),
+    ] = False,
+    step_timeout: Annotated[
+        float,
+        typer.Option(
+            "--step-timeout", help="Seconds a reset or step may take before the node reports its FMU hung."
+        ),
+    ] = 10.0,
 ) -> None:
     """Serve an FMU over Zenoh until interrupted (Ctrl-C or SIGTERM)."""
+    import os
     import signal
 
     from bridge.env.fmu_env import as_experiment
@@ -344,6 +359,8 @@ def node(
         options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode),
         prefix=prefix,
         ros=view,
+        isolate=isolate,
+        step_timeout_s=step_timeout,
     )
     signal.signal(signal.SIGTERM, lambda *_: server.close())
     err_console.print(
@@ -355,7 +372,15 @@ def node(
     except KeyboardInterrupt:
         pass
     finally:
-        server.close()
+        if not server.close():
+            # A native call into the FMU never returned: it cannot be interrupted, so leave now.
+            err_console.print(
+                f"node {name!r}: {server.health_detail or 'a call into the FMU did not return'}; "
+                "exiting without it",
+                highlight=False,
+            )
+            sys.stderr.flush()
+            os._exit(3)
 
 
 @app.command()
@@ -391,8 +416,9 @@ def nodes(
     zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     timeout_s: Annotated[float, typer.Option("--timeout", help="Seconds to wait for answers.")] = 2.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print each node's info as JSON.")] = False,
 ) -> None:
-    """List live FMU nodes with their model and state."""
+    """List live FMU nodes with their model, health, holder and state."""
     from bridge.net.remote import describe_nodes, list_nodes
     from bridge.net.transport import open_session, wait_connected
 
@@ -403,11 +429,17 @@ def nodes(
         if not names:  # declarations may still be propagating from the router: look once more
             time.sleep(0.5)
             names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
+        entries = describe_nodes(session, names, prefix=prefix, timeout_s=timeout_s)
+        if as_json:
+            typer.echo(json.dumps(entries, indent=2))
+            return
         table = Table(
             "node",
             "model",
             "experiment",
             "mode",
+            "health",
+            "held by",
             "episode",
             "step",
             "t [s]",
@@ -418,29 +450,37 @@ def nodes(
             "pid",
             title=f"{len(names)} live node(s) under {prefix}/",
         )
-        for entry in describe_nodes(session, names, prefix=prefix, timeout_s=timeout_s):
-            if "error" in entry:
-                table.add_row(entry["node"], f"[red]{escape(entry['error'])}[/red]")
-                continue
-            c = entry["counters"]
-            rejected = sum(v for k, v in c.items() if k.startswith("rejected_"))
-            table.add_row(
-                entry["node"],
-                entry["model"]["model_name"],
-                f"{entry['experiment']} {entry['version']}",
-                entry["mode"],
-                str(entry["episode"]),
-                str(entry["step"]),
-                f"{entry['time_s']:g}",
-                str(c.get("steps", 0)),
-                str(rejected),
-                str(c.get("malformed", 0)),
-                str(c.get("fmu_errors", 0)),
-                str(entry["pid"]),
-            )
+        for entry in entries:
+            table.add_row(*_node_row(entry))
         console.print(table)
     finally:
         session.close()
+
+
+def _node_row(entry: dict[str, Any]) -> list[str]:
+    """One row of the ``nodes`` table from a node's info reply."""
+    if "error" in entry:
+        return [entry["node"], f"[red]{escape(entry['error'])}[/red]"]
+    c = entry["counters"]
+    rejected = sum(v for k, v in c.items() if k.startswith("rejected_"))
+    health = str(entry.get("health", "?"))
+    holder = entry.get("holder")
+    return [
+        entry["node"],
+        entry["model"]["model_name"],
+        f"{entry['experiment']} {entry['version']}",
+        entry["mode"],
+        health if health == "ok" else f"[red]{escape(health)}[/red]",
+        f"{holder['client']} ({holder['zid'] or '?'})" if holder else "-",
+        str(entry["episode"]),
+        str(entry["step"]),
+        f"{entry['time_s']:g}",
+        str(c.get("steps", 0)),
+        str(rejected),
+        str(c.get("malformed", 0)),
+        str(c.get("fmu_errors", 0)),
+        str(entry["pid"]),
+    ]
 
 
 @app.command()

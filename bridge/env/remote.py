@@ -20,6 +20,7 @@ class RemoteFmuEnv(FmuEnv):
         node: the node's name.
         options: how to open a Zenoh session (ignored when ``session`` is given).
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
+        take_over: take the node over from the client that holds it.
     """
 
     def __init__(
@@ -33,8 +34,17 @@ class RemoteFmuEnv(FmuEnv):
         timeout_s: float = 5.0,
         version: str | None = None,
         render_mode: str | None = None,
+        take_over: bool = False,
     ) -> None:
         exp = as_experiment(experiment, version)
-        plant = RemotePlant(exp, node, options=options, session=session, prefix=prefix, timeout_s=timeout_s)
+        plant = RemotePlant(
+            exp,
+            node,
+            options=options,
+            session=session,
+            prefix=prefix,
+            timeout_s=timeout_s,
+            take_over=take_over,
+        )
         super().__init__(exp, render_mode=render_mode, plant=plant)
         self.node = node

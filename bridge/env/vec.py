@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import sys
+import threading
 import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -93,15 +94,18 @@ class PlantVecEnv:
             except PlantError as exc:
                 failed[i] = exc
         results: list[Any] = [None] * self.num_envs
-        for i, env in enumerate(self.envs):
-            if i not in failed:
-                try:
-                    results[i] = env.receive()
-                except PlantError as exc:
-                    failed[i] = exc
         for i, error in failed.items():
             results[i] = self._failed_result(i, error)
+        for i in self._in_answer_order([i for i in range(self.num_envs) if i not in failed]):
+            try:
+                results[i] = self.envs[i].receive()
+            except PlantError as exc:  # handled at once: raised, or replaced while others still step
+                results[i] = self._failed_result(i, exc)
         return self._collect(results)
+
+    def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
+        """The envs to receive from, in the order their plants answer (in-process: in order)."""
+        return pending
 
     def _failed_result(self, index: int, error: PlantError) -> Result:
         info = self._recover(index, error)
@@ -124,6 +128,8 @@ class PlantVecEnv:
                 info["terminal_observation"] = last_obs
                 info["TimeLimit.truncated"] = truncated and not terminated
                 obs, self.reset_infos[i] = self._reset_one(i)
+                if "node_replaced" in self.reset_infos[i]:  # replaced during the auto-reset
+                    info.setdefault("node_replaced", self.reset_infos[i]["node_replaced"])
             observations.append(obs)
             rewards.append(reward)
             dones.append(done)
@@ -238,6 +244,7 @@ class RemoteVecEnv(PlantVecEnv):
         discovery_timeout_s: float = 10.0,
     ) -> None:
         self.experiment = as_experiment(experiment)
+        self._any_answer = threading.Event()
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._prefix, self._timeout_s, self.replace_dead = prefix, timeout_s, replace_dead
@@ -273,9 +280,30 @@ class RemoteVecEnv(PlantVecEnv):
         return names[:wanted]
 
     def _connect(self, name: str) -> RemoteFmuEnv:
-        return RemoteFmuEnv(
+        env = RemoteFmuEnv(
             self.experiment, name, session=self._session, prefix=self._prefix, timeout_s=self._timeout_s
         )
+        env.plant.client.notify = self._any_answer  # type: ignore[attr-defined]
+        return env
+
+    def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
+        """Nodes in the order they answer: a dead node is reported at once, not after a hung one's timeout."""
+        if len(pending) < 2:
+            yield from pending
+            return
+        waiting = list(pending)
+        while waiting:
+            self._any_answer.clear()
+            ready = [i for i in waiting if self._client(i).ready()]
+            if not ready:
+                self._any_answer.wait(0.05)
+                continue
+            for i in ready:
+                waiting.remove(i)
+                yield i
+
+    def _client(self, index: int) -> Any:
+        return self.envs[index].plant.client  # type: ignore[attr-defined]
 
     def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
         if isinstance(error, PlantDied | StepTimeout) and self.replace_dead:

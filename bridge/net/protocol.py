@@ -7,16 +7,20 @@ key expression                        kind       payload
 ====================================  =========  ===============================================
 ``<prefix>/<node>/outputs``           put        ``Frame`` kind OUTPUTS, ERROR or REJECT
 ``<prefix>/<node>/actions``           put        ``Frame`` kind ACTION (FMU input values)
-``<prefix>/<node>/reset``             query      request: JSON; reply: ``Frame`` kind OUTPUTS (step 0)
-``<prefix>/<node>/info``              query      reply: JSON (model, variables, spaces, counters)
+``<prefix>/<node>/reset``             query      request: JSON (``ResetRequest``); reply: OUTPUTS (step 0)
+``<prefix>/<node>/info``              query      no payload; reply: JSON (model, health, holder, counters)
 ``<prefix>/<node>/clock``             put        int64 LE simulation time in ns (real-time mode)
 ``<prefix>/<node>/alive``             liveliness token while the node serves
+``<prefix>/<node>/unhealthy``         liveliness token while the node's FMU is hung
+``<prefix>/<node>/clients/<id>``      liveliness token of a client (16 hex digits) while it lives
 ====================================  =========  ===============================================
 
 A frame is little-endian: a 24-byte header ``<BBHIqq`` (version, kind, flags, episode,
 step, sim_time_ns) then either ``n`` float64 values (``<I`` count + ``n*8`` bytes) or, for
 ERROR/REJECT, a UTF-8 message. One frame per sample: outputs of a step travel together with
-the step index and simulation time, so consumers can lock step, detect loss and record.
+the step index and simulation time, so consumers can lock step, detect loss and record. An
+ACTION has no simulation time: its last header field carries the sender's client id (0:
+anonymous), which the node checks against the holder of its lease.
 """
 
 from __future__ import annotations
@@ -38,6 +42,12 @@ KIND_NAMES = {OUTPUTS: "outputs", ACTION: "action", ERROR: "error", REJECT: "rej
 # flags
 TERMINATED = 1  # the FMU requested termination at this step
 FAILED = 2  # the step failed (ERROR frames): the episode is over
+HUNG = 4  # (with FAILED) the FMU did not return within the node's step deadline
+
+MAX_REQUEST_BYTES = 64 * 1024  # a reset request larger than this is refused unread
+MAX_JSON_DEPTH = 8  # reset requests are flat: deeper nesting is refused before parsing
+EPISODE_MAX = 2**32 - 1  # the header's uint32
+CLIENT_MAX = 2**63 - 1  # client ids travel in an int64 header field
 
 HEADER = struct.Struct("<BBHIqq")
 COUNT = struct.Struct("<I")
@@ -86,6 +96,14 @@ class Keys:
     @property
     def alive(self) -> str:
         return f"{self.base}/alive"
+
+    @property
+    def unhealthy(self) -> str:
+        return f"{self.base}/unhealthy"
+
+    def client(self, client_id: int) -> str:
+        """The liveliness token of a client; ``client_id`` 0 gives the pattern of all of them."""
+        return f"{self.base}/clients/{client_id:016x}" if client_id else f"{self.base}/clients/*"
 
 
 @dataclass
@@ -152,11 +170,18 @@ def encode_json(data: dict[str, Any]) -> bytes:
     return json.dumps(data, separators=(",", ":"), default=_jsonable).encode()
 
 
-def decode_json(payload: bytes, what: str) -> dict[str, Any]:
+def decode_json(payload: bytes, what: str, *, limit: int | None = None) -> dict[str, Any]:
+    """A JSON object; with ``limit``, a payload longer than ``limit`` bytes or nested deeper than
+    ``MAX_JSON_DEPTH`` is refused before it is parsed (no memory or recursion blow-up)."""
+    if limit is not None:
+        if len(payload) > limit:
+            raise TransportError(f"{what}: {len(payload)} bytes is more than the limit of {limit} bytes")
+        if _depth(payload) > MAX_JSON_DEPTH:
+            raise TransportError(f"{what}: JSON nested deeper than {MAX_JSON_DEPTH} levels")
     try:
         data = json.loads(payload.decode())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise TransportError(f"{what}: not JSON ({exc})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise TransportError(f"{what}: not JSON ({str(exc)[:200]})") from None
     if not isinstance(data, dict):
         raise TransportError(f"{what}: expected a JSON object, got {type(data).__name__}")
     return data
@@ -168,3 +193,25 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return value.tolist()
     raise TypeError(f"{type(value).__name__} is not JSON serialisable")
+
+
+def _depth(payload: bytes) -> int:
+    """Bracket nesting depth, counting brackets outside strings only (an upper bound is enough)."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for byte in payload:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif byte == 0x5C:  # backslash
+                escaped = True
+            elif byte == 0x22:
+                in_string = False
+        elif byte == 0x22:
+            in_string = True
+        elif byte in (0x5B, 0x7B):
+            depth += 1
+            deepest = max(deepest, depth)
+        elif byte in (0x5D, 0x7D):
+            depth -= 1
+    return deepest

@@ -11,12 +11,21 @@ from __future__ import annotations
 
 import fnmatch
 import logging
+import secrets
 import threading
 import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bridge.errors import FMU_LOG_HEADER, ConfigError, PlantDied, StepError, StepTimeout, TransportError
+from bridge.errors import (
+    FMU_LOG_HEADER,
+    BridgeError,
+    ConfigError,
+    PlantDied,
+    StepError,
+    StepTimeout,
+    TransportError,
+)
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, check_experiment, timing
 from bridge.fmu.vocab import info_from_summary
@@ -28,21 +37,36 @@ _log = logging.getLogger(__name__)
 
 
 class NodeClient:
-    """Talks to one node: stamped actions out, the matching outputs frame back."""
+    """Talks to one node: stamped actions out, the matching outputs frame back.
+
+    The client has a random id, sent with every reset and action, and a liveliness token
+    ``<prefix>/<node>/clients/<id>`` that ends the node's lease when this session goes away.
+    """
 
     def __init__(
-        self, session: Any, node: str, *, prefix: str = proto.DEFAULT_PREFIX, timeout_s: float = 5.0
+        self,
+        session: Any,
+        node: str,
+        *,
+        prefix: str = proto.DEFAULT_PREFIX,
+        timeout_s: float = 5.0,
+        take_over: bool = False,
     ) -> None:
         self.keys = proto.Keys(prefix, node)
         self.name = node
         self.timeout_s = timeout_s
+        self.take_over = take_over
+        self.client_id = secrets.randbits(63) | 1
+        self.notify: threading.Event | None = None  # set too whenever an answer arrives (vector envs)
         self._session = session
         self._event = threading.Event()
         self._want: tuple[int, int] = (-1, -1)
+        self._deadline = 0.0
         self._frame: proto.Frame | None = None
         self.alive = True
         self.description = self._query_info()
         self._declared = [
+            session.liveliness().declare_token(self.keys.client(self.client_id)),
             session.declare_subscriber(self.keys.outputs, self._on_frame),
             session.liveliness().declare_subscriber(self.keys.alive, self._on_liveliness, history=True),
         ]
@@ -75,14 +99,20 @@ class NodeClient:
             return
         if (frame.episode, frame.step) == self._want:
             self._frame = frame
-            self._event.set()
+            self._wake()
+
+    def _wake(self) -> None:
+        self._event.set()
+        notify = self.notify
+        if notify is not None:
+            notify.set()
 
     def _on_liveliness(self, sample: Any) -> None:
         import zenoh
 
         if sample.kind == zenoh.SampleKind.DELETE:
             self.alive = False
-            self._event.set()  # wake a waiting step at once
+            self._wake()  # wake a waiting step at once
         else:
             self.alive = True
 
@@ -92,11 +122,16 @@ class NodeClient:
         self._frame = None
         self._event.clear()
         self._want = (episode, step)
-        self._pub.put(proto.encode_values(proto.ACTION, episode, step, 0, inputs))
+        self._deadline = time.monotonic() + self.timeout_s
+        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs))
+
+    def ready(self) -> bool:
+        """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""
+        return self._event.is_set() or time.monotonic() >= self._deadline
 
     def wait(self, plant: Plant) -> proto.Frame:
         """The outputs frame for the last action; raises if the node died, rejected it or timed out."""
-        if not self._event.wait(self.timeout_s):
+        if not self._event.wait(max(0.0, self._deadline - time.monotonic())):
             raise plant.failure(
                 StepTimeout,
                 f"no answer within {self.timeout_s:g} s",
@@ -126,14 +161,31 @@ class NodeClient:
         if not self.alive:
             raise self._dead(plant, step=None)
         episode = plant.episode
-        request = proto.encode_json({"episode": episode, "values": values, "inputs": inputs})
+        request = proto.encode_json(
+            {
+                "episode": episode,
+                "values": values,
+                "inputs": inputs,
+                "client": self.client_id,
+                "zid": str(self._session.zid()),
+                "take_over": self.take_over,
+            }
+        )
         self._want = (episode, 0)
+        start = time.monotonic()
         for reply in self._session.get(self.keys.reset, payload=request, timeout=self.timeout_s):
             if reply.ok is not None:
                 return proto.decode(reply.ok.payload.to_bytes())
-            raise TransportError(f"{plant.name}: {reply.err.payload.to_bytes().decode(errors='replace')}")
-        if not self.alive:
-            raise self._dead(plant, step=None)
+            raise self._reset_refused(plant, reply.err.payload.to_bytes().decode(errors="replace"))
+        if not self.alive or time.monotonic() - start < 0.5 * self.timeout_s:
+            # No queryable answered long before the deadline: nothing serves the reset key any more.
+            raise plant.failure(
+                PlantDied,
+                "the plant died",
+                "nothing answers on the node's reset key (the node stopped or died)",
+                f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.reset}]",
+                step=None,
+            )
         raise plant.failure(
             StepTimeout,
             f"no answer within {self.timeout_s:g} s",
@@ -141,6 +193,12 @@ class NodeClient:
             f"the node may be overloaded, hung or unreachable [{self.keys.reset}]",
             step=None,
         )
+
+    def _reset_refused(self, plant: Plant, message: str) -> BridgeError:
+        code, _, detail = message.partition(": ")
+        if code == "unhealthy":
+            return plant.failure(PlantDied, "the plant is unhealthy", detail, "restart the node", step=None)
+        return TransportError(f"{plant.name}: the reset was refused ({code}): {detail}")
 
     def close(self) -> None:
         for entity in reversed(self._declared):
@@ -179,6 +237,7 @@ class RemotePlant(Plant):
         node: the node's name.
         options: how to open a Zenoh session (ignored when ``session`` is given).
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
+        take_over: take the node over from the client that holds it (its next action is rejected).
     """
 
     def __init__(
@@ -190,6 +249,7 @@ class RemotePlant(Plant):
         session: Any = None,
         prefix: str = proto.DEFAULT_PREFIX,
         timeout_s: float = 5.0,
+        take_over: bool = False,
     ) -> None:
         self.experiment = experiment
         self.node = node
@@ -198,7 +258,9 @@ class RemotePlant(Plant):
         self._session = session if session is not None else open_session(options)
         self._time_s = 0.0
         try:
-            self.client = NodeClient(self._session, node, prefix=prefix, timeout_s=timeout_s)
+            self.client = NodeClient(
+                self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over
+            )
             self.info = info_from_summary(self.client.description["model"])
             check_experiment(experiment, self.info)
             self.timing = timing(experiment, self.info)
@@ -233,6 +295,11 @@ class RemotePlant(Plant):
         frame = self.client.wait(self)
         self._time_s = frame.sim_time_ns / 1e9
         self.sample += 1
+        if frame.kind == proto.ERROR and frame.flags & proto.HUNG:
+            hint = "the node killed its FMU process; reset() starts a fresh one"
+            if "restart the node" in frame.message:
+                hint = "the node is unhealthy until restarted"
+            raise self.failure(StepTimeout, "the model hung", frame.message, hint, step=self.sample)
         if frame.kind == proto.ERROR:
             detail, _, log = frame.message.partition(FMU_LOG_HEADER)
             raise self.failure(

@@ -21,8 +21,9 @@ from agents.train import train
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
+from bridge.net.remote import describe_nodes
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # training takes minutes when busy
 CARTPOLE = example_experiment("cartpole_balance")
 
 
@@ -67,33 +68,65 @@ def outputs_of(net: Loopback, node: str) -> tuple[list[proto.Frame], Any]:
     return frames, sub
 
 
-@pytest.mark.parametrize("transport", ["zenoh", "ros2"])
-def test_closed_loop_keeps_the_pole_up_for_a_whole_episode(
-    balancer: Path, loopback: Loopback, transport: str
-) -> None:
-    with node_process(CARTPOLE, "plant", loopback, "--mode", "realtime", "--rate", "4", "--ros"):
-        settings = DeploySettings(transport=transport, node="plant", prefix=loopback.prefix)  # type: ignore[arg-type]
-        agent = AgentNode(balancer, None, settings, session=loopback.session)
-        frames, sub = outputs_of(loopback, "plant")
+def closed_loop(
+    balancer: Path, net: Loopback, transport: str, mode: str, samples: int
+) -> tuple[list[proto.Frame], dict[str, Any], dict[str, Any]]:
+    """The agent against a node for ``samples`` samples of episode 9; its frames, agent and node stats."""
+    extra = ["--mode", mode, *(["--rate", "4"] if mode == "realtime" else []), "--ros"]
+    with node_process(CARTPOLE, "plant", net, *extra):
+        # In lockstep nothing is late by design: no missing-observation actions.
+        timeout = 60.0 if mode == "lockstep" else 0.5
+        settings = DeploySettings(transport=transport, node="plant", prefix=net.prefix, timeout_s=timeout)  # type: ignore[arg-type]
+        agent = AgentNode(balancer, None, settings, session=net.session)
+        frames, sub = outputs_of(net, "plant")
         try:
-            for _ in loopback.session.get(
-                proto.Keys(loopback.prefix, "plant").reset,  # type: ignore[attr-defined]
+            for _ in net.session.get(
+                proto.Keys(net.prefix, "plant").reset,  # type: ignore[attr-defined]
                 payload=proto.encode_json({"episode": 9, "values": {"theta0": 0.04}}),
             ):
                 pass
-            start = len(frames)
-            while len([f for f in frames[start:] if f.episode == 9]) < 520:  # 500 samples = 10 s simulated
+            deadline = time.monotonic() + 120
+            while len([f for f in frames if f.episode == 9]) < samples + 20 and time.monotonic() < deadline:
                 time.sleep(0.05)
+            node = describe_nodes(net.session, ["plant"], prefix=net.prefix)[0]  # type: ignore[arg-type]
         finally:
             stats = agent.agent.stats.summary()
             agent.close()
             sub.undeclare()
-    episode = [f for f in frames if f.episode == 9 and f.kind == proto.OUTPUTS][:500]
+    episode = [f for f in frames if f.episode == 9 and f.kind == proto.OUTPUTS][:samples]
+    return episode, stats, node
+
+
+@pytest.mark.parametrize("transport", ["zenoh", "ros2"])
+def test_closed_loop_keeps_the_pole_up_for_a_whole_episode(
+    balancer: Path, loopback: Loopback, transport: str
+) -> None:
+    """Correctness in lockstep: the node waits for every action, so a busy machine cannot change it."""
+    episode, stats, _ = closed_loop(balancer, loopback, transport, "lockstep", 500)
     theta = np.array([f.values[2] for f in episode])
     x = np.array([f.values[0] for f in episode])
-    assert len(episode) == 500
+    assert len(episode) == 500 and [f.step for f in episode] == list(range(500))
     assert np.abs(theta).max() < 0.2094 and np.abs(x).max() < 2.4  # inside the task's bounds throughout
-    assert stats["actions"] >= 500 and stats["latency_median_us"] < 5000
+    assert stats["actions"] >= 499
+
+
+@pytest.mark.parametrize("transport", ["zenoh", "ros2"])
+def test_closed_loop_in_real_time_reports_its_deadline_misses(
+    balancer: Path, loopback: Loopback, transport: str, record_property: Any
+) -> None:
+    """Real time on a shared machine: what must hold is asserted, what depends on load is measured."""
+    episode, stats, node = closed_loop(balancer, loopback, transport, "realtime", 200)
+    steps = [f.step for f in episode]
+    assert steps == list(range(steps[0], steps[0] + len(steps)))  # every sample published, in order
+    assert len(episode) == 200 and stats["actions"] > 0
+    misses = {
+        "node_overruns": node["counters"].get("overruns", 0),
+        "missing_observation_events": stats.get("missing_events", 0),
+        "latency_median_us": stats["latency_median_us"],
+        "max_abs_theta": float(np.abs([f.values[2] for f in episode]).max()),
+    }
+    for key, value in misses.items():
+        record_property(key, value)  # in the JUnit report: deadline misses are reported, not asserted
 
 
 def test_missing_observations_hold_or_go_safe(balancer: Path) -> None:

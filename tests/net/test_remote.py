@@ -96,18 +96,32 @@ def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(lo
         try:
             env.reset(seed=0)
             env.step(np.zeros(1, dtype=np.float32))  # now at step 1 of episode 1
-            action = [0.0]
-            dup = _send(loopback, "cp", proto.encode_values(proto.ACTION, 1, 1, 0, action), frames, event)
+            action, me = [0.0], env.plant.client.client_id  # type: ignore[attr-defined]
+
+            def send(episode: int, step: int, values: list[float], client: int = me) -> proto.Frame:
+                payload = proto.encode_values(proto.ACTION, episode, step, client, values)
+                return _send(loopback, "cp", payload, frames, event)
+
+            dup = send(1, 1, action)
             assert (dup.kind, dup.step) == (proto.OUTPUTS, 1)  # the same answer again, not a second step
-            early = _send(loopback, "cp", proto.encode_values(proto.ACTION, 1, 5, 0, action), frames, event)
+            other = send(1, 1, [3.0])
+            assert other.kind == proto.REJECT and other.message.startswith("conflict")
+            early = send(1, 5, action)
             assert early.kind == proto.REJECT and early.message.startswith("out_of_order")
-            stale = _send(loopback, "cp", proto.encode_values(proto.ACTION, 0, 2, 0, action), frames, event)
+            stale = send(0, 2, action)
             assert stale.kind == proto.REJECT and stale.message.startswith("stale")
+            stranger = send(1, 2, action, client=0)
+            assert stranger.kind == proto.REJECT and stranger.message.startswith("not_holder")
+            assert f"{me:016x}" in stranger.message
+            far = send(1, 2, [1e308])
+            assert far.kind == proto.REJECT and "outside its declared range [-10, 10]" in far.message
             _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
             assert info["step"] == 2  # the node stepped exactly twice
             counters = _info(loopback, "cp")["counters"]
             assert counters["steps"] == 2 and counters["duplicate"] == 1
+            assert counters["rejected_conflict"] == 1
             assert counters["rejected_out_of_order"] == 1 and counters["rejected_stale"] == 1
+            assert counters["rejected_not_holder"] == 1 and counters["rejected_out_of_range"] == 1
         finally:
             sub.undeclare()
             env.close()

@@ -133,6 +133,10 @@ class RosView:
             self.dropped += 1
             _log.warning("ROS actions: dropped a message that is not a JointState: %s", exc)
             return
+        if len(message.name) != len(message.position):
+            self.dropped += 1
+            _log.warning("ROS actions: %d names but %d positions", len(message.name), len(message.position))
+            return
         known = {n: float(v) for n, v in zip(message.name, message.position) if n in self._input_names}
         unknown = [n for n in message.name if n not in self._input_names]
         if unknown:
@@ -140,11 +144,24 @@ class RosView:
                 "ROS actions: %s are not inputs of this node (inputs: %s)", unknown, self._input_names
             )
         if known:
-            self._on_actions(known)
+            try:
+                self._on_actions(known)
+            except Exception:  # never let a subscription handler die
+                _log.exception("ROS actions: could not apply %s", known)
 
     def _reset(self, request: bytes) -> bytes:
-        success, message = self._on_reset()
         from bridge.net.ros2 import interfaces
+
+        if len(request) > 64:  # a Trigger request is empty: 4 bytes of CDR header and padding
+            self.dropped += 1
+            return interfaces.trigger_response(  # type: ignore[no-any-return]
+                False, f"bad request: std_srvs/srv/Trigger takes no fields, got {len(request)} bytes"
+            )
+        try:
+            success, message = self._on_reset()
+        except Exception as exc:  # never let a service handler die
+            _log.exception("ROS reset failed")
+            success, message = False, f"reset failed ({type(exc).__name__})"
 
         return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
 

@@ -1,0 +1,199 @@
+"""What a client may ask of a node: requests parsed into typed, range-checked forms.
+
+A node is a network service: every request is checked before anything touches the FMU.
+
+- A reset may set only the values the experiment declares (``model.parameters`` and
+  ``start_values``, scenario values and randomised names; any settable variable when a
+  ``hooks.episode`` may choose them), each with the variable's type, finite, inside the
+  variable's declared min/max, strings at most ``MAX_STRING`` characters.
+- Input values (actions, reset inputs, ROS actions) must be finite and inside the input's
+  declared range: the hull of the FMU's min/max and the experiment's action bounds (levels or
+  table for discrete actions). Values outside are **rejected**, never clipped: a client that
+  sends them has a bug, and a silently changed action would hide it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from bridge.errors import TransportError
+from bridge.experiment.config import Experiment
+from bridge.fmu.vocab import Variable
+from bridge.net import protocol as proto
+
+MAX_STRING = 1024
+MAX_VALUES = 1000
+REQUEST_KEYS = {"episode", "values", "inputs", "client", "zid", "take_over"}
+
+
+class BadRequest(TransportError):
+    """A request that is not what the protocol allows (the reply says what was wrong)."""
+
+
+@dataclass(frozen=True)
+class ResetRequest:
+    """A reset request after parsing: every field typed and in range."""
+
+    episode: int
+    values: dict[str, float | int | bool | str]
+    inputs: list[float] | None
+    client: int
+    zid: str
+    take_over: bool
+
+
+def parse_reset(payload: bytes) -> ResetRequest:
+    """The typed form of a reset request's JSON payload, or :class:`BadRequest` saying why."""
+    try:
+        data = proto.decode_json(payload or b"{}", "reset request", limit=proto.MAX_REQUEST_BYTES)
+    except TransportError as exc:
+        raise BadRequest(str(exc)) from None
+    unknown = sorted(set(data) - REQUEST_KEYS)
+    if unknown:
+        raise BadRequest(f"reset request: unknown keys {unknown[:5]}; allowed: {sorted(REQUEST_KEYS)}")
+    values = data.get("values", {})
+    if not isinstance(values, dict) or len(values) > MAX_VALUES:
+        raise BadRequest(f"reset request: 'values' must be an object of at most {MAX_VALUES} entries")
+    inputs = data.get("inputs")
+    if inputs is not None and (not isinstance(inputs, list) or len(inputs) > MAX_VALUES):
+        raise BadRequest("reset request: 'inputs' must be a list of numbers or null")
+    zid = data.get("zid", "")
+    if not isinstance(zid, str) or len(zid) > 64:
+        raise BadRequest("reset request: 'zid' must be a string of at most 64 characters")
+    take_over = data.get("take_over", False)
+    if not isinstance(take_over, bool):
+        raise BadRequest(f"reset request: 'take_over' must be true or false, got {_show(take_over)}")
+    return ResetRequest(
+        episode=_int_in(data.get("episode", 0), "episode", 0, proto.EPISODE_MAX),
+        values=values,
+        inputs=None if inputs is None else [_number(v, f"inputs[{i}]") for i, v in enumerate(inputs)],
+        client=_int_in(data.get("client", 0), "client", 0, proto.CLIENT_MAX),
+        zid=zid,
+        take_over=take_over,
+    )
+
+
+def check_empty(payload: bytes | None, what: str) -> None:
+    """Requests that take no payload (info, ROS Trigger) refuse one of more than a few bytes."""
+    if payload is not None and len(payload) > 64:
+        raise BadRequest(f"{what} takes no payload; got {len(payload)} bytes")
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+def _int_in(value: Any, key: str, low: int, high: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise BadRequest(f"reset request: {key!r} must be an integer in [{low}, {high}], got {_show(value)}")
+    return value
+
+
+def _number(value: Any, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise BadRequest(f"reset request: {key} must be a number, got {_show(value)}")
+    try:
+        number = float(value)
+    except OverflowError:
+        number = math.inf
+    if not math.isfinite(number):
+        raise BadRequest(f"reset request: {key} must be finite, got {_show(value)}")
+    return number
+
+
+class RequestRules:
+    """What the experiment allows a client to set and send, for one node."""
+
+    def __init__(
+        self, experiment: Experiment, variables: Mapping[str, Variable], input_names: Sequence[str]
+    ) -> None:
+        self.variables = variables
+        self.input_names = tuple(input_names)
+        self.settable = _declared_names(experiment, variables)
+        self.low, self.high = _input_ranges(experiment, variables, self.input_names)
+
+    def values(self, values: Mapping[str, Any]) -> dict[str, float | int | bool | str]:
+        """Reset values, checked name by name against the experiment and the model."""
+        checked: dict[str, float | int | bool | str] = {}
+        for name, value in values.items():
+            if name not in self.settable:
+                allowed = sorted(self.settable)
+                shown = allowed[:20] + (["..."] if len(allowed) > 20 else [])
+                raise BadRequest(
+                    f"reset request: {_show(name)} is not a value the experiment declares; a reset may set "
+                    f"{shown or 'nothing'}"
+                )
+            checked[name] = self._value(self.variables[name], value)
+        return checked
+
+    def _value(self, var: Variable, value: Any) -> float | int | bool | str:
+        where = f"reset request: {var.name!r} ({var.type})"
+        if var.type == "String":
+            if not isinstance(value, str) or len(value) > MAX_STRING:
+                raise BadRequest(f"{where} takes a string of at most {MAX_STRING} characters")
+            return value
+        if var.type == "Boolean":
+            if not isinstance(value, bool | int) or value not in (0, 1):
+                raise BadRequest(f"{where} takes true or false, got {_show(value)}")
+            return bool(value)
+        number = _number(value, repr(var.name))
+        is_float = var.type in ("Float64", "Float32")
+        if not is_float and not (number.is_integer() and abs(number) < 2**31):
+            raise BadRequest(f"{where} takes an integer in [-2^31, 2^31), got {_show(value)}")
+        if (var.min is not None and number < var.min) or (var.max is not None and number > var.max):
+            raise BadRequest(f"{where} = {number:g} is outside its declared range [{var.min}, {var.max}]")
+        return number if is_float else int(number)
+
+    def inputs(self, values: Sequence[float]) -> str | None:
+        """None if every input value is finite and in range, else the reason (for a REJECT)."""
+        low, high = self.low, self.high
+        for i, v in enumerate(values):
+            if not low[i] <= v <= high[i]:  # False for NaN too
+                return (
+                    f"input {self.input_names[i]!r} = {v!r} is outside its declared range "
+                    f"[{low[i]:g}, {high[i]:g}]"
+                )
+        return None
+
+
+def _declared_names(experiment: Experiment, variables: Mapping[str, Variable]) -> frozenset[str]:
+    if experiment.hooks.episode:  # a hook may choose any start value or parameter
+        return frozenset(n for n, v in variables.items() if v.settable_at_init)
+    model = experiment.model
+    names = set(model.parameters) | set(model.start_values)
+    randomizations = [experiment.randomization]
+    for scenario in experiment.scenarios.values():
+        names |= set(scenario.parameters) | set(scenario.start_values)
+        randomizations.append(scenario.randomization)
+    for r in randomizations:
+        names |= set(r.parameters) | set(r.start_values)
+    return frozenset(n for n in names if n in variables)
+
+
+def _input_ranges(
+    experiment: Experiment, variables: Mapping[str, Variable], names: Sequence[str]
+) -> tuple[list[float], list[float]]:
+    """Per input: the hull of the FMU's min/max and the experiment's bounds, levels and table.
+
+    Where nothing is declared the range is the finite doubles: NaN and infinities are always refused.
+    """
+    actions = experiment.actions
+    low, high = [], []
+    for name in names:
+        var = variables[name]
+        listed = list(actions.levels.get(name, []))
+        if actions.table and name in actions.inputs:
+            column = actions.inputs.index(name)
+            listed += [row[column] for row in actions.table if column < len(row)]
+        lows = [v for v in (var.min, actions.low.get(name)) if v is not None] + listed
+        highs = [v for v in (var.max, actions.high.get(name)) if v is not None] + listed
+        low.append(float(min(lows)) if lows else -_LARGEST)
+        high.append(float(max(highs)) if highs else _LARGEST)
+    return low, high
+
+
+_LARGEST = 1.7976931348623157e308

@@ -1,0 +1,59 @@
+"""A step watchdog: notices a plant call that has not returned within its deadline.
+
+The node marks the start and end of every reset and step (two attribute writes, nothing per
+step beyond that); a daemon thread looks a few times a second and calls ``on_hung`` once when a
+call outlives ``deadline_s``. A native call that never returns cannot be interrupted from
+Python: the node reports itself unhealthy and, on SIGTERM or Ctrl-C, exits without waiting
+for it. Run untrusted FMUs with ``--isolate`` to have the node kill and restart them instead.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+
+_log = logging.getLogger(__name__)
+
+
+class Watchdog:
+    """Calls ``on_hung(what, elapsed_s)`` once when a call marked by ``begin`` outlives ``deadline_s``."""
+
+    def __init__(self, deadline_s: float, on_hung: Callable[[str, float], None], *, name: str = "") -> None:
+        self.deadline_s = deadline_s
+        self.fired = False
+        self._on_hung = on_hung
+        self._busy: tuple[str, float] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"watchdog-{name}", daemon=True)
+        self._thread.start()
+
+    def begin(self, what: str) -> None:
+        self._busy = (what, time.monotonic())
+
+    def end(self) -> None:
+        self._busy = None
+
+    @property
+    def busy_s(self) -> float:
+        """How long the current call has been running (0 when idle)."""
+        busy = self._busy
+        return time.monotonic() - busy[1] if busy is not None else 0.0
+
+    def _run(self) -> None:
+        period = min(0.25, self.deadline_s / 4)
+        while not self._stop.wait(period):
+            busy = self._busy
+            if busy is None or self.fired:
+                continue
+            elapsed = time.monotonic() - busy[1]
+            if elapsed > self.deadline_s:
+                self.fired = True
+                try:
+                    self._on_hung(busy[0], elapsed)
+                except Exception:  # the watchdog must outlive whatever it reports
+                    _log.exception("the hung-call handler failed")
+
+    def stop(self) -> None:
+        self._stop.set()
