@@ -120,7 +120,8 @@ def _actions(inputs: list[Variable], tunables: list[Variable]) -> list[str]:
     if not candidates:
         return [
             "# The FMU has no inputs and no tunable parameters: this experiment only observes it.",
-            "# check, simulate, node, record and evaluate --policy zero work; training needs something to act on.",
+            "# check, simulate, node, record and evaluate --policy zero work on it;",
+            "# training needs something to act on (an input or a tunable parameter).",
             "actions:",
             "  inputs: []",
             "",
@@ -188,7 +189,9 @@ def discrete_levels(var: Variable) -> tuple[list[int], str]:
         return list(range(low, high + 1)), ""
     start = int(var.start) if isinstance(var.start, int | float) else 0
     start = min(max(start, low), high)
-    levels = sorted({low, start, high} if all(declared) else {start, start + 1 if start < high else start - 1})
+    levels = sorted(
+        {low, start, high} if all(declared) else {start, start + 1 if start < high else start - 1}
+    )
     return levels, "  # GUESS: a few levels inside the declared range; list the ones you need"
 
 
