@@ -371,7 +371,7 @@ class Experiment(Strict):
     name: str = "experiment"
     description: str = ""
     model: ModelSection
-    actions: ActionSection
+    actions: ActionSection = ActionSection()  # none: an observation-only experiment
     observations: ObservationSection
     reward: RewardSection
     termination: TerminationSection = TerminationSection()

@@ -179,7 +179,8 @@ def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: st
             drivable = [v.name for v in variables.values() if v.settable_in_step and not v.dimensions]
             raise ConfigError(
                 f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input' "
-                f"({var.variability}); the agent drives inputs and tunable parameters only ({drivable or 'this FMU has none'}){where}"
+                f"({var.variability}); the agent drives inputs and tunable parameters only "
+                f"({drivable or 'this FMU has none'}){where}"
             )
         if not var.is_numeric:
             raise ConfigError(f"actions.inputs: {name!r} is a {var.type} input; actions are numeric{where}")
