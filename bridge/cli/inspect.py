@@ -2,8 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
 
 from bridge.fmu import read_model_info
 from bridge.fmu.vocab import summary_of
@@ -54,3 +59,29 @@ def clock_lines(info: dict[str, Any]) -> list[str]:
             parts.append(f"shift {clock['shift_s']:g} s")
         lines.append(", ".join(parts))
     return lines
+
+
+def print_rows(
+    console: Console, columns: Sequence[str], rows: Sequence[Sequence[str]], title: str = ""
+) -> None:
+    """A table where it fits a terminal, else a plain list: names and paths are never cut.
+
+    Piped output (and any terminal narrower than the table) gets one block per row: the first
+    column on its own line, the other non-empty cells below it as ``column: value``.
+    """
+    widths = [max([len(c), *(len(r[i]) for r in rows if i < len(r))]) for i, c in enumerate(columns)]
+    if console.is_terminal and sum(widths) + 3 * len(columns) + 1 <= console.width:
+        table = Table(*columns, title=title or None)
+        for column in table.columns:
+            column.no_wrap = True
+        for row in rows:
+            table.add_row(*(escape(cell) for cell in row))
+        console.print(table)
+        return
+    if title:
+        console.print(title, markup=False, highlight=False, soft_wrap=True)
+    for row in rows:
+        rest = [f"{c}: {v}" for c, v in zip(columns[1:], row[1:]) if v]
+        console.print(row[0], markup=False, highlight=False, soft_wrap=True)
+        if rest:
+            console.print("  " + "  ".join(rest), markup=False, highlight=False, soft_wrap=True)

@@ -19,7 +19,6 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
-from rich.table import Table
 
 from bridge import __version__
 from bridge.errors import BridgeError
@@ -60,7 +59,14 @@ def inspect_cmd(
     ] = None,
 ) -> None:
     """Show an FMU's version, interfaces, default experiment, platforms and variables."""
-    from bridge.cli.inspect import VARIABLE_COLUMNS, clock_lines, interfaces_text, summary, type_cell
+    from bridge.cli.inspect import (
+        VARIABLE_COLUMNS,
+        clock_lines,
+        interfaces_text,
+        print_rows,
+        summary,
+        type_cell,
+    )
 
     info = summary(fmu)
     if causality:
@@ -69,7 +75,7 @@ def inspect_cmd(
         sys.stdout.write(json.dumps(info, indent=2) + "\n")
         return
     de = info["default_experiment"]
-    console.print(f"[bold]{info['model_name']}[/bold]  ({info['path']})")
+    console.print(f"[bold]{escape(info['model_name'])}[/bold]  ({escape(info['path'])})", soft_wrap=True)
     console.print(
         f"FMI {info['fmi_version']}  interfaces: {interfaces_text(info)}  "
         f"platforms: {', '.join(info['platforms']) or 'none (source only?)'}"
@@ -84,10 +90,11 @@ def inspect_cmd(
     )
     for problem in info["problems"]:
         err_console.print(f"[yellow]standard violation:[/yellow] {escape(problem)}")
-    table = Table(*VARIABLE_COLUMNS, show_lines=False)
-    for var in info["variables"]:
-        table.add_row(*(type_cell(var) if col == "type" else _cell(var.get(col)) for col in VARIABLE_COLUMNS))
-    console.print(table)
+    rows = [
+        [type_cell(var) if col == "type" else _cell(var.get(col)) for col in VARIABLE_COLUMNS]
+        for var in info["variables"]
+    ]
+    print_rows(console, VARIABLE_COLUMNS, rows)
     console.print(f"{len(info['variables'])} variables")
     for line in clock_lines(info):
         console.print(f"clock {escape(line)}")
@@ -129,16 +136,13 @@ def models(
     if as_json:
         sys.stdout.write(json.dumps(rows, indent=2) + "\n")
         return
-    table = Table("model", "FMI", "interface", "path", "description")
-    for row in rows:
-        table.add_row(
-            row["model"],
-            row["fmi_version"],
-            row["interface"].upper(),
-            row["path"] or "(not built)",
-            row["description"],
-        )
-    console.print(table)
+    from bridge.cli.inspect import print_rows
+
+    cells = [
+        [r["model"], r["fmi_version"], r["interface"].upper(), r["path"] or "(not built)", r["description"]]
+        for r in rows
+    ]
+    print_rows(console, ("model", "FMI", "interface", "path", "description"), cells)
 
 
 ExperimentArg = Annotated[Path, typer.Argument(help="An experiment YAML file.")]
@@ -224,11 +228,10 @@ def simulate(
             output_names=env.unwrapped.output_names,
         )
     names = list(results[0].final_outputs) if results else []
-    table = Table(
-        "episode", "scenario", "steps", "return", "end", "t [s]", *names, title=f"{experiment} ({policy})"
-    )
-    for r in results:
-        table.add_row(
+    from bridge.cli.inspect import print_rows
+
+    rows = [
+        [
             str(r.episode),
             r.scenario,
             str(r.steps),
@@ -236,8 +239,11 @@ def simulate(
             r.reason or "",
             f"{r.time_s:g}",
             *(f"{r.final_outputs[n]:.4g}" for n in names),
-        )
-    console.print(table)
+        ]
+        for r in results
+    ]
+    columns = ("episode", "scenario", "steps", "return", "end", "t [s]", *names)
+    print_rows(console, columns, rows, f"{experiment} ({policy})")
     if record:
         console.print(f"recording: {getattr(env, 'path', recordings)}")
 
@@ -429,38 +435,44 @@ def nodes(
         if not names:  # declarations may still be propagating from the router: look once more
             time.sleep(0.5)
             names = list_nodes(session, prefix=prefix, pattern=pattern, timeout_s=timeout_s)
-        entries = describe_nodes(session, names, prefix=prefix, timeout_s=timeout_s)
+        entries = list(describe_nodes(session, names, prefix=prefix, timeout_s=timeout_s))
         if as_json:
-            typer.echo(json.dumps(entries, indent=2))
+            sys.stdout.write(json.dumps(entries, indent=2, default=str) + "\n")
             return
-        table = Table(
-            "node",
-            "model",
-            "experiment",
-            "mode",
-            "health",
-            "held by",
-            "episode",
-            "step",
-            "t [s]",
-            "steps",
-            "rejected",
-            "malformed",
-            "fmu errors",
-            "pid",
-            title=f"{len(names)} live node(s) under {prefix}/",
+        from bridge.cli.inspect import print_rows
+
+        print_rows(
+            console,
+            NODE_COLUMNS,
+            [_node_row(e) for e in entries],
+            f"{len(names)} live node(s) under {prefix}/",
         )
-        for entry in entries:
-            table.add_row(*_node_row(entry))
-        console.print(table)
     finally:
         session.close()
 
 
+NODE_COLUMNS = (
+    "node",
+    "model",
+    "experiment",
+    "mode",
+    "health",
+    "held by",
+    "episode",
+    "step",
+    "t [s]",
+    "steps",
+    "rejected",
+    "malformed",
+    "fmu errors",
+    "pid",
+)
+
+
 def _node_row(entry: dict[str, Any]) -> list[str]:
-    """One row of the ``nodes`` table from a node's info reply."""
+    """One row of the ``nodes`` listing from a node's info reply."""
     if "error" in entry:
-        return [entry["node"], f"[red]{escape(entry['error'])}[/red]"]
+        return [entry["node"], f"error: {entry['error']}"]
     c = entry["counters"]
     rejected = sum(v for k, v in c.items() if k.startswith("rejected_"))
     health = str(entry.get("health", "?"))
@@ -470,7 +482,7 @@ def _node_row(entry: dict[str, Any]) -> list[str]:
         entry["model"]["model_name"],
         f"{entry['experiment']} {entry['version']}",
         entry["mode"],
-        health if health == "ok" else f"[red]{escape(health)}[/red]",
+        health,
         f"{holder['client']} ({holder['zid'] or '?'})" if holder else "-",
         str(entry["episode"]),
         str(entry["step"]),

@@ -114,7 +114,9 @@ class ActionSection(Strict):
     the FMU's min/max); ``discrete``: Discrete(n) over ``levels`` of one input or a ``table`` of input
     vectors; ``multi_discrete``: MultiDiscrete over ``levels`` of each input."""
 
-    inputs: list[str] = Field(min_length=1)
+    inputs: list[str] = Field(
+        default=[], description="FMU inputs or tunable parameters; none: an observation-only experiment"
+    )
     type: Literal["continuous", "discrete", "multi_discrete"] = "continuous"
     low: dict[str, FiniteFloat] = {}
     high: dict[str, FiniteFloat] = {}
@@ -310,7 +312,7 @@ class Experiment(Strict):
     name: str = "experiment"
     description: str = ""
     model: ModelSection
-    actions: ActionSection
+    actions: ActionSection = ActionSection()  # none: an observation-only experiment
     observations: ObservationSection
     reward: RewardSection
     termination: TerminationSection = TerminationSection()

@@ -1,31 +1,54 @@
 """``fmu-bridge init``: a commented starting experiment written from an FMU's model description.
 
-Nobody should type variable names by hand: inputs become actions, outputs observations,
-parameters are listed with their defaults, and bounds are filled in where the FMU declares
-them (and marked TODO where it does not).
+Nobody should type variable names by hand, and nobody should have to edit the result before
+``check`` accepts it. What becomes what:
+
+- Real (Float) inputs: continuous actions, bounds from min/max, else a guess marked ``GUESS``;
+- Integer, Boolean and Enumeration inputs: a ``multi_discrete`` action over levels inside their
+  declared range or items when they are the only inputs, else held at their start values;
+- no inputs: the same over tunable parameters, else an observation-only experiment;
+- observations: the outputs, else the states (``x`` of ``der(x)``) and other locals.
+
+Every name is written as a double-quoted YAML scalar, so any Modelica name (``a.b[1]``,
+``der(x)``, ``'quoted name'``) reads back unchanged.
 """
 
 from __future__ import annotations
 
+import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
 
+from bridge.experiment.validate import with_elements
 from bridge.fmu.vocab import ModelInfo, Variable
 
+#: Locals observed at most when a model has no outputs (Modelica models may have thousands).
+MAX_OBSERVED = 12
+INTEGER_TYPES = ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64")
+_TYPE_RANGES = {
+    t: ((-(2 ** (b - 1)), 2 ** (b - 1) - 1) if t[0] == "I" else (0, 2**b - 1))
+    for t, b in zip(INTEGER_TYPES, (8, 8, 16, 16, 32, 32, 64, 64))
+}
 
-def _num(value: float | None) -> str:
-    if value is None or not math.isfinite(value):
-        return "null"
+
+def q(text: str) -> str:
+    """``text`` as a double-quoted YAML scalar (JSON strings are valid YAML flow scalars)."""
+    return json.dumps(text, ensure_ascii=False)
+
+
+def _num(value: float) -> str:
     return repr(float(value))
 
 
 def _comment(var: Variable) -> str:
     parts = [p for p in (var.unit and f"[{var.unit}]", var.description) if p]
-    return f"  # {' '.join(parts)}" if parts else ""
+    text = " ".join(" ".join(str(p).split()) for p in parts)  # one line, whatever the XML holds
+    return f"  # {text}" if text else ""
 
 
 def starting_config(fmu: str | Path, *, relative_to: Path | None = None) -> str:
-    """The YAML text of a starting experiment for ``fmu``."""
+    """The YAML text of a starting experiment for ``fmu`` that ``fmu-bridge check`` accepts as is."""
     from bridge.fmu import read_model_info  # FMPy only where an FMU is read
 
     info = read_model_info(fmu)
@@ -34,75 +57,175 @@ def starting_config(fmu: str | Path, *, relative_to: Path | None = None) -> str:
         shown = path.relative_to(relative_to.resolve()) if relative_to else path
     except ValueError:
         shown = path
-    inputs = [v for v in info.variables.values() if v.causality == "input" and v.is_numeric]
-    outputs = [v for v in info.variables.values() if v.causality == "output" and v.is_numeric]
+    scalars = [v for v in with_elements(info.variables).values() if v.is_numeric and not v.dimensions]
+    inputs = [v for v in scalars if v.causality == "input"]
+    observed, observed_note = observations_for(scalars)
     lines = _header(info, shown)
     lines += _parameters(info)
-    lines += _actions(inputs)
-    lines += _observations(outputs)
-    lines += _reward_and_termination(outputs)
+    lines += _actions(inputs, [v for v in scalars if _tunable(v)])
+    lines += _observations(observed, observed_note)
+    lines += _reward_and_termination(observed)
     return "\n".join(lines) + "\n"
+
+
+def _tunable(var: Variable) -> bool:
+    return var.causality == "parameter" and var.variability == "tunable"
+
+
+def observations_for(scalars: Sequence[Variable]) -> tuple[list[Variable], str]:
+    """The outputs; else the states and other locals; else the parameters; with a note on the choice."""
+    outputs = [v for v in scalars if v.causality == "output"]
+    if outputs:
+        return outputs, ""
+    names = {v.name for v in scalars}
+    states = [v for v in scalars if f"der({v.name})" in names]
+    locals_ = [v for v in scalars if v.causality == "local" and v not in states]
+    chosen = (states + locals_)[:MAX_OBSERVED]
+    if chosen:
+        more = len(states) + len(locals_) - len(chosen)
+        extra = f"; {more} more locals not shown (`fmu-bridge inspect -c local`)" if more else ""
+        return chosen, f"# The FMU has no outputs: observing its states and local variables{extra}."
+    rest = [v for v in scalars if v.causality not in ("input", "independent")][:MAX_OBSERVED]
+    return rest, "# The FMU has no outputs or locals: observing its parameters (constant signals)."
 
 
 def _header(info: ModelInfo, shown: Path) -> list[str]:
     de = info.default_experiment
     step = de.step_size_s or 0.01
-    duration = (de.stop_time_s or 10.0) - (de.start_time_s or 0.0)
+    start = de.start_time_s or 0.0
+    duration = (de.stop_time_s or start + 10.0) - start
+    if not duration > 0:
+        duration = 10.0
     return [
-        f"# Experiment for {info.model_name} (FMI {info.fmi_version}, "
+        f"# Experiment for {' '.join(info.model_name.split())} (FMI {info.fmi_version}, "
         f"{'/'.join(i.upper() for i in info.interfaces)})",
         f"# written by `fmu-bridge init` from {shown.name}; check it with `fmu-bridge check <this file>`.",
-        f"name: {info.model_name.lower()}",
+        f"name: {q(info.model_name.lower())}",
         "",
         "model:",
-        f"  fmu: {shown}",
+        f"  fmu: {q(str(shown))}",
         f"  step_size: {step!r}          # FMU step, s"
-        + ("" if de.step_size_s else "  (TODO: the FMU declares none)"),
+        + ("" if de.step_size_s else "  (GUESS: the FMU declares none)"),
         f"  sampling_time: {step!r}      # one agent sample; a whole multiple of step_size",
         f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
+        *([f"  start_time: {start!r}"] if start else []),
         "  reset_policy: auto          # restore | reset | reinstantiate | auto",
     ]
 
 
-def _actions(inputs: list[Variable]) -> list[str]:
+def _actions(inputs: list[Variable], tunables: list[Variable]) -> list[str]:
+    what, candidates = "inputs", inputs
     if not inputs:
-        return ["# The FMU has no numeric inputs: an agent cannot act on it.", "actions:", "  inputs: []", ""]
+        what, candidates = "tunable parameters", tunables
+    if not candidates:
+        return [
+            "# The FMU has no inputs and no tunable parameters: this experiment only observes it.",
+            "# check, simulate, node, record and evaluate --policy zero work on it;",
+            "# training needs something to act on (an input or a tunable parameter).",
+            "actions:",
+            "  inputs: []",
+            "",
+        ]
+    real = [v for v in candidates if v.type.startswith("Float")]
+    if real:
+        return _continuous(real, [v for v in candidates if v not in real], what)
+    return _multi_discrete(candidates, what)
+
+
+def _continuous(real: list[Variable], held: list[Variable], what: str) -> list[str]:
     lines = [
-        "actions:",
-        f"  inputs: [{', '.join(v.name for v in inputs)}]",
+        f"actions:                        # the FMU's {what}",
+        f"  inputs: [{', '.join(q(v.name) for v in real)}]",
         "  type: continuous            # the agent acts in [-1, 1], mapped onto [low, high]",
-        "  low:",
     ]
-    for v in inputs:
-        todo = "" if v.min is not None and math.isfinite(v.min) else "  # TODO: the FMU declares no min"
-        lines.append(f"    {v.name}: {_num(v.min) if todo == '' else '-1.0'}{todo or _comment(v)}")
+    bounds = [(v, *real_bounds(v)) for v in real]
+    lines.append("  low:")
+    lines += [f"    {q(v.name)}: {_num(lo)}{note or _comment(v)}" for v, lo, _, note in bounds]
     lines.append("  high:")
-    for v in inputs:
-        todo = "" if v.max is not None and math.isfinite(v.max) else "  # TODO: the FMU declares no max"
-        lines.append(f"    {v.name}: {_num(v.max) if todo == '' else '1.0'}{todo}")
+    lines += [f"    {q(v.name)}: {_num(hi)}{note}" for v, _, hi, note in bounds]
+    return [*lines, *_held(held), ""]
+
+
+def real_bounds(var: Variable) -> tuple[float, float, str]:
+    """(low, high, note): the declared min/max, or a guess around the start value marked GUESS."""
+    low = var.min if var.min is not None and math.isfinite(var.min) else None
+    high = var.max if var.max is not None and math.isfinite(var.max) else None
+    if low is not None and high is not None and low < high:
+        return low, high, ""
+    start = float(var.start) if isinstance(var.start, int | float) and math.isfinite(var.start) else 0.0
+    half = max(abs(start) * 0.5, abs(var.nominal or 0.0), 1.0 if start == 0.0 else 0.0)
+    lo = low if low is not None else start - half
+    hi = high if high is not None else start + half
+    if not lo < hi:
+        lo, hi = (lo, lo + 2 * half) if low is not None else (hi - 2 * half, hi)
+    missing = [s for s, b in (("min", low), ("max", high)) if b is None]
+    return lo, hi, f"  # GUESS: the FMU declares no {'/'.join(missing) or 'usable range'}; set a real bound"
+
+
+def _multi_discrete(discrete: list[Variable], what: str) -> list[str]:
+    lines = [
+        f"actions:                        # the FMU's {what} (whole numbers: one level per choice)",
+        f"  inputs: [{', '.join(q(v.name) for v in discrete)}]",
+        "  type: multi_discrete        # the agent picks one level of each",
+        "  levels:",
+    ]
+    for v in discrete:
+        levels, note = discrete_levels(v)
+        lines.append(f"    {q(v.name)}: [{', '.join(str(x) for x in levels)}]{note or _comment(v)}")
     return [*lines, ""]
 
 
-def _observations(outputs: list[Variable]) -> list[str]:
-    lines = ["observations:", f"  outputs: [{', '.join(v.name for v in outputs)}]"]
+def discrete_levels(var: Variable) -> tuple[list[int], str]:
+    """Levels of an Integer, Boolean or Enumeration variable inside its declared range or items."""
+    if var.type == "Boolean":
+        return [0, 1], ""
+    if var.enum_items:
+        return sorted({value for _, value in var.enum_items}), ""
+    low, high = _TYPE_RANGES.get(var.type, (-(2**31), 2**31 - 1))
+    declared = (var.min is not None, var.max is not None)
+    low = int(var.min) if var.min is not None else low
+    high = int(var.max) if var.max is not None else high
+    if all(declared) and high - low <= 10:
+        return list(range(low, high + 1)), ""
+    start = int(var.start) if isinstance(var.start, int | float) else 0
+    start = min(max(start, low), high)
+    levels = sorted(
+        {low, start, high} if all(declared) else {start, start + 1 if start < high else start - 1}
+    )
+    return levels, "  # GUESS: a few levels inside the declared range; list the ones you need"
+
+
+def _held(held: list[Variable]) -> list[str]:
+    if not held:
+        return []
+    lines = ["  # Held at their start values (whole-number variables do not mix with continuous actions):"]
+    lines += [f"  #   {q(v.name)} ({v.type}, start {v.start})" for v in held]
     lines += [
+        "  # To drive them instead: list them in inputs with type: multi_discrete and levels per input,",
+        "  # or give them a time profile under scenarios.<name>.inputs.",
+    ]
+    return lines
+
+
+def _observations(observed: list[Variable], note: str) -> list[str]:
+    lines = [note] if note else []
+    lines += ["observations:", f"  outputs: [{', '.join(q(v.name) for v in observed)}]"]
+    lines += [f"  #   {q(v.name)}{_comment(v).replace('  #', ':')}" for v in observed]
+    return [
+        *lines,
         "  scale: auto                 # from the FMU's min/max or nominal; or {name: [low, high]}",
         "  history: 1                  # stack the last k samples",
         "",
     ]
-    for v in outputs:
-        lines.insert(-3, f"  #   {v.name}{_comment(v).replace('  #', ':')}")
-    return lines
 
 
-def _reward_and_termination(outputs: list[Variable]) -> list[str]:
-    first = outputs[0].name if outputs else "y"
+def _reward_and_termination(observed: list[Variable]) -> list[str]:
+    first = q(observed[0].name) if observed else '"y"'
     return [
         "reward:                        # built-in terms, an expression, or a Python callable",
         "  terms:",
         "    - alive: 1.0",
         f"    # - signal: {{name: {first}, norm: squared, weight: 1.0}}",
-        f'  # expression: "1.0 - abs({first})"',
         "  termination_penalty: 0.0",
         "",
         "termination:",
@@ -125,6 +248,6 @@ def _parameters(info: ModelInfo) -> list[str]:
         "                              # randomization.parameters. The FMU's parameters and defaults:",
     ]
     for v in params:
-        value = v.start if not isinstance(v.start, str) else repr(v.start)
-        lines.append(f"  #   {v.name}: {value}{_comment(v)}")
+        value = json.dumps(v.start) if isinstance(v.start, str) else v.start
+        lines.append(f"  #   {q(v.name)}: {value}{_comment(v)}")
     return [*lines, ""]

@@ -6,6 +6,7 @@ the bad value, what is allowed, and the file, instead of deep inside training.
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 from collections.abc import Iterable, Mapping
@@ -99,7 +100,7 @@ def _check_episode_lengths(experiment: Experiment, sampling_time_s: float) -> No
 def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     """Check every name and role in ``experiment`` against the model ``info``; returns ``info``."""
     where = f" [{experiment.source}]" if experiment.source else ""
-    variables = info.variables
+    variables = with_elements(info.variables)
     timing(experiment, info)
     _check_values(experiment, variables, where)
     _check_actions(experiment, variables, where)
@@ -108,6 +109,40 @@ def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     _check_reward_and_termination(experiment, variables, signals, where)
     _check_evaluation(experiment, signals, where)
     return info
+
+
+def with_elements(variables: Mapping[str, Variable]) -> dict[str, Variable]:
+    """``variables`` plus one scalar entry per element of each FMI 3.0 array (``y[2,3]``, 1-based).
+
+    Configs name array elements, never whole arrays: an element is a scalar signal everywhere
+    (actions, observations, rewards, bounds), so the task and these checks treat it as one.
+    """
+    out = dict(variables)
+    for var in variables.values():
+        if not var.dimensions:
+            continue
+        starts = _element_starts(var)
+        for i, name in enumerate(var.element_names()):
+            out.setdefault(
+                name, dataclasses.replace(var, name=name, start=starts[i], dimensions=(), is_array=False)
+            )
+    return out
+
+
+def _element_starts(var: Variable) -> list[object]:
+    start = var.start
+    if isinstance(start, list | tuple) and len(start) == var.size:
+        return list(start)
+    if isinstance(start, str) and len(start.split()) == var.size:
+        return [_number(x) for x in start.split()]
+    return [start if isinstance(start, int | float) else None] * var.size
+
+
+def _number(text: str) -> object:
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def _unknown(
@@ -124,7 +159,16 @@ def _unknown(
 def _need(key: str, name: str, variables: Mapping[str, Variable], where: str) -> Variable:
     if name not in variables:
         raise _unknown(key, name, variables, where)
-    return variables[name]
+    var = variables[name]
+    if var.dimensions:
+        shape = ",".join(map(str, var.dimensions))
+        elements = var.element_names()
+        shown = ", ".join(elements[:3]) + (f", ... {elements[-1]}" if len(elements) > 3 else "")
+        raise ConfigError(
+            f"{key}: {name!r} is an FMI 3.0 array {var.type}[{shape}]; configs name its elements one by "
+            f"one (1-based, row-major): {shown}{where}"
+        )
+    return var
 
 
 def _check_values(exp: Experiment, variables: Mapping[str, Variable], where: str) -> None:
@@ -168,11 +212,12 @@ def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: st
     actions = exp.actions
     for name in actions.inputs:
         var = _need("actions.inputs", name, variables, where)
-        if var.causality != "input":
+        if not var.settable_in_step:
+            drivable = [v.name for v in variables.values() if v.settable_in_step and not v.dimensions]
             raise ConfigError(
-                f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input'; "
-                f"the agent can only "
-                f"drive inputs ({[v.name for v in variables.values() if v.causality == 'input']}){where}"
+                f"actions.inputs: {name!r} has causality {var.causality!r} in the FMU, not 'input' "
+                f"({var.variability}); the agent drives inputs and tunable parameters only "
+                f"({drivable or 'this FMU has none'}){where}"
             )
         if not var.is_numeric:
             raise ConfigError(f"actions.inputs: {name!r} is a {var.type} input; actions are numeric{where}")

@@ -133,7 +133,7 @@ class Model:
     def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
         """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`)."""
         elements = [self._element(n, role) for n in names]
-        if not elements:
+        if not elements and not writable:  # an empty input group: an observation-only experiment
             raise ConfigError(f"{role}: at least one variable is needed")
         for var, _ in elements:
             if not var.is_numeric:

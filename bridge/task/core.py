@@ -22,7 +22,7 @@ import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
-from bridge.experiment.validate import Timing, action_bounds
+from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
 from bridge.task.rewards import build_reward
 from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
@@ -64,7 +64,7 @@ class Task:
         self.experiment = exp = experiment
         self.timing = timing
         self.episode_duration_s = exp.model.episode_duration
-        self._variables = variables
+        self._variables = variables = with_elements(variables)  # array elements are scalar signals
         self.action_inputs = tuple(exp.actions.inputs)
         self.input_names = self.action_inputs + tuple(scenario_inputs(exp))
         self.reference_names, self.output_names = self._signal_sets(exp, variables)

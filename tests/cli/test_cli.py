@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from bridge.cli.main import _load_plugins, app
@@ -70,8 +71,10 @@ def test_init_writes_a_config_that_check_accepts(tmp_path: Path, cartpole_fmu: P
     target = tmp_path / "experiment.yaml"
     invoke("init", str(cartpole_fmu), "-o", str(target))
     text = target.read_text()
-    assert "inputs: [force]" in text and "outputs: [x, x_dot, theta, theta_dot]" in text
-    assert "m_pole: 0.1" in text  # parameters listed with their defaults
+    data = yaml.safe_load(text)
+    assert data["actions"]["inputs"] == ["force"]
+    assert data["observations"]["outputs"] == ["x", "x_dot", "theta", "theta_dot"]
+    assert '"m_pole": 0.1' in text  # parameters listed with their defaults
     out = invoke("check", str(target), "--steps", "3")
     assert "gymnasium env checker passed" in out and "stable-baselines3 env checker passed" in out
     refused = runner.invoke(app, ["init", str(cartpole_fmu), "-o", str(target)])

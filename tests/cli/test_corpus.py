@@ -1,0 +1,201 @@
+"""Every FMU of the test corpus goes from ``init`` to ``check``, ``simulate`` and training unedited.
+
+The corpus: FMUs from other exporters (pythonfmu for FMI 2.0, pythonfmu3 for FMI 3.0, JModelica
+through the FMUs shipped in PyFMI 2.5's source distribution: FMI 1.0/2.0, CS/ME; Dymola through
+eta-ctrl's source distribution) and our own models
+for what those lack (time events with inputs in model exchange). Downloads are cached under
+``$FMU_BRIDGE_CACHE/thirdparty``; a test is skipped, saying why, when they cannot be fetched.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tarfile
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from bridge.cli.main import app
+from bridge.experiment.config import load_experiment
+from tests.conftest import DATA, _cache_dir, _pythonfmu_build, example_fmu
+
+pytestmark = pytest.mark.slow
+runner = CliRunner()
+
+#: FMUs inside PyFMI 2.5's sdist: (FMI version and interface, path in the archive).
+PYFMI_FMUS = {
+    "jmodelica_cs10": "src/pyfmi/examples/files/FMUs/CS1.0/bouncingBall.fmu",
+    "jmodelica_me10": "src/pyfmi/examples/files/FMUs/ME1.0/bouncingBall.fmu",
+    "jmodelica_cs20": "src/pyfmi/examples/files/FMUs/CS2.0/bouncingBall.fmu",
+    "jmodelica_me20": "src/pyfmi/examples/files/FMUs/ME2.0/bouncingBall.fmu",
+    "jmodelica_me10_win_only": "src/pyfmi/examples/files/FMUs/ME1.0/SecondOrder.fmu",
+}
+
+
+def _pyfmi_sdist(cache: Path) -> Path:
+    """PyFMI 2.5's sdist through pip: its metadata step needs cython<3, numpy<1.24 and FMIL_HOME."""
+    archives = sorted(cache.glob("[Pp]y[Ff][Mm][Ii]-2.5.tar.gz"))
+    if archives:
+        return archives[-1]
+    venv, fmil = cache / "venv", cache / "no-fmil"
+    (fmil / "lib").mkdir(parents=True, exist_ok=True)
+    (fmil / "include").mkdir(exist_ok=True)
+    pip = [str(venv / "bin" / "python"), "-m", "pip", "-q"]
+    steps = [
+        [sys.executable, "-m", "venv", str(venv)],
+        [*pip, "install", "cython<3", "numpy<1.24", "wheel"],
+        [*pip, "download", "--no-deps", "--no-build-isolation", "--no-binary", ":all:", "pyfmi==2.5"],
+    ]
+    env = {**os.environ, "FMIL_HOME": str(fmil)}  # the metadata step only checks the folder exists
+    try:
+        for cmd in steps:
+            subprocess.run(cmd, cwd=cache, env=env, capture_output=True, timeout=600, check=True)
+    except (subprocess.SubprocessError, OSError) as exc:
+        pytest.skip(f"PyFMI 2.5's source distribution could not be downloaded (offline?): {exc}")
+    archives = sorted(cache.glob("[Pp]y[Ff][Mm][Ii]-2.5.tar.gz"))
+    if not archives:
+        pytest.skip("PyFMI 2.5's source distribution is not in the package index")
+    return archives[-1]
+
+
+@pytest.fixture(scope="session")
+def pyfmi_fmus() -> dict[str, Path]:
+    """JModelica-exported FMUs shipped in PyFMI 2.5's source distribution (fetched once, cached)."""
+    cache = _cache_dir() / "pyfmi"
+    cache.mkdir(parents=True, exist_ok=True)
+    found = {name: cache / f"{name}.fmu" for name in PYFMI_FMUS}
+    if all(p.is_file() for p in found.values()):
+        return found
+    with tarfile.open(_pyfmi_sdist(cache)) as tar:
+        for member in tar.getmembers():
+            for name, rel in PYFMI_FMUS.items():
+                data = tar.extractfile(member) if member.name.endswith(rel) else None
+                if data is not None:
+                    found[name].write_bytes(data.read())
+    missing = [n for n, p in found.items() if not p.is_file()]
+    if missing:
+        pytest.skip(f"PyFMI 2.5's source distribution no longer ships {missing}")
+    return found
+
+
+@pytest.fixture(scope="session")
+def names2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu's export of tests/data/slaves/Names2.py: locals only, Modelica-style names."""
+    pytest.importorskip("pythonfmu")
+    return _pythonfmu_build("pythonfmu", DATA / "slaves" / "Names2.py", tmp_path_factory.mktemp("names2"))
+
+
+@pytest.fixture(scope="session")
+def arrays3_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu3's export of tests/data/slaves/Arrays3.py: FMI 3.0 arrays u[3], k[3] in, y[2,3] out."""
+    pytest.importorskip("pythonfmu3")
+    return _pythonfmu_build("pythonfmu3", DATA / "slaves" / "Arrays3.py", tmp_path_factory.mktemp("arr3"))
+
+
+def _fixture(name: str, key: str | None = None) -> Callable[[pytest.FixtureRequest], Path]:
+    def get(request: pytest.FixtureRequest) -> Path:
+        value = request.getfixturevalue(name)
+        return Path(value[key] if key else value)
+
+    return get
+
+
+def _example(name: str, version: str, interface: str) -> Callable[[pytest.FixtureRequest], Path]:
+    return lambda request: example_fmu(name, version, interface)
+
+
+#: name -> (how to get the FMU, whether it has something to act on: an input or tunable parameter).
+CORPUS: dict[str, tuple[Callable[[pytest.FixtureRequest], Path], bool]] = {
+    "pythonfmu_heater2 (FMI 2.0 CS, typed inputs)": (_fixture("pythonfmu_heater2"), True),
+    "pythonfmu3_heater3 (FMI 3.0 CS, Enumeration input)": (_fixture("pythonfmu_heater3"), True),
+    "pythonfmu3_arrays3 (FMI 3.0 CS, arrays)": (_fixture("arrays3_fmu"), True),
+    "pythonfmu_names2 (FMI 2.0 CS, locals only, Modelica names)": (_fixture("names2"), False),
+    "jmodelica_cs10 (FMI 1.0 CS, no inputs)": (_fixture("pyfmi_fmus", "jmodelica_cs10"), False),
+    "jmodelica_me10 (FMI 1.0 ME, no inputs)": (_fixture("pyfmi_fmus", "jmodelica_me10"), False),
+    "jmodelica_cs20 (FMI 2.0 CS, tunable parameter)": (_fixture("pyfmi_fmus", "jmodelica_cs20"), True),
+    "jmodelica_me20 (FMI 2.0 ME, tunable parameter)": (_fixture("pyfmi_fmus", "jmodelica_me20"), True),
+    "dymola_damped_oscillator (FMI 2.0 CS/ME, inputs)": (
+        _fixture("eta_ctrl_fmus", "damped_oscillator"),
+        True,
+    ),
+    "stair (FMI 1.0 ME, time events, Int32 input)": (_example("stair", "1.0", "me"), True),
+    "stair (FMI 2.0 ME, time events, Int32 input)": (_example("stair", "2.0", "me"), True),
+    "stair (FMI 3.0 ME, time events, Int32 input)": (_example("stair", "3.0", "me"), True),
+    "typed (FMI 3.0 CS, every integer type)": (_example("typed", "3.0", "cs"), True),
+}
+
+
+def _init(fmu: Path, folder: Path) -> Path:
+    config = folder / "experiment.yaml"
+    result = runner.invoke(app, ["init", str(fmu), "-o", str(config)])
+    assert result.exit_code == 0, result.output
+    return config
+
+
+@pytest.mark.parametrize("entry", list(CORPUS))
+def test_init_then_check_then_simulate_unedited(
+    entry: str, request: pytest.FixtureRequest, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    get, _ = CORPUS[entry]
+    config = _init(get(request), tmp_path)
+    monkeypatch.chdir(tmp_path)
+    checked = runner.invoke(app, ["check", str(config), "--steps", "3"])
+    assert checked.exit_code == 0, checked.output
+    simulated = runner.invoke(app, ["simulate", str(config), "--episodes", "2"])
+    assert simulated.exit_code == 0, simulated.output
+    assert list((tmp_path / "recordings").glob("*.mcap")), "simulate records by default"
+
+
+@pytest.mark.parametrize("entry", [name for name, (_, acts) in CORPUS.items() if acts])
+def test_train_a_few_hundred_steps_unedited(
+    entry: str, request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
+    from agents.train import train
+
+    get, _ = CORPUS[entry]
+    config = _init(get(request), tmp_path)
+    assert load_experiment(config).actions.inputs, "a model with something to act on gets actions"
+    overrides = {
+        "timesteps": 256,
+        "n_envs": 1,
+        "hyperparams": {"n_steps": 128, "batch_size": 64},
+        "eval_every": 100_000,
+        "checkpoint_every": 100_000,
+    }
+    result = train(config, overrides=overrides, run_dir=tmp_path / "run", progress=False)
+    assert result.timesteps >= 256 and result.model_path.is_file()
+
+
+@pytest.mark.parametrize("entry", [name for name, (_, acts) in CORPUS.items() if not acts])
+def test_models_without_anything_to_act_on_get_an_observation_only_experiment(
+    entry: str, request: pytest.FixtureRequest, tmp_path: Path
+) -> None:
+    get, _ = CORPUS[entry]
+    text = _init(get(request), tmp_path).read_text()
+    assert yaml.safe_load(text)["actions"] == {"inputs": []}
+    assert "training needs something to act on" in text
+
+
+def test_fmu_without_a_binary_for_this_platform_inits_and_is_refused_by_check_saying_so(
+    pyfmi_fmus: dict[str, Path], eta_ctrl_fmus: dict[str, Path], tmp_path: Path
+) -> None:
+    for fmu in (pyfmi_fmus["jmodelica_me10_win_only"], eta_ctrl_fmus["kea_simplified"]):
+        folder = tmp_path / fmu.stem
+        folder.mkdir()
+        assert runner.invoke(app, ["inspect", str(fmu)]).exit_code == 0
+        config = _init(fmu, folder)
+        result = subprocess.run(
+            [sys.executable, "-m", "bridge.cli", "check", str(config)],
+            capture_output=True,
+            text=True,
+            timeout=300,
+            check=False,
+        )
+        assert result.returncode == 2, result.stdout + result.stderr
+        assert "has no binary for this platform" in result.stderr
+        assert "Traceback" not in result.stderr
