@@ -239,3 +239,10 @@ def check_with_model(experiment: Experiment) -> ModelInfo:
     from bridge.plant.factory import model_info_for
 
     return check_experiment(experiment, model_info_for(experiment))
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """docs/reliability.md from the counts the fuzz and fault tests wrote in this run."""
+    from reliability_table import write
+
+    write()

@@ -135,10 +135,16 @@ class FmuNode:
         self._declare()
 
     def _make_plant(self, exp: Experiment) -> LocalFmuPlant | IsolatedFmuPlant:
-        if self.isolated:
+        isolation = exp.model.isolation  # the experiment's model.isolation, or --isolate
+        if self.isolated or isolation is not None:
             from bridge.plant.isolated import IsolatedFmuPlant
 
-            return IsolatedFmuPlant(exp, timeout_s=self.step_timeout_s, restart=True)
+            return IsolatedFmuPlant(
+                exp,
+                timeout_s=isolation.timeout if isolation is not None else self.step_timeout_s,
+                memory_limit_mb=isolation.memory_limit_mb if isolation is not None else None,
+                restart=True,
+            )
         from bridge.plant.local import LocalFmuPlant
 
         return LocalFmuPlant(exp)

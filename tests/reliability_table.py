@@ -1,0 +1,85 @@
+"""docs/reliability.md from the counts the fuzz and fault tests write to docs/reliability/*.json.
+
+The tests write their counts as they run; at the end of a test session ``conftest.py`` calls
+``write()`` so the document always shows the last run's figures. ``python tests/reliability_table.py``
+does the same by hand.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+DOCS = Path(__file__).resolve().parent.parent / "docs"
+HEADER = """# Reliability: hostile input and faults, counted
+
+Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
+counts); regenerate with `pytest` or `python tests/reliability_table.py`. Every row asserts, in its
+test, that there were zero tracebacks, zero hangs and nothing silently wrong.
+
+| test | what was thrown at it | outcome | tracebacks | hangs | silently wrong |
+|---|---|---|---|---|---|
+"""
+
+
+def _experiments(data: dict[str, Any]) -> str:
+    examples = data["examples"]
+    mutations = sum(e["mutations"] for e in examples.values())
+    rejected = sum(e["rejected_cleanly"] for e in examples.values())
+    accepted = sum(e["accepted_and_sensible"] for e in examples.values())
+    cli = sum(e["cli_check_runs"] for e in examples.values())
+    tracebacks = sum(e["tracebacks"] for e in examples.values())
+    return (
+        f"| experiment files (`tests/experiment/test_fuzz.py`) | {mutations:,} seeded mutations of "
+        f"{len(examples)} example files; {cli} through `fmu-bridge check` | {rejected:,} rejected with a "
+        f"message naming the key, {accepted:,} accepted and sensible; `check` exits 0 or 2 | "
+        f"{tracebacks} | 0 | 0 |"
+    )
+
+
+def _recordings(data: dict[str, Any]) -> str:
+    return (
+        f"| recordings (`tests/recording/test_recording_fuzz.py`) | a file cut at every one of "
+        f"{data['cut_offsets']:,} byte offsets, {data['corruptions']:,} random corruptions "
+        f"({', '.join(sorted(data['corruption_kinds']))}), {data['bombs']} decompression bombs, a full "
+        f"disk; {data['reader_runs']:,} reader runs, {data['cli_runs']} CLI runs | "
+        f"{data['clean_errors']} clear errors, {data['partial_reads']:,} partial reads, "
+        f"{data['full_reads']} full; `recover` changed its input {data['inputs_changed_by_recover']} "
+        f"times | {data['tracebacks']} | 0 | 0 |"
+    )
+
+
+def _nodes(data: dict[str, Any]) -> str:
+    answered = data["info_ok"] + data["info_error_replies"] + data["reset_ok"] + data["reset_error_replies"]
+    return (
+        f"| nodes (`tests/net/test_node_fuzz.py`) | {data['requests']:,} malformed or random requests on "
+        f"every key of a lockstep and a real-time node ({data['actions_sent']:,} actions, "
+        f"{data['reset_sent']:,} resets, {data['info_sent']:,} info, {data['ros_reset_sent']} ROS resets, "
+        f"{data['ros_actions_sent']} ROS actions) | {answered:,} queries answered, every action "
+        f"accounted for ({data['actions_accounted_by_the_nodes']:,}); memory growth at most "
+        f"{data['rss_growth_mb_max']:.0f} MB; afterwards a well-behaved client bit for bit: "
+        f"{'yes' if data['well_behaved_client_bit_for_bit'] else 'NO'} | {data['tracebacks']} | "
+        f"{data['hangs']} | {data['silently_wrong']} |"
+    )
+
+
+ROWS = {"experiment_fuzz.json": _experiments, "recording_fuzz.json": _recordings, "node_fuzz.json": _nodes}
+
+
+def render() -> str:
+    rows = []
+    for name, row in ROWS.items():
+        path = DOCS / "reliability" / name
+        if path.is_file():
+            rows.append(row(json.loads(path.read_text())))
+    faults = (DOCS / "reliability" / "faults.md").read_text()  # the fault-injection table, by hand
+    return HEADER + "\n".join(rows) + "\n\n" + faults
+
+
+def write() -> None:
+    (DOCS / "reliability.md").write_text(render())
+
+
+if __name__ == "__main__":
+    write()
