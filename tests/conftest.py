@@ -246,3 +246,17 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     from reliability_table import write
 
     write()
+
+
+@pytest.fixture(scope="session")
+def names2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu's export of tests/data/slaves/Names2.py: locals only, Modelica-style names."""
+    pytest.importorskip("pythonfmu")
+    return _pythonfmu_build("pythonfmu", DATA / "slaves" / "Names2.py", tmp_path_factory.mktemp("names2"))
+
+
+@pytest.fixture(scope="session")
+def arrays3_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu3's export of tests/data/slaves/Arrays3.py: FMI 3.0 arrays u[3], k[3] in, y[2,3] out."""
+    pytest.importorskip("pythonfmu3")
+    return _pythonfmu_build("pythonfmu3", DATA / "slaves" / "Arrays3.py", tmp_path_factory.mktemp("arr3"))

@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 import yaml
+from conftest import _cache_dir, example_fmu
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
 from bridge.experiment.config import load_experiment
-from tests.conftest import DATA, _cache_dir, _pythonfmu_build, example_fmu
 
 pytestmark = pytest.mark.slow
 runner = CliRunner()
@@ -81,20 +81,6 @@ def pyfmi_fmus() -> dict[str, Path]:
     if missing:
         pytest.skip(f"PyFMI 2.5's source distribution no longer ships {missing}")
     return found
-
-
-@pytest.fixture(scope="session")
-def names2(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """pythonfmu's export of tests/data/slaves/Names2.py: locals only, Modelica-style names."""
-    pytest.importorskip("pythonfmu")
-    return _pythonfmu_build("pythonfmu", DATA / "slaves" / "Names2.py", tmp_path_factory.mktemp("names2"))
-
-
-@pytest.fixture(scope="session")
-def arrays3_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """pythonfmu3's export of tests/data/slaves/Arrays3.py: FMI 3.0 arrays u[3], k[3] in, y[2,3] out."""
-    pytest.importorskip("pythonfmu3")
-    return _pythonfmu_build("pythonfmu3", DATA / "slaves" / "Arrays3.py", tmp_path_factory.mktemp("arr3"))
 
 
 def _fixture(name: str, key: str | None = None) -> Callable[[pytest.FixtureRequest], Path]:
