@@ -679,7 +679,7 @@ def test_typed_fmu_state_restores_strings(fmus: Fmus, open_slave: OpenSlave) -> 
 
 
 def test_model_names_and_variants() -> None:
-    assert models.model_names() == ["bouncing_ball", "cartpole", "dcmotor", "typed"]
+    assert models.model_names() == ["bouncing_ball", "cartpole", "dcmotor", "typed", "vehicle"]
     by_model: dict[str, set[tuple[str, str]]] = {}
     for v in models.list_variants():
         by_model.setdefault(v.name, set()).add((v.fmi_version, v.interface))
@@ -688,10 +688,11 @@ def test_model_names_and_variants() -> None:
     assert by_model["dcmotor"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["bouncing_ball"] == {("2.0", "me"), ("3.0", "me"), ("2.0", "cs")}
     assert by_model["typed"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    with pytest.raises(ConfigError, match="available: bouncing_ball, cartpole, dcmotor, typed"):
+    with pytest.raises(ConfigError, match="available: bouncing_ball, cartpole, dcmotor, typed, vehicle"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
         models.example_fmu("typed", "2.0", "me")
