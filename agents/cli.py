@@ -199,6 +199,10 @@ def train_cmd(
     zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config")] = None,
     zenoh_mode: ZenohModeOpt = None,
     progress: Annotated[bool, typer.Option("--progress/--no-progress")] = True,
+    residual: Annotated[
+        str | None,
+        typer.Option(help="Residual RL over an evaluation baseline: BASELINE:SCALE (e.g. pid:0.1)."),
+    ] = None,
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
 
@@ -217,6 +221,8 @@ def train_cmd(
         "vec": vec,
         "seed": seed,
     }
+    if residual is not None:
+        overrides["residual"] = _residual_option(residual)
     if nodes or connect or zenoh_config or zenoh_mode:
         overrides["remote"] = {
             "nodes": nodes or "*",
@@ -232,6 +238,17 @@ def train_cmd(
         f"({result.timesteps / max(result.wall_time_s, 1e-9):,.0f} steps/s)"
     )
     console.print(f"run: {result.run_dir}\nmodel: {result.model_path}")
+
+
+def _residual_option(text: str) -> dict[str, Any]:
+    """``--residual pid:0.1`` -> ``training.residual: {baseline: pid, scale: 0.1}``."""
+    from bridge.errors import ConfigError
+
+    name, _, scale = text.partition(":")
+    try:
+        return {"baseline": name, "scale": float(scale or 1.0)}
+    except ValueError:
+        raise ConfigError(f"--residual {text!r}: expected BASELINE:SCALE (e.g. pid:0.1)") from None
 
 
 def evaluate_cmd(
@@ -276,7 +293,9 @@ def evaluate_cmd(
         record_dir=Path("recordings") / out.name if record and not batch else None,
         batch=batch,
     )
-    paths = write(result, out, title=f"Evaluation of {config.stem}")
+    from bridge.experiment.config import load_experiment
+
+    paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))
     rows = summary(result)
     columns = headline_columns(rows)
     table = Table("agent", "scenario", "episodes", *columns, "end", title=f"evaluation ({config.name})")

@@ -135,7 +135,7 @@ def _record(env: Any, cell: Cell) -> tuple[Any, Path | None]:
     wrapped = record_env(
         env,
         directory=cell.record_dir,
-        run_name=f"{cell.agent_name}__{cell.scenario or 'mixed'}",
+        run_name=f"{cell.agent_name}__{cell.scenario or 'nominal'}",  # the scenario sampler's name
         agent=cell.agent,
     )
     return wrapped, Path(getattr(wrapped, "path", cell.record_dir))

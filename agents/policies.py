@@ -106,9 +106,26 @@ class Pid:
         return self._task.action_for_inputs(inputs)
 
 
+def discrete_levels(task: Task) -> dict[str, list[float]] | None:
+    """The levels each action input can take on a discrete space (None if continuous)."""
+    actions = task.experiment.actions
+    if actions.type == "continuous":
+        return None
+    if actions.type == "discrete" and actions.table:
+        return {
+            name: sorted({float(row[i]) for row in actions.table}) for i, name in enumerate(actions.inputs)
+        }
+    return {name: [float(v) for v in actions.levels[name]] for name in actions.inputs}
+
+
 @dataclass
 class FixedPolicy:
-    """``zero`` / ``constant:V`` (physical value on every action input) / ``random`` (seeded)."""
+    """``zero`` (zero physical input on every action input) / ``constant:V`` (the physical value V)
+    / ``random`` (seeded samples of the action space).
+
+    On a discrete space the value must be one of the levels: ``zero`` on a push-left/push-right
+    cart-pole would otherwise push at the nearest level every step while being called zero.
+    """
 
     name: str
     value: float | None = None
@@ -116,6 +133,7 @@ class FixedPolicy:
     def reset(self, task: Task, seed: int | None) -> None:
         self._task = task
         if self.value is not None:
+            self._check_level(task, self.value)
             self._action = task.action_for_inputs([self.value] * len(task.action_inputs))
         else:  # its own copy: policies sharing the task's space must not share its generator
             self._space = copy.deepcopy(task.action_space)
@@ -123,6 +141,16 @@ class FixedPolicy:
 
     def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
         return self._action if self.value is not None else self._space.sample()
+
+    def _check_level(self, task: Task, value: float) -> None:
+        levels = discrete_levels(task)
+        missing = {n: v for n, v in (levels or {}).items() if value not in v}
+        if missing:
+            what = "zero input" if value == 0 else f"{value:g}"
+            raise ConfigError(
+                f"agent {self.name!r}: this discrete action space has no action applying {what}: "
+                f"levels {missing}; use constant:LEVEL with one of the levels (named by what it applies)"
+            )
 
 
 @dataclass

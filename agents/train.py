@@ -125,6 +125,24 @@ def _batch_vec_env(
     return vec
 
 
+def build_eval_env(
+    train_env: Any,
+    settings: TrainingSettings,
+    experiment: Experiment,
+    path: Path,
+    residual: dict[str, Any] | None,
+) -> Any:
+    """One env on the held-out scenarios, of the training env's VecEnv type (SB3's EvalCallback
+    warns otherwise): a worker process for subproc, a VecMonitor for remote, else in-process."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecMonitor
+
+    scenarios = settings.evaluation_scenarios(experiment)
+    if isinstance(train_env, VecMonitor):
+        return VecMonitor(DummyVecEnv([make_env_fn(path, experiment.version, residual, scenarios)]))
+    fn = make_env_fn(path, experiment.version, residual, scenarios, monitor=True)
+    return SubprocVecEnv([fn]) if isinstance(train_env, SubprocVecEnv) else DummyVecEnv([fn])
+
+
 def prepare_run_dir(
     settings: TrainingSettings, experiment: Experiment, path: Path, run_dir: Path | None
 ) -> Path:
@@ -152,7 +170,7 @@ def train(
     """Train an agent; returns where everything went."""
     from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
     from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+    from stable_baselines3.common.vec_env import VecNormalize
 
     if resume is not None:
         return _resume(resume, overrides or {}, progress)
@@ -167,17 +185,7 @@ def train(
     # the variables the Task was built from: a deployed agent needs them, not the FMU
     (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
-    eval_env: Any = DummyVecEnv(
-        [
-            make_env_fn(
-                experiment_path,
-                experiment.version,
-                residual,
-                settings.evaluation_scenarios(experiment),
-                monitor=True,
-            )
-        ]
-    )
+    eval_env = build_eval_env(env, settings, experiment, experiment_path, residual)
     if settings.normalize:
         env = VecNormalize(env, **settings.normalize_kwargs())
         eval_env = VecNormalize(

@@ -1,7 +1,9 @@
 """The main job: train PPO on the bundled cart-pole FMU, evaluate it against baselines, report.
 
-``fmu-bridge demo`` runs it (in-process, no server): a few minutes on 2 cores. It ends with a
-table and the paths of the run, the report, the MCAP recordings and the Rerun file.
+``fmu-bridge demo`` runs it (in-process, no server): about half a minute of training on 2 cores,
+a minute in all. It ends with a table and the paths of the run, the report, the MCAP recordings
+and the Rerun file. The cart-pole's actions push -10 N or +10 N (there is no 0 N action), so the
+fixed baselines are named by what they apply: ``constant:-10`` and ``constant:10``.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ from rich.table import Table
 from agents.evaluate import evaluate
 from agents.report import summary, write
 from agents.train import train
+from bridge.experiment import load_experiment
 from bridge.experiment.examples import example_experiment
 
 
@@ -28,15 +31,23 @@ def run_demo(
     )
     result = train(experiment, overrides={"timesteps": timesteps, "eval_every": 10_000}, run_dir=out / "ppo")
     console.print(f"    {result.timesteps:,} steps in {result.wall_time_s:.0f} s")
-    console.print(f"[bold]2/3[/bold] evaluating PPO, zero and random over {episodes} seeded episodes each")
+    console.print(
+        f"[bold]2/3[/bold] evaluating PPO, constant -10 N, constant +10 N and random pushes over "
+        f"{episodes} seeded episodes each"
+    )
     evaluation = evaluate(
-        [str(result.run_dir), "zero", "random"],
+        [str(result.run_dir), "constant:-10", "constant:10", "random"],
         experiment,
         episodes=episodes,
         workers=2,
         record_dir=Path("recordings") / out.name,
     )
-    paths = write(evaluation, out / "evaluation", title="cart-pole FMU: PPO vs baselines")
+    paths = write(
+        evaluation,
+        out / "evaluation",
+        title="cart-pole FMU: PPO vs baselines",
+        experiment=load_experiment(experiment),
+    )
     table = Table("agent", "mean return", "episodes", "success rate", "ended by", title="evaluation")
     for row in summary(evaluation):
         table.add_row(

@@ -6,6 +6,11 @@ Run:  python launch_scripts/closed_loop.py RUN_DIR [--experiment FILE] [--rate 2
 This process is the Zenoh router (127.0.0.1); the node, the agent and the recorder are
 subprocesses connecting to it, exactly as they would on separate machines. Ctrl-C stops all
 three; the recording is finished properly.
+
+Order matters for an honest recording: the recorder starts first, so the plant's samples from
+its t = 0 on are in the file (the node publishes from its start, before the agent has loaded);
+when the agent ends, the node is stopped before the recorder, so the file ends with the agent's
+last action instead of showing the plant running on (the pole falling) with no agent.
 """
 
 from __future__ import annotations
@@ -45,6 +50,9 @@ def main() -> None:
     experiment = args.experiment or run_dir / "experiment.yaml"
     endpoint = f"tcp/127.0.0.1:{args.port}"
     session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
+    args.record.parent.mkdir(parents=True, exist_ok=True)
+    recorder = spawn("record", "--node", args.node, "-o", str(args.record), "--connect", endpoint)
+    time.sleep(2.0)  # the recorder imports and subscribes before the node publishes its first sample
     node = spawn(
         "node",
         str(experiment),
@@ -58,11 +66,9 @@ def main() -> None:
         endpoint,
         *(["--ros"] if args.transport == "ros2" else []),
     )
-    processes = [node]
+    processes = [recorder, node]
     try:
         time.sleep(3.0)  # the node imports and opens its FMU
-        args.record.parent.mkdir(parents=True, exist_ok=True)
-        processes.append(spawn("record", "--node", args.node, "-o", str(args.record), "--connect", endpoint))
         processes.append(
             spawn(
                 "agent",
@@ -84,10 +90,9 @@ def main() -> None:
     except KeyboardInterrupt:
         pass
     finally:
-        for process in reversed(processes):
+        for process in reversed(processes):  # agent, node, then recorder: nothing after the agent
             if process.poll() is None:
                 process.send_signal(signal.SIGINT)
-        for process in reversed(processes):
             try:
                 process.wait(timeout=15)
             except subprocess.TimeoutExpired:

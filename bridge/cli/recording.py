@@ -84,6 +84,9 @@ def replay_cmd(
         Path | None, typer.Option("--save", help="Write a .rrd file instead of opening the viewer.")
     ] = None,
     episode: Annotated[int | None, typer.Option("--episode", help="Only this episode.")] = None,
+    bind: Annotated[
+        str, typer.Option("--bind", help="Address the spawned viewer listens on (loopback by default).")
+    ] = "127.0.0.1",
     publish: Annotated[
         bool, typer.Option("--publish", help="Play the outputs back over Zenoh as the node's frames.")
     ] = False,
@@ -100,8 +103,10 @@ def replay_cmd(
     if not publish:
         from bridge.recording.replay import replay
 
-        saved = replay(recording, save=save, episode=episode)
-        console.print(f"wrote {saved}" if saved else "opened the Rerun viewer")
+        saved = replay(recording, save=save, episode=episode, bind=bind)
+        console.print(
+            f"wrote {saved}" if saved else f"sent {recording} to the Rerun viewer (listening on {bind})"
+        )
         return
     from bridge.recording.playback import publish as play
 

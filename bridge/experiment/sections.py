@@ -157,6 +157,7 @@ class EvaluationSection(Strict):
     scenarios: list[str] = []
     baselines: dict[str, BaselineSection] = {}
     metrics: MetricsSection = MetricsSection()
+    plots: list[str] = Field(default=[], description="signals the report plots (default: all)")
 
 
 # -- recording, node, ROS -------------------------------------------------------------------------

@@ -3,14 +3,22 @@
 The only module that imports ``rerun`` (the ``viz`` extra). The Rerun recording holds:
 
 - one time series per signal, grouped by stream (``/observations/*``, ``/outputs/*``,
-  ``/actions/*`` beside ``/agent_action/*``, ``/reward``), in fixed colours;
+  ``/actions/*`` in physical units, ``/agent_action/*`` in [-1, 1] on a plot of its own,
+  ``/reward``), in fixed colours, labelled with the FMU's units where the FMU can be read;
+- one plot per tracked output with its reference (``/tracking/<output>/...``; the reference
+  rebuilt from the episode's scenario), the output in the agent's colour;
+- a clear at every episode end, so no line joins two episodes;
 - the scenario of each episode (name, seed, drawn values) as a Markdown document at the
   episode's start, the run's metadata as a static document, and episode starts and ends
   as text log entries;
 - the cart-pole drawn in 2D when the outputs include ``x`` and ``theta``;
 - timelines ``time`` (the recording clock: episodes back to back), ``sim_time`` and
   ``step`` (within the episode), and one ``episode_N`` timeline per episode (up to
-  ``MAX_EPISODE_TIMELINES``): choosing it in the time panel shows only that episode.
+  ``MAX_EPISODE_TIMELINES``): choosing it in the time panel shows only that episode (every
+  plot, the scenario document and the episode log).
+
+The viewer is started here, bound to 127.0.0.1 unless ``bind`` says otherwise; without a display
+(no ``DISPLAY``/``WAYLAND_DISPLAY``) replay fails before building anything and suggests ``--save``.
 
 Rerun reads the MCAP file itself too (``rerun file.mcap``); this adds the structure.
 """
@@ -18,6 +26,12 @@ Rerun reads the MCAP file itself too (``rerun file.mcap``); this adds the struct
 from __future__ import annotations
 
 import logging
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +41,7 @@ import yaml
 
 from bridge.errors import BridgeError, DependencyMissing
 from bridge.recording import meta
+from bridge.recording import replay_signals as sig
 from bridge.recording.export import episode_of, steps_of
 from bridge.recording.reader import Recording, read_recording
 
@@ -67,6 +82,7 @@ def replay(
     save: str | Path | None = None,
     episode: int | None = None,
     spawn: bool = True,
+    bind: str = "127.0.0.1",
 ) -> Path | None:
     """Build a Rerun recording of ``path``; write it to ``save`` or show it in a spawned viewer.
 
@@ -74,10 +90,13 @@ def replay(
         path: the MCAP recording (``.mcap``, or ``.mcap.part`` up to its last chunk).
         save: write a ``.rrd`` file here instead of spawning the viewer.
         episode: replay only this episode (its number in the recording).
+        bind: address the spawned viewer listens on (loopback by default).
 
-    Returns the ``.rrd`` path when saved.
+    Returns the ``.rrd`` path when saved. Raises BridgeError when the viewer cannot be shown.
     """
     rr = _rerun()
+    if save is None and spawn:
+        _check_display()
     import rerun.blueprint as rrb
 
     recording = read_recording(path)
@@ -91,23 +110,70 @@ def replay(
         target.parent.mkdir(parents=True, exist_ok=True)
         stream.save(str(target), default_blueprint=blueprint)
     elif spawn:
-        try:
-            stream.spawn(default_blueprint=blueprint)
-        except Exception as exc:  # the viewer binary is missing or cannot start here
-            raise BridgeError(f"cannot start the Rerun viewer ({exc}); use --save FILE.rrd instead") from exc
-    _log_recording(rr, stream, recording, episode)
-    stream.flush()
+        port = _start_viewer(bind)
+        stream.connect_grpc(f"rerun+http://127.0.0.1:{port}/proxy", default_blueprint=blueprint)
+    try:
+        _log_recording(rr, stream, recording, episode)
+        stream.flush()
+    except RuntimeError as exc:  # the viewer went away while we were sending
+        raise BridgeError(
+            f"the Rerun viewer closed the connection ({exc}); use --save RUN.rrd instead"
+        ) from exc
     stream.disconnect()  # writes the .rrd footer now, not whenever the stream is collected
     return Path(save) if save is not None else None
 
 
+def _check_display() -> None:
+    if sys.platform.startswith("linux") and not (
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+    ):
+        raise BridgeError(
+            "cannot open the Rerun viewer: neither DISPLAY nor WAYLAND_DISPLAY is set (no display here); "
+            "write a file with --save RUN.rrd and open it where there is a display (rerun RUN.rrd)"
+        )
+
+
+def _start_viewer(bind: str) -> int:
+    """Start ``rerun`` listening on ``bind`` at a free port; fail clearly when it does not come up."""
+    binary = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
+    if binary is None:
+        raise BridgeError(
+            'cannot start the Rerun viewer: no rerun executable (pip install "fmu-bridge[viz]"); '
+            "use --save RUN.rrd instead"
+        )
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = int(probe.getsockname()[1])
+    process = subprocess.Popen(
+        [binary, "--bind", bind, "--port", str(port)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+    deadline = time.monotonic() + 20.0
+    while time.monotonic() < deadline:
+        if process.poll() is not None:
+            error = (process.stderr.read() if process.stderr else b"").decode(errors="replace").strip()
+            raise BridgeError(
+                f"the Rerun viewer exited at start (code {process.returncode}): {error[-400:]}; "
+                "use --save RUN.rrd instead"
+            )
+        with socket.socket() as client:
+            if client.connect_ex(("127.0.0.1", port)) == 0:
+                return port
+        time.sleep(0.1)
+    raise BridgeError(
+        f"the Rerun viewer did not listen on port {port} within 20 s; use --save RUN.rrd instead"
+    )
+
+
 def _blueprint(rrb: Any, recording: Recording) -> Any:
+    tracked = [out for out, _ in sig.tracking_pairs(sig.config(recording))]
     plots = [
-        rrb.TimeSeriesView(origin=meta.OBSERVATIONS, name="observations"),
+        rrb.TimeSeriesView(origin=f"/tracking/{out}", name=f"{out}: reference and output") for out in tracked
+    ]
+    plots += [
         rrb.TimeSeriesView(origin=meta.OUTPUTS, name="outputs (unscaled)"),
-        rrb.TimeSeriesView(
-            origin="/", contents=[f"+ {meta.ACTIONS}/**", f"+ {meta.AGENT_ACTION}/**"], name="actions"
-        ),
+        rrb.TimeSeriesView(origin=meta.ACTIONS, name="FMU inputs (physical units)"),
+        rrb.TimeSeriesView(origin=meta.AGENT_ACTION, name="agent action (-1..1)"),
+        rrb.TimeSeriesView(origin=meta.OBSERVATIONS, name="observations (scaled)"),
         rrb.TimeSeriesView(origin=meta.REWARD, name="reward"),
     ]
     top = [
@@ -119,13 +185,15 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
         top.insert(0, rrb.Spatial2DView(origin="/cartpole", name="cart-pole", visual_bounds=bounds))
     return rrb.Blueprint(
         rrb.Vertical(rrb.Grid(*plots, grid_columns=2), rrb.Horizontal(*top), row_shares=[3, 2]),
-        rrb.TimePanel(state="collapsed", timeline="time", play_state="following"),
+        # paused: a viewer that follows the newest data shows nothing until the whole file is in
+        rrb.TimePanel(state="collapsed", timeline="time", play_state="paused"),
         collapse_panels=True,
     )
 
 
 def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
     stream.log("/about", rr.TextDocument(_about(recording), media_type=rr.MediaType.MARKDOWN), static=True)
+    unit_of = sig.units(recording)
     for group in GROUPS:
         series = recording.series.get(group)
         if series is None or not len(series):
@@ -135,68 +203,106 @@ def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | No
         rows = _rows(recording, series, episode)
         for i, name in enumerate(names):
             entity = f"{group}/{name}" if group != meta.REWARD else group
-            style = rr.SeriesLines(colors=[series_colour(group, i)], names=name, widths=2.0)
+            text = sig.label(group, name, unit_of)
+            style = rr.SeriesLines(colors=[series_colour(group, i)], names=text, widths=2.0)
             stream.log(entity, style, static=True)
             _send(rr, stream, entity, rows, lambda r, i=i, v=values: rr.Scalars.columns(scalars=v[r, i]))
+    _log_tracking(rr, stream, recording, episode, unit_of)
     _log_episodes(rr, stream, recording, episode)
     _log_cartpole(rr, stream, recording, episode)
+
+
+def _log_tracking(
+    rr: Any, stream: Any, recording: Recording, episode: int | None, unit_of: dict[str, str]
+) -> None:
+    """Reference and output of each tracked signal on one plot; the output in the agent's colour."""
+    outputs = recording.series.get(meta.OUTPUTS)
+    cfg = sig.config(recording)
+    if outputs is None or not len(outputs):
+        return
+    agent = str(recording.metadata.get("fmu_bridge", {}).get("agent") or "agent")
+    rows = _rows(recording, outputs, episode)
+    sim_s = outputs.stamp_ns.astype(np.float64) / 1e9
+    for out, ref in sig.tracking_pairs(cfg):
+        if out not in outputs.names:
+            continue
+        unit = f" [{unit_of[out]}]" if out in unit_of else ""
+        column = outputs.values[:, outputs.names.index(out)]
+        entity = f"/tracking/{out}/output"
+        stream.log(entity, rr.SeriesLines(colors=[sig.agent_colour(agent)], names=f"{out}{unit} ({agent})",
+                                          widths=2.0), static=True)  # fmt: skip
+        _send(rr, stream, entity, rows, lambda m, c=column: rr.Scalars.columns(scalars=c[m]))
+        reference = sig.reference_values(cfg, recording, ref, rows["episode"], sim_s)
+        if reference is None:
+            continue
+        entity = f"/tracking/{out}/reference"
+        style = rr.SeriesLines(colors=[sig.REFERENCE_RGB], names=f"{ref}{unit} (reference)", widths=1.5)
+        stream.log(entity, style, static=True)
+        _send(rr, stream, entity, rows, lambda m, c=reference: rr.Scalars.columns(scalars=c[m]))
 
 
 def _rows(recording: Recording, series: Any, episode: int | None) -> dict[str, Any]:
     """Row selection and time columns of a stream, split by episode for the episode timelines."""
     episodes = episode_of(recording, series.log_ns)
     keep = np.ones(len(series), dtype=bool) if episode is None else episodes == episode
+    starts = {e.index: e.start_ns for e in recording.episodes}
+    since_start = series.log_ns - np.array([starts.get(int(e), 0) for e in episodes], dtype=np.int64)
     return {
         "keep": keep,
         "episode": episodes,
         "time": series.log_ns.astype("timedelta64[ns]"),  # exact: no float seconds in between
         "sim_time": series.stamp_ns.astype("timedelta64[ns]") if series.stamped else None,
+        # unstamped streams (reward): the time since the episode's start on the recording clock
+        "in_episode": (series.stamp_ns if series.stamped else since_start).astype("timedelta64[ns]"),
         "step": steps_of(recording, series),
         "per_episode": len(recording.episodes) <= MAX_EPISODE_TIMELINES,
     }
 
 
 def _send(rr: Any, stream: Any, entity: str, rows: dict[str, Any], columns: Any) -> None:
-    """``send_columns`` once per episode (each with its own episode timeline), or once for all."""
-    parts: list[tuple[str | None, npt.NDArray[np.bool_]]] = []
-    if rows["per_episode"]:
-        for number in np.unique(rows["episode"][rows["keep"]]):
-            label = f"episode_{number}" if number >= 0 else None
-            parts.append((label, rows["keep"] & (rows["episode"] == number)))
-    else:
-        parts.append((None, rows["keep"]))
-    for label, mask in parts:
-        if not mask.any():
-            continue
+    """``send_columns`` once per episode (each with its own episode timeline), then a clear, so
+    that no line joins the last sample of an episode to the first of the next."""
+    for number in np.unique(rows["episode"][rows["keep"]]):
+        mask = rows["keep"] & (rows["episode"] == number)
         indexes = [
             rr.TimeColumn("time", duration=rows["time"][mask]),
             rr.TimeColumn("step", sequence=rows["step"][mask]),
         ]
         if rows["sim_time"] is not None:
             indexes.append(rr.TimeColumn("sim_time", duration=rows["sim_time"][mask]))
-            if label is not None:
-                indexes.append(rr.TimeColumn(label, duration=rows["sim_time"][mask]))
+        if rows["per_episode"] and number >= 0:
+            indexes.append(rr.TimeColumn(f"episode_{number}", duration=rows["in_episode"][mask]))
         stream.send_columns(entity, indexes=indexes, columns=columns(mask))
+        stream.set_time("time", duration=rows["time"][mask][-1] + np.timedelta64(1, "ns"))
+        stream.log(entity, rr.Clear(recursive=False))
+        stream.reset_time()
 
 
 def _log_episodes(rr: Any, stream: Any, recording: Recording, only: int | None) -> None:
+    per_episode = len(recording.episodes) <= MAX_EPISODE_TIMELINES
     for ep in recording.episodes:
         if only is not None and ep.index != only:
             continue
-        stream.set_time("time", duration=ep.start_ns / 1e9)
+        _episode_time(stream, ep.index, ep.start_ns, 0, per_episode)
         lines = [f"## Episode {ep.index}", f"- scenario: `{ep.scenario}`", f"- seed: {ep.seed}"]
         lines += [f"- {name} = {value:.6g}" for name, value in ep.drawn.items()]
         stream.log("/scenario", rr.TextDocument("\n".join(lines), media_type=rr.MediaType.MARKDOWN))
-        stream.log(
-            "/events", rr.TextLog(f"episode {ep.index} starts: scenario {ep.scenario}, seed {ep.seed}")
-        )
+        text = f"episode {ep.index} starts: scenario {ep.scenario}, seed {ep.seed}"
+        stream.log("/events", rr.TextLog(text, level="INFO"))
         if ep.end_ns is not None:
-            stream.set_time("time", duration=ep.end_ns / 1e9)
+            _episode_time(stream, ep.index, ep.end_ns, ep.end_ns - ep.start_ns, per_episode)
             text = f"episode {ep.index} ends after {ep.steps} steps: return {ep.episode_return}, {ep.reason}"
             stream.log(
                 "/events", rr.TextLog(text, level="WARN" if ep.reason not in (None, "time") else "INFO")
             )
+        stream.reset_time()
+
+
+def _episode_time(stream: Any, index: int, log_ns: int, since_start_ns: int, per_episode: bool) -> None:
     stream.reset_time()
+    stream.set_time("time", duration=np.timedelta64(log_ns, "ns"))
+    if per_episode:
+        stream.set_time(f"episode_{index}", duration=np.timedelta64(since_start_ns, "ns"))
 
 
 def _about(recording: Recording) -> str:

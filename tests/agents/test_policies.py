@@ -98,3 +98,20 @@ def test_residual_adds_to_the_baseline(motor: FmuEnv) -> None:
 def test_unknown_agent_is_a_clear_error() -> None:
     with pytest.raises(ConfigError, match="not a model file or run directory"):
         make_policy("no_such_thing", {"pid": {}})
+
+
+def test_zero_on_a_discrete_space_without_a_zero_level_says_so() -> None:
+    """Cart-pole pushes -10 N or +10 N: 'zero' cannot apply 0 N there and must not pretend to."""
+    env = FmuEnv(example_experiment("cartpole_balance"))
+    try:
+        with pytest.raises(
+            ConfigError, match=r"no action applying zero input: levels \{'force': \[-10.0, 10.0\]\}"
+        ):
+            make_policy("zero", {}).reset(env.task, 0)
+        push = make_policy("constant:-10", {})
+        push.reset(env.task, 0)
+        obs, _ = env.reset(seed=0)
+        env.step(push.act(obs, env.task.signal_dict()))
+        assert env.task.applied_inputs[0] == -10.0
+    finally:
+        env.close()

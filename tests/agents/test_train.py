@@ -138,3 +138,29 @@ def test_train_and_compare_from_the_command_line(tmp_path: Path) -> None:
     )
     assert out.exit_code == 0, out.output
     assert "run1" in out.output and "run2" in out.output and (tmp_path / "curves.png").is_file()
+
+
+def test_eval_env_has_the_training_env_type_so_sb3_does_not_warn() -> None:
+    """SB3's EvalCallback warns 'Training and eval env are not of the same type' unless
+    isinstance(training_env, type(eval_env)); subproc and remote (VecMonitor) training must pass."""
+    from stable_baselines3.common.vec_env import SubprocVecEnv, VecMonitor
+
+    from agents.settings import TrainingSettings
+    from agents.train import build_eval_env, build_vec_env
+    from bridge.experiment.config import load_experiment
+
+    path, experiment = CARTPOLE, load_experiment(CARTPOLE)
+    settings = TrainingSettings.from_experiment(experiment, {"vec": "subproc", "n_envs": 2})
+    train_env = build_vec_env(settings, experiment, path, None, 0)
+    eval_env = build_eval_env(train_env, settings, experiment, path, None)
+    try:
+        assert isinstance(train_env, SubprocVecEnv) and isinstance(train_env, type(eval_env))
+    finally:
+        eval_env.close()
+        train_env.close()
+    plain = TrainingSettings.from_experiment(experiment, {"n_envs": 1})
+    monitored = VecMonitor(build_vec_env(plain, experiment, path, None, 0))
+    remote_like = build_eval_env(monitored, settings, experiment, path, None)
+    assert isinstance(monitored, type(remote_like)) and type(remote_like) is VecMonitor
+    remote_like.close()
+    monitored.close()

@@ -688,6 +688,7 @@ def test_model_names_and_variants() -> None:
         "pi_controller",
         "stair",
         "typed",
+        "vehicle",
     ]
     by_model: dict[str, set[tuple[str, str]]] = {}
     for v in models.list_variants():
@@ -701,13 +702,12 @@ def test_model_names_and_variants() -> None:
     assert by_model["gearload"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["motor_gearload"] == {("2.0", "cs")}
+    assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    with pytest.raises(
-        ConfigError,
-        match="available: bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed",
-    ):
+    names = "bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed, vehicle"
+    with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
         models.example_fmu("typed", "2.0", "me")
