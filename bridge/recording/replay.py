@@ -3,7 +3,8 @@
 The only module that imports ``rerun`` (the ``viz`` extra). The Rerun recording holds:
 
 - one time series per signal, grouped by stream (``/observations/*``, ``/outputs/*``,
-  ``/actions/*`` beside ``/agent_action/*``, ``/reward``), in fixed colours;
+  ``/actions/*`` beside ``/agent_action/*``, ``/reward``), in fixed colours; a system of FMUs
+  also gets one plot per component (``/components/NAME/outputs/*``);
 - the scenario of each episode (name, seed, drawn values) as a Markdown document at the
   episode's start, the run's metadata as a static document, and episode starts and ends
   as text log entries;
@@ -109,6 +110,7 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
             origin="/", contents=[f"+ {meta.ACTIONS}/**", f"+ {meta.AGENT_ACTION}/**"], name="actions"
         ),
         rrb.TimeSeriesView(origin=meta.REWARD, name="reward"),
+        *_component_views(rrb, recording),
     ]
     top = [
         rrb.TextDocumentView(origin="/scenario", name="scenario"),
@@ -124,9 +126,23 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
     )
 
 
+def component_topics(recording: Recording) -> list[str]:
+    """The per-component output topics of a recorded system of FMUs, in recording order."""
+    return [t for t in recording.series if t.startswith(meta.COMPONENTS) and t.endswith("/outputs")]
+
+
+def _component_views(rrb: Any, recording: Recording) -> list[Any]:
+    """One plot per component of a system of FMUs: its outputs under ``/components/NAME/outputs``."""
+    views = []
+    for topic in component_topics(recording):
+        name = topic.removeprefix(meta.COMPONENTS).removesuffix("/outputs")
+        views.append(rrb.TimeSeriesView(origin=topic, name=f"component {name}"))
+    return views
+
+
 def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
     stream.log("/about", rr.TextDocument(_about(recording), media_type=rr.MediaType.MARKDOWN), static=True)
-    for group in GROUPS:
+    for group in (*GROUPS, *component_topics(recording)):
         series = recording.series.get(group)
         if series is None or not len(series):
             continue

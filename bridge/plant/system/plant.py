@@ -114,6 +114,9 @@ class SystemPlant(Plant):
             _add(ins, e)
         for e in observed:
             _add(outs, e)
+        for name, info in self.infos.items():  # every output, for the per-component recording
+            for var in info.by_causality("output"):
+                _add(outs, Endpoint(name, var.name))
         for name, plant in self.plants.items():
             plant.bind(ins[name], outs[name])
         self.links = [
@@ -195,10 +198,15 @@ class SystemPlant(Plant):
         return error
 
     def component_outputs(self) -> dict[str, dict[str, float]]:
-        """Every bound output of every component now, by component (for recording)."""
+        """Every output of every component now (and any other variable the task reads), by
+        component, for recording; the order is fixed once bound."""
         return {
             n: dict(zip(p.output_names, map(float, self.master.outputs[n]))) for n, p in self.plants.items()
         }
+
+    def component_values(self) -> FloatArray:
+        """The values of :meth:`component_outputs`, flat in the same order (cheap, per step)."""
+        return np.concatenate([self.master.outputs[n] for n in self.plants])
 
     @property
     def can_set_values(self) -> bool:  # type: ignore[override]
