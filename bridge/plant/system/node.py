@@ -107,10 +107,15 @@ def serve_components(
     served = [n for n, c in system.components.items() if c.node is not None]
     chosen = list(names) or served
     unknown = [n for n in chosen if n not in served]
-    if unknown or not chosen:
+    if not served:
         raise ConfigError(
-            f"system serve: {unknown or 'no component'} is not served by a node; components with "
-            f"node: {served}; set system.components.NAME.node in the file{system.where}"
+            f"system serve: no component of the system has node:; set system.components.NAME.node "
+            f"to the node name that serves it{system.where}"
+        )
+    if unknown:
+        raise ConfigError(
+            f"system serve: {unknown} is not served by a node; components with node: {served}; "
+            f"set system.components.NAME.node in the file{system.where}"
         )
     nodes: list[FmuNode] = []
     try:
@@ -169,6 +174,9 @@ class NodeComponent(Plant):
         super().bind(input_names, output_names)
         self._in_index = self._positions(self.input_names, self._node_inputs, "inputs")
         self._out_index = self._positions(self.output_names, self._node_outputs, "outputs")
+        # the usual case (both sides bound alike): values pass through without reordering
+        self._all_inputs = self._in_index == list(range(len(self._node_inputs)))
+        self._all_outputs = self._out_index == list(range(len(self._node_outputs)))
 
     def _positions(self, names: Sequence[str], served: list[str], what: str) -> list[int]:
         missing = [n for n in names if n not in served]
@@ -199,6 +207,10 @@ class NodeComponent(Plant):
             self._u[self._in_index] = inputs
 
     def send(self, inputs: Sequence[float] | None) -> None:
+        if self._all_inputs and inputs is not None:
+            self._u[:] = inputs
+            self.client.send_action(self, self.episode, self.sample + 1, inputs)
+            return
         self._write(inputs)
         self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist())
 
@@ -212,7 +224,7 @@ class NodeComponent(Plant):
                 StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=self.sample, log=log.split("\n  ")
             )
         self.terminated = frame.terminated
-        return frame.values[self._out_index]
+        return frame.values if self._all_outputs else frame.values[self._out_index]
 
     def provenance(self) -> dict[str, str]:
         d = self.client.description

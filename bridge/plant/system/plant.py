@@ -107,16 +107,16 @@ class SystemPlant(Plant):
         outs: dict[str, list[str]] = {n: [] for n in system.components}
         external = [split_name(n, system.components, "actions", where) for n in self.input_names]
         observed = [split_name(n, system.components, "observations", where) for n in self.output_names]
-        for c in system.connections:
+        for name, info in self.infos.items():  # every output, for the per-component recording
+            for var in info.by_causality("output"):
+                _add(outs, Endpoint(name, var.name))
+        for c in system.connections:  # in the order a component's node serves them
             _add(outs, c.source)
             _add(ins, c.target)
         for e in external:
             _add(ins, e)
         for e in observed:
             _add(outs, e)
-        for name, info in self.infos.items():  # every output, for the per-component recording
-            for var in info.by_causality("output"):
-                _add(outs, Endpoint(name, var.name))
         for name, plant in self.plants.items():
             plant.bind(ins[name], outs[name])
         self.links = [
