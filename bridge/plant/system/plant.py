@@ -19,7 +19,7 @@ from bridge.errors import ConfigError, PlantDied, PlantError, StepError
 from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
 from bridge.experiment.validate import Timing, check_experiment
 from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
-from bridge.plant.base import FloatArray, Plant
+from bridge.plant.base import MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.check import check_system
 from bridge.plant.system.description import (
     Component,
@@ -190,9 +190,11 @@ class SystemPlant(Plant):
     def _component_failed(self, exc: PlantError, **fields: Any) -> PlantError:
         """The component's error as the system's, same kind, naming the component."""
         verb = {PlantDied: "died", StepError: "failed"}.get(type(exc), "did not answer")
+        hint = "the node may be overloaded, hung or unreachable; timeout_s sets the limit"
         if isinstance(exc, StepError):
-            fields["log"] = exc.log
-        hint = "restart its node (fmu-bridge system serve) and reset" if isinstance(exc, PlantDied) else ""
+            fields["log"], hint = exc.log, MODEL_FAILED_HINT
+        elif isinstance(exc, PlantDied):
+            hint = "restart its node (fmu-bridge system serve) and reset"
         error = self.failure(type(exc), f"{exc.plant} {verb}", exc.detail, hint, **fields)
         error.component = next((n for n, p in self.plants.items() if p.name == exc.plant), "")  # type: ignore[attr-defined]
         return error
