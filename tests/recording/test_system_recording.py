@@ -80,7 +80,7 @@ def test_each_component_has_its_outputs_on_its_own_topic(recorded: Any) -> None:
 
 
 def test_rosbags_reads_the_component_topics(recorded: Any) -> None:
-    path, samples, names = recorded
+    path, samples, _ = recorded
     counts: dict[str, int] = defaultdict(int)
     last: dict[str, list[float]] = {}
     with AnyReader([path]) as reader:
@@ -100,7 +100,7 @@ def test_replay_groups_plots_by_component(recorded: Any, tmp_path: Path) -> None
     rr_chunk = pytest.importorskip("rerun.chunk", reason="rerun-sdk is not installed")
     from bridge.recording.replay import replay
 
-    path, samples, names = recorded
+    path, _, names = recorded
     target = replay(path, save=tmp_path / "system.rrd")
     assert target is not None
     entities = set()
