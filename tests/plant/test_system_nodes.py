@@ -121,6 +121,18 @@ def test_nodes_give_the_in_process_trajectory(
         assert np.max(np.abs(expected)) > 1.0  # the motor really turned
 
 
+def test_a_node_component_needs_no_fmu_on_this_machine(served: Path, net: Loopback) -> None:
+    here = system_file(served, "here_nofmu", {})
+    there = system_file(served, "there_nofmu", {"motor": NODES["motor"]})
+    data = yaml.safe_load(there.read_text())
+    data["system"]["components"]["motor"]["fmu"] = "only/on/the/node/dcmotor.fmu"
+    there.write_text(yaml.safe_dump(data))
+    with FmuEnv(here) as local, remote_env(there, net) as distributed:
+        motor = distributed.plant.plants["motor"]  # type: ignore[attr-defined]
+        assert not motor.component.fmu.exists() and "omega" in motor.info.variables
+        np.testing.assert_array_equal(trajectory(distributed, 2), trajectory(local, 2))
+
+
 def test_a_dead_component_node_is_named(net: Loopback, tmp_path: Path) -> None:
     file = system_file(tmp_path, "dying", {"load": "dying-load"})
     own = Loopback(net.endpoint, f"test_{uuid.uuid4().hex[:10]}", net.session)

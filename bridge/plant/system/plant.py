@@ -48,32 +48,43 @@ class SystemPlant(Plant):
         prefix: str = "fmu_bridge",
         timeout_s: float = 10.0,
     ) -> None:
-        from bridge.fmu import read_model_info
-
         self.experiment = exp = experiment
         self.system = system = from_experiment(exp)
-        self.infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
-        self.warnings = check_system(system, self.infos)
-        self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
-        loop = find_loop(system, self.feedthrough)
-        if loop and system.max_iterations <= 1:
-            raise loop_error(loop, system)
         self.name = f"system {exp.name!r} ({len(system.components)} components)"
         self.timing = system_timing(exp, system)
-        self.info = system_info(exp, system, self.infos, self.timing)
-        _check_driven(exp, system)
-        check_experiment(exp, self.info)
         self.plants: dict[str, Plant] = dict(plants or {})
         self._session, self._own_session = session, False
+        connect = (options, prefix, timeout_s)
         try:
+            # a node's FMU need not exist here: its variables then come from the node
+            for name, component in system.components.items():
+                if component.node and not component.fmu.is_file() and name not in self.plants:
+                    self.plants[name] = self._component(component, *connect)
+            self._check(exp, system)
             for name, component in system.components.items():
                 if name not in self.plants:
-                    self.plants[name] = self._component(component, options, prefix, timeout_s)
+                    self.plants[name] = self._component(component, *connect)
         except BaseException:
             self.close()
             raise
         self._macro = 0
         self._pending: Sequence[float] | None = None
+
+    def _check(self, exp: Experiment, system: SystemDescription) -> None:
+        from bridge.fmu import read_model_info
+
+        self.infos = {
+            n: self.plants[n].info if n in self.plants else read_model_info(c.fmu)
+            for n, c in system.components.items()
+        }
+        self.warnings = check_system(system, self.infos)
+        self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
+        loop = find_loop(system, self.feedthrough)
+        if loop and system.max_iterations <= 1:
+            raise loop_error(loop, system)
+        self.info = system_info(exp, system, self.infos, self.timing)
+        _check_driven(exp, system)
+        check_experiment(exp, self.info)
 
     def _component(
         self, component: Component, options: ZenohOptions | None, prefix: str, timeout_s: float
