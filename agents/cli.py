@@ -1,4 +1,4 @@
-"""``fmu-bridge train, evaluate, compare, agent run, export``: added through an entry point."""
+"""``fmu-bridge train, evaluate, compare, agent run, agent export``: added through an entry point."""
 
 from __future__ import annotations
 
@@ -17,13 +17,16 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("compare")(compare_cmd)
-    agent_app = typer.Typer(help="Deployed agents: run a trained policy as a node.", no_args_is_help=True)
+    agent_app = typer.Typer(
+        help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
+    )
     agent_app.command("run")(agent_run_cmd)
-    app.add_typer(agent_app, name="agent")
+    # `fmu-bridge export` is the recordings' CSV/Parquet export: agents export under `agent`.
     export_app = typer.Typer(help="Export a trained run: ONNX graph or policy FMU.", no_args_is_help=True)
     export_app.command("onnx")(export_onnx_cmd)
     export_app.command("fmu")(export_fmu_cmd)
-    app.add_typer(export_app, name="export")
+    agent_app.add_typer(export_app, name="export")
+    app.add_typer(agent_app, name="agent")
 
 
 ZenohModeOpt = Annotated[

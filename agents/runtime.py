@@ -1,4 +1,4 @@
-"""Torch-free inference: a policy exported by ``fmu-bridge export onnx``, run with onnxruntime.
+"""Torch-free inference: a policy exported by ``fmu-bridge agent export onnx``, run with onnxruntime.
 
 This module imports neither torch nor stable-baselines3, so a deployed agent runs where only
 numpy and onnxruntime are installed. :class:`OnnxPolicy` has the interface of
@@ -39,7 +39,7 @@ def onnx_file(path: Path) -> Path:
     candidate = run_dir / "policy.onnx"
     if not candidate.is_file():
         raise ConfigError(
-            f"{path} has no policy.onnx: export it first with `fmu-bridge export onnx {run_dir}` "
+            f"{path} has no policy.onnx: export it first with `fmu-bridge agent export onnx {run_dir}` "
             "(on a machine with torch), then copy the run directory"
         )
     return candidate

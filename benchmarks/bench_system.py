@@ -1,10 +1,17 @@
-"""Cost of a macro step of a system in this process against a raw FMPy loop doing the same work.
+"""Cost of a macro step of a system, in this process and across nodes, side by side in one run.
 
-The system: the DC motor and the gearbox load (two FMUs, two connections, Jacobi). The raw loop
-is what a user writes with FMPy alone: per macro step and component, setReal of the connected
-input, doStep, getReal of the outputs. Target: a macro step costs at most 1.3x the raw loop.
+In this process: the DC motor and the gearbox load (two FMUs, two connections, Jacobi) against
+a raw FMPy loop doing the same work (per macro step and component: setReal of the connected
+input, doStep, getReal of the outputs). Target: at most 1.3x the raw loop.
+
+Across nodes on loopback: N = 1..4 DC motors in a chain (``c_i.omega -> c_{i+1}.load_torque``),
+each component in its own node process (``fmu-bridge system serve --component c_i``), Jacobi:
+every node is sent its inputs before any answer is awaited, so they step in parallel. Against
+one bare Zenoh round trip (the echo process of bench_remote.py, same payload as a node's
+outputs frame). Target: a macro step of N components at most 2x one bare round trip.
 
     PYTHONPATH=$PWD python benchmarks/bench_system.py [--steps 20000] [--repeats 5]
+        [--nodes 1,2,3,4] [--remote-steps 2000] [--no-distributed]
 """
 
 from __future__ import annotations
@@ -53,7 +60,18 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--nodes", default="1,2,3,4")
+    parser.add_argument("--remote-steps", type=int, default=2000)
+    parser.add_argument("--no-distributed", action="store_true")
     args = parser.parse_args()
+    in_process(args)
+    if not args.no_distributed:
+        from benchmarks.bench_system_nodes import distributed
+
+        distributed([int(n) for n in args.nodes.split(",")], args.remote_steps)
+
+
+def in_process(args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         plant = system_plant(Path(tmp))
         motor, load = raw_pair()

@@ -1,4 +1,4 @@
-"""``fmu-bridge export onnx RUN``: the deployed policy as one ONNX graph.
+"""``fmu-bridge agent export onnx RUN``: the deployed policy as one ONNX graph.
 
 Input ``observation`` (float32, ``[batch, n_obs]``, the Task's observation vector); outputs
 ``action`` (the agent's action: float32 ``[batch, n_actions]`` or int64 ``[batch]``, as

@@ -1,4 +1,4 @@
-"""``fmu-bridge export fmu RUN --fmi 2|3``: a trained policy as a co-simulation FMU.
+"""``fmu-bridge agent export fmu RUN --fmi 2|3``: a trained policy as a co-simulation FMU.
 
 Inputs: when the observation is a plain selection of signals (outputs and references, history 1,
 no tracking errors or last action), the FMU takes those signals in physical units, named after

@@ -1,4 +1,4 @@
-"""``fmu-bridge system inspect|check|simulate``: systems of coupled FMUs from the command line."""
+"""``fmu-bridge system inspect|check|simulate|serve``: systems of coupled FMUs from the command line."""
 
 from __future__ import annotations
 
@@ -12,8 +12,11 @@ from rich.table import Table
 
 from bridge.experiment.config import as_experiment
 
-system_app = typer.Typer(help="Systems of coupled FMUs: inspect, check, simulate.", no_args_is_help=True)
+system_app = typer.Typer(
+    help="Systems of coupled FMUs: inspect, check, simulate, serve.", no_args_is_help=True
+)
 console = Console()
+err_console = Console(stderr=True)
 ExperimentArg = Annotated[Path, typer.Argument(help="An experiment file with a system: section or an .ssp.")]
 
 
@@ -150,6 +153,57 @@ def _held(items: list[str], inputs: list[str]) -> dict[str, float]:
         except ValueError:
             raise ConfigError(f"--input {item!r}: {value!r} is not a number") from None
     return held
+
+
+@system_app.command("serve")
+def serve_system(  # noqa: PLR0917 (typer options)
+    experiment: ExperimentArg,
+    component: Annotated[
+        list[str] | None, typer.Option("--component", help="Serve only this component (repeatable).")
+    ] = None,
+    zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config.")] = None,
+    listen: Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on.")] = None,
+    connect: Annotated[
+        list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")
+    ] = None,
+    zenoh_mode: Annotated[str | None, typer.Option("--zenoh-mode", help="client or peer (default).")] = None,
+    prefix: Annotated[
+        str, typer.Option("--prefix", help="Key expression prefix of the nodes.")
+    ] = "fmu_bridge",
+) -> None:
+    """Serve the components that have node: as FMU nodes (lockstep) until interrupted.
+
+    Each component runs in an FmuNode named by its node: key, with the inputs and outputs the
+    system connects (see docs/systems.md). Run it once per machine with --component to spread
+    the components; the system's env then drives them over Zenoh."""
+    import signal
+    import threading
+
+    from bridge.net.transport import ZenohOptions, open_session, session_mode
+    from bridge.plant.system.node import serve_components
+
+    mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
+    options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
+    stop = threading.Event()
+    session = open_session(options)
+    try:
+        nodes = serve_components(as_experiment(experiment), component or (), prefix=prefix, session=session)
+        try:
+            signal.signal(signal.SIGTERM, lambda *_: stop.set())
+            for n in nodes:
+                err_console.print(
+                    f"node {n.name!r} serving {n.experiment.name} on {n.keys.base}/*", highlight=False
+                )
+            err_console.print(f"{len(nodes)} component node(s) serving; Ctrl-C stops them", highlight=False)
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            pass
+        finally:
+            for n in nodes:
+                n.close()
+    finally:
+        session.close()
 
 
 def register(app: typer.Typer) -> None:

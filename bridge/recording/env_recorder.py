@@ -80,15 +80,20 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             meta.AGENT_ACTION: meta.action_names(task, env.action_space),
             meta.OUTPUTS: list(task.output_names),
         }
+        components = meta.component_names(plant)  # a system of FMUs: each component's outputs
+        self._component_topics = [meta.component_topic(c) for c in components]
+        self._component_sizes = np.cumsum([len(v) for v in components.values()])[:-1].tolist()
+        names.update(zip(self._component_topics, components.values()))
+        topics = [*STEP_TOPICS, *self._component_topics]
         self.writer = writer = McapWriter(
             path, chunk_size=chunk_size, compression=compression, overwrite=overwrite
         )
         try:
-            self.channels = ch = meta.open_channels(writer, [*STEP_TOPICS, meta.SCENARIO, meta.EVENTS], names)
+            self.channels = ch = meta.open_channels(writer, [*topics, meta.SCENARIO, meta.EVENTS], names)
             self._layouts = {t: cdr.JointStateLayout.of(n) for t, n in names.items()}
             slot = {meta.ACTIONS: 0, meta.AGENT_ACTION: 0}
             self._block = StepBlock(
-                [FixedMessage(ch[t], slot.get(t, 1), self._layouts.get(t)) for t in STEP_TOPICS]
+                [FixedMessage(ch[t], slot.get(t, 1), self._layouts.get(t)) for t in topics]
             )
             meta.write_run_metadata(writer, self._run_info(agent, seed), task.experiment)
         except BaseException:
@@ -159,9 +164,17 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         w, ch, log = self.writer, self.channels, self._clock.next_start_ns
         w.add_message(ch[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
         w.add_message(ch[meta.SCENARIO], log, cdr.encode_joint_state(t_ns, list(drawn), list(drawn.values())))
-        for topic, values in ((meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])):
+        messages = [(meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])]
+        if self._component_topics:
+            messages += zip(self._component_topics, self._components_now())
+        for topic, values in messages:
             w.add_message(ch[topic], log, self._layouts[topic].pack(t_ns, np.ravel(values).tolist()))
         return obs, info
+
+    def _components_now(self) -> list[Any]:
+        """Each component's output values now (a system of FMUs), split from one flat array."""
+        values = self._plant.component_values()  # type: ignore[attr-defined]
+        return np.split(np.asarray(values, dtype=np.float64), self._component_sizes)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
@@ -174,6 +187,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
                 obs.tobytes(),
                 reward,
                 info["outputs"].tobytes(),
+                self._plant.component_values().tobytes() if self._component_topics else b"",  # type: ignore[attr-defined]
             )
         )
         if terminated or truncated:
@@ -187,7 +201,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         if not rows:
             return
         n = len(rows)
-        times, inputs, actions, observations, rewards, outputs = zip(*rows)
+        times, inputs, actions, observations, rewards, outputs, components = zip(*rows)
         t_ns = np.round(np.asarray(times, dtype=np.float64) * 1e9).astype(np.int64)
         before = np.concatenate(([self._t_prev], t_ns[:-1]))  # actions are stamped at t_k
         self._t_prev = int(t_ns[-1])
@@ -198,6 +212,9 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             np.asarray(rewards, dtype=np.float64),
             np.frombuffer(b"".join(outputs), dtype=np.float64).reshape(n, -1),
         ]
+        if self._component_topics:
+            flat = np.frombuffer(b"".join(components), dtype=np.float64).reshape(n, -1)
+            values += np.split(flat, self._component_sizes, axis=1)
         offset = self._offset
         self.writer.add_block(*self._block.pack([(before + offset, before), (t_ns + offset, t_ns)], values))
         self._steps += n

@@ -15,6 +15,10 @@ topic              type                          content
 ``/events``        ``std_msgs/msg/String``         JSON: episode start/end, FMU errors, rejects
 =================  ============================  ============================================
 
+A system of FMUs adds ``/components/<component>/outputs`` (``sensor_msgs/msg/JointState``) per
+component: every output of that component (and any other variable of it the task reads), by
+its own name, stamped like ``/outputs``.
+
 Recording clock: MCAP log and publish times (ns) are simulation time shifted per episode:
 episode ``e`` starts one sampling period after episode ``e-1`` ended, so several episodes
 in one file never overlap and the file's timeline reads like one continuous run. Header
@@ -52,6 +56,24 @@ TOPIC_TYPES = {
     SCENARIO: cdr.JOINT_STATE,
     EVENTS: cdr.STRING,
 }
+COMPONENTS = "/components/"
+
+
+def component_topic(component: str) -> str:
+    """The topic of one component's outputs in a recording of a system of FMUs."""
+    return f"{COMPONENTS}{component}/outputs"
+
+
+def component_names(plant: Any) -> dict[str, list[str]]:
+    """The outputs of each component of a system plant (its ``component_outputs`` hook), else {}."""
+    hook = getattr(plant, "component_outputs", None)
+    return {name: list(values) for name, values in hook().items()} if callable(hook) else {}
+
+
+def topic_type(topic: str) -> str:
+    return cdr.JOINT_STATE if topic.startswith(COMPONENTS) else TOPIC_TYPES[topic]
+
+
 RECORDING_CLOCK = (
     "log_time = simulation time + a per-episode offset: each episode starts one sampling period "
     "after the previous one ended; header stamps = simulation time within the episode"
@@ -166,7 +188,7 @@ def open_channels(writer: McapWriter, topics: list[str], names: dict[str, list[s
     """Register the schemas and the channels of ``topics`` (JointState channels list their names)."""
     ids = {}
     for topic in topics:
-        msgtype = TOPIC_TYPES[topic]
+        msgtype = topic_type(topic)
         schema_id = writer.add_schema(msgtype, "ros2msg", cdr.schema_text(msgtype).encode())
         meta = {"offered_qos_profiles": ""}
         if topic in names:

@@ -4,7 +4,8 @@ The only module that imports ``rerun`` (the ``viz`` extra). The Rerun recording 
 
 - one time series per signal, grouped by stream (``/observations/*``, ``/outputs/*``,
   ``/actions/*`` in physical units, ``/agent_action/*`` in [-1, 1] on a plot of its own,
-  ``/reward``), in fixed colours, labelled with the FMU's units where the FMU can be read;
+  ``/reward``), in fixed colours, labelled with the FMU's units where the FMU can be read; a system
+  of FMUs also gets one plot per component (``/components/NAME/outputs/*``);
 - one plot per tracked output with its reference (``/tracking/<output>/...``; the reference
   rebuilt from the episode's scenario), the output in the agent's colour;
 - a clear at every episode end, so no line joins two episodes;
@@ -175,6 +176,7 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
         rrb.TimeSeriesView(origin=meta.AGENT_ACTION, name="agent action (-1..1)"),
         rrb.TimeSeriesView(origin=meta.OBSERVATIONS, name="observations (scaled)"),
         rrb.TimeSeriesView(origin=meta.REWARD, name="reward"),
+        *_component_views(rrb, recording),
     ]
     top = [
         rrb.TextDocumentView(origin="/scenario", name="scenario"),
@@ -191,10 +193,24 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
     )
 
 
+def component_topics(recording: Recording) -> list[str]:
+    """The per-component output topics of a recorded system of FMUs, in recording order."""
+    return [t for t in recording.series if t.startswith(meta.COMPONENTS) and t.endswith("/outputs")]
+
+
+def _component_views(rrb: Any, recording: Recording) -> list[Any]:
+    """One plot per component of a system of FMUs: its outputs under ``/components/NAME/outputs``."""
+    views = []
+    for topic in component_topics(recording):
+        name = topic.removeprefix(meta.COMPONENTS).removesuffix("/outputs")
+        views.append(rrb.TimeSeriesView(origin=topic, name=f"component {name}"))
+    return views
+
+
 def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
     stream.log("/about", rr.TextDocument(_about(recording), media_type=rr.MediaType.MARKDOWN), static=True)
     unit_of = sig.units(recording)
-    for group in GROUPS:
+    for group in (*GROUPS, *component_topics(recording)):
         series = recording.series.get(group)
         if series is None or not len(series):
             continue

@@ -139,14 +139,18 @@ def test_policy_fmus_pass_fmpys_validator_and_inspect(runs: dict[str, Path]) -> 
 
     _load_plugins()
     for fmi in ("2", "3"):
-        out = CliRunner().invoke(app, ["export", "fmu", str(runs["SAC-cartpole_continuous"]), "--fmi", fmi])
+        out = CliRunner().invoke(
+            app, ["agent", "export", "fmu", str(runs["SAC-cartpole_continuous"]), "--fmi", fmi]
+        )
         assert out.exit_code == 0, out.output
         path = runs["SAC-cartpole_continuous"] / f"policy-fmi{fmi}.fmu"
         assert validate_fmu(str(path)) == []
         shown = CliRunner().invoke(app, ["inspect", str(path), "--json"])
         assert shown.exit_code == 0, shown.output
         assert "theta_dot" in shown.output and "force" in shown.output
-    bad = CliRunner().invoke(app, ["export", "fmu", str(runs["SAC-cartpole_continuous"]), "--fmi", "1"])
+    bad = CliRunner().invoke(
+        app, ["agent", "export", "fmu", str(runs["SAC-cartpole_continuous"]), "--fmi", "1"]
+    )
     assert bad.exit_code != 0 and "FMI 2 or 3" in str(bad.exception) + bad.output
 
 

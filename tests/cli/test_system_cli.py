@@ -83,3 +83,10 @@ def test_an_agent_trains_on_one_input_of_a_system(tmp_path: Path) -> None:
         progress=False,
     )
     assert result.timesteps >= 2048 and result.model_path.exists()
+
+
+def test_serve_refuses_a_system_without_node_components() -> None:
+    result = runner.invoke(app, ["system", "serve", str(SYSTEM)], env={"COLUMNS": "200"})
+    assert result.exit_code != 0
+    message = str(result.exception)
+    assert "no component of the system has node:" in message and str(SYSTEM) in message

@@ -113,7 +113,11 @@ def from_experiment(experiment: Experiment) -> SystemDescription:
         old = components.get(name)
         if not spec.fmu and old is None:
             raise ConfigError(f"system.components.{name}.fmu: give the component's FMU{where}")
-        fmu = _component_fmu(spec.fmu, experiment, name) if spec.fmu else (old.fmu if old else Path())
+        fmu = (
+            _component_fmu(spec.fmu, experiment, name, spec.node)
+            if spec.fmu
+            else (old.fmu if old else Path())
+        )
         parameters = {**(old.parameters if old else {}), **spec.parameters}
         components[name] = Component(
             name, fmu, parameters, spec.step_size, spec.interface, spec.feedthrough, spec.node
@@ -136,21 +140,22 @@ def from_experiment(experiment: Experiment) -> SystemDescription:
     )
 
 
-def _component_fmu(spec: str, experiment: Experiment, name: str) -> Path:
+def _component_fmu(spec: str, experiment: Experiment, name: str, node: str | None = None) -> Path:
     if spec.startswith("example:"):
         from bridge.models import example_fmu
 
         parts = spec.split(":")[1:]
         version = parts[1] if len(parts) > 1 and parts[1] else "2.0"
         return example_fmu(parts[0], version, parts[2] if len(parts) > 2 else "cs")
-    return _path(spec, experiment, f"system.components.{name}.fmu")
+    # a component served by a node may have its FMU only on the node's machine
+    return _path(spec, experiment, f"system.components.{name}.fmu", must_exist=node is None)
 
 
-def _path(spec: str, experiment: Experiment, key: str) -> Path:
+def _path(spec: str, experiment: Experiment, key: str, *, must_exist: bool = True) -> Path:
     path = Path(spec).expanduser()
     if not path.is_absolute():
         path = experiment.base_dir / path
-    if not path.exists():
+    if must_exist and not path.exists():
         raise ConfigError(
             f"{key}: {spec!r} does not exist (looked at {path}); give a path relative to the "
             f"experiment file or example:NAME [{experiment.source}]"

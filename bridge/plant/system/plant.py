@@ -11,59 +11,104 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, PlantDied, PlantError, StepError
 from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
 from bridge.experiment.validate import Timing, check_experiment
 from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
-from bridge.plant.base import FloatArray, Plant
+from bridge.plant.base import MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.check import check_system
-from bridge.plant.system.description import Endpoint, SystemDescription, from_experiment, split_name
+from bridge.plant.system.description import (
+    Component,
+    Endpoint,
+    SystemDescription,
+    from_experiment,
+    split_name,
+)
 from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
 from bridge.plant.system.master import Link, Master
+
+if TYPE_CHECKING:
+    from bridge.net.transport import ZenohOptions
 
 
 class SystemPlant(Plant):
     """The system of ``experiment`` (its ``system:`` section, or the SSP ``model.fmu`` names)."""
 
-    def __init__(self, experiment: Experiment, *, plants: Mapping[str, Plant] | None = None) -> None:
-        from bridge.fmu import read_model_info
-
+    def __init__(
+        self,
+        experiment: Experiment,
+        *,
+        plants: Mapping[str, Plant] | None = None,
+        options: ZenohOptions | None = None,
+        session: Any = None,
+        prefix: str = "fmu_bridge",
+        timeout_s: float = 10.0,
+    ) -> None:
         self.experiment = exp = experiment
         self.system = system = from_experiment(exp)
-        self.infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
-        self.warnings = check_system(system, self.infos)
-        self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
-        loop = find_loop(system, self.feedthrough)
-        if loop and system.max_iterations <= 1:
-            raise loop_error(loop, system)
         self.name = f"system {exp.name!r} ({len(system.components)} components)"
         self.timing = system_timing(exp, system)
-        self.info = system_info(exp, system, self.infos, self.timing)
-        _check_driven(exp, system)
-        check_experiment(exp, self.info)
         self.plants: dict[str, Plant] = dict(plants or {})
-        remote = [n for n, c in system.components.items() if c.node and n not in self.plants]
-        if remote:
-            raise ConfigError(
-                f"system.components.{remote[0]}.node: components served by nodes are not supported yet; "
-                f"remove node: to run {remote} in this process{system.where}"
-            )
+        self._session, self._own_session = session, False
+        connect = (options, prefix, timeout_s)
         try:
+            # a node's FMU need not exist here: its variables then come from the node
+            for name, component in system.components.items():
+                if component.node and not component.fmu.is_file() and name not in self.plants:
+                    self.plants[name] = self._component(component, *connect)
+            self._check(exp, system)
             for name, component in system.components.items():
                 if name not in self.plants:
-                    from bridge.plant.system.component import FmuComponent
-
-                    t = self.timing
-                    self.plants[name] = FmuComponent(component, t.step_size_s, t.start_time_s, system.where)
+                    self.plants[name] = self._component(component, *connect)
         except BaseException:
             self.close()
             raise
         self._macro = 0
         self._pending: Sequence[float] | None = None
+
+    def _check(self, exp: Experiment, system: SystemDescription) -> None:
+        from bridge.fmu import read_model_info
+
+        self.infos = {
+            n: self.plants[n].info if n in self.plants else read_model_info(c.fmu)
+            for n, c in system.components.items()
+        }
+        self.warnings = check_system(system, self.infos)
+        self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
+        loop = find_loop(system, self.feedthrough)
+        if loop and system.max_iterations <= 1:
+            raise loop_error(loop, system)
+        self.info = system_info(exp, system, self.infos, self.timing)
+        _check_driven(exp, system)
+        check_experiment(exp, self.info)
+
+    def _component(
+        self, component: Component, options: ZenohOptions | None, prefix: str, timeout_s: float
+    ) -> Plant:
+        t, where = self.timing, self.system.where
+        if component.node is None:
+            from bridge.plant.system.component import FmuComponent
+
+            return FmuComponent(component, t.step_size_s, t.start_time_s, where)
+        from bridge.plant.system.node import NodeComponent
+
+        if self._session is None:
+            from bridge.net.transport import open_session
+
+            self._session, self._own_session = open_session(options), True
+        return NodeComponent(
+            component,
+            t.step_size_s,
+            t.start_time_s,
+            session=self._session,
+            prefix=prefix,
+            timeout_s=timeout_s,
+            where=where,
+        )
 
     # -- wiring ------------------------------------------------------------------------------------
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
@@ -73,7 +118,10 @@ class SystemPlant(Plant):
         outs: dict[str, list[str]] = {n: [] for n in system.components}
         external = [split_name(n, system.components, "actions", where) for n in self.input_names]
         observed = [split_name(n, system.components, "observations", where) for n in self.output_names]
-        for c in system.connections:
+        for name, info in self.infos.items():  # every output, for the per-component recording
+            for var in info.by_causality("output"):
+                _add(outs, Endpoint(name, var.name))
+        for c in system.connections:  # in the order a component's node serves them
             _add(outs, c.source)
             _add(ins, c.target)
         for e in external:
@@ -92,9 +140,10 @@ class SystemPlant(Plant):
         self._start = {
             n: np.array([_start(self.infos[n].variables[v]) for v in ins[n]], dtype=np.float64) for n in ins
         }
-        order = (
-            gauss_seidel_order(system, self.feedthrough) if system.algorithm == "gauss_seidel" else list(ins)
-        )
+        if system.algorithm == "gauss_seidel":
+            order = gauss_seidel_order(system, self.feedthrough)
+        else:  # order-free: components here step while those in nodes do, then nodes are awaited
+            order = sorted(ins, key=lambda n: system.components[n].node is not None)
         self._plant_list = list(self.plants.values())
         self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
 
@@ -112,7 +161,10 @@ class SystemPlant(Plant):
             by_component[end.component][end.variable] = value
         start = {n: u.copy() for n, u in self._start.items()}
         self._write(start, inputs)
-        self.master.initialize(by_component, start)
+        try:
+            self.master.initialize(by_component, start)
+        except PlantError as exc:
+            raise self._component_failed(exc, step=None) from exc
         return self._read()
 
     def _write(self, target: Mapping[str, FloatArray], inputs: Sequence[float] | None) -> None:
@@ -134,7 +186,11 @@ class SystemPlant(Plant):
         self._write(self.master.inputs, inputs)
         master, plants = self.master, self._plant_list
         for _ in range(self.timing.steps_per_sample):
-            master.step()
+            try:
+                master.step()
+            except PlantError as exc:
+                self.terminated = True
+                raise self._component_failed(exc) from exc
             self._macro += 1
             if any([p.terminated for p in plants]):
                 self.terminated = True
@@ -142,11 +198,28 @@ class SystemPlant(Plant):
         self.sample += 1
         return self._read()
 
+    def _component_failed(self, exc: PlantError, **fields: Any) -> PlantError:
+        """The component's error as the system's, same kind, naming the component."""
+        verb = {PlantDied: "died", StepError: "failed"}.get(type(exc), "did not answer")
+        hint = "the node may be overloaded, hung or unreachable; timeout_s sets the limit"
+        if isinstance(exc, StepError):
+            fields["log"], hint = exc.log, MODEL_FAILED_HINT
+        elif isinstance(exc, PlantDied):
+            hint = "restart its node (fmu-bridge system serve) and reset"
+        error = self.failure(type(exc), f"{exc.plant} {verb}", exc.detail, hint, **fields)
+        error.component = next((n for n, p in self.plants.items() if p.name == exc.plant), "")  # type: ignore[attr-defined]
+        return error
+
     def component_outputs(self) -> dict[str, dict[str, float]]:
-        """Every bound output of every component now, by component (for recording)."""
+        """Every output of every component now (and any other variable the task reads), by
+        component, for recording; the order is fixed once bound."""
         return {
             n: dict(zip(p.output_names, map(float, self.master.outputs[n]))) for n, p in self.plants.items()
         }
+
+    def component_values(self) -> FloatArray:
+        """The values of :meth:`component_outputs`, flat in the same order (cheap, per step)."""
+        return np.concatenate([self.master.outputs[n] for n in self.plants])
 
     @property
     def can_set_values(self) -> bool:  # type: ignore[override]
@@ -166,6 +239,9 @@ class SystemPlant(Plant):
     def close(self) -> None:
         for plant in getattr(self, "plants", {}).values():
             plant.close()
+        if getattr(self, "_own_session", False) and self._session is not None:
+            self._session.close()
+            self._session = None
 
 
 def describe_system(experiment: Experiment) -> ModelInfo:

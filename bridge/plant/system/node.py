@@ -1,0 +1,256 @@
+"""Components served by nodes: ``NodeComponent`` (the client) and the experiment a node serves.
+
+A component with ``node: NAME`` runs in an :class:`bridge.net.node.FmuNode` of that name, started
+by ``fmu-bridge system serve SYSTEM.yaml``. A node serves one FMU with the inputs and outputs its
+experiment names, so ``system serve`` gives it a generated single-FMU experiment
+(:func:`component_experiment`): the component's FMU, parameters and step size, one sample per
+macro step, actions = the component's connected inputs and the task inputs on it (in that
+order), observations = every output of the FMU and then any other variable of it the task
+reads. Both sides read the same system file, so they agree on the names; the client maps its
+bound inputs and outputs onto the node's lists by name and says so when they do not fit.
+
+A node answers in lockstep: ``send`` publishes the stamped inputs at once and ``receive``
+waits for the matching outputs, so Jacobi components in several nodes step in parallel.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError
+from bridge.experiment.config import Experiment, parse_experiment
+from bridge.fmu.vocab import info_from_summary
+from bridge.net import protocol as proto
+from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.plant.system.description import Component, SystemDescription, from_experiment, split_name
+
+if TYPE_CHECKING:
+    from bridge.net.node import FmuNode
+    from bridge.net.transport import ZenohOptions
+
+SERVE_HINT = "`fmu-bridge system serve SYSTEM.yaml` starts the component nodes"
+
+
+def component_signals(
+    experiment: Experiment, system: SystemDescription, name: str
+) -> tuple[list[str], list[str]]:
+    """The input and output names the node of component ``name`` serves (see the module doc)."""
+    from bridge.fmu import read_model_info
+    from bridge.plant.system.plant import describe_system, system_timing
+    from bridge.task.core import Task
+
+    task = Task(experiment, describe_system(experiment).variables, system_timing(experiment, system))
+    ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
+    ins += [e.variable for e in _ends(task.input_names, system, "actions") if e.component == name]
+    info = read_model_info(system.components[name].fmu)
+    outs = [v.name for v in info.by_causality("output")]
+    outs += [c.source.variable for c in system.connections if c.source.component == name]
+    outs += [e.variable for e in _ends(task.output_names, system, "observations") if e.component == name]
+    return list(dict.fromkeys(ins)), list(dict.fromkeys(outs))
+
+
+def _ends(names: Sequence[str], system: SystemDescription, key: str) -> list[Any]:
+    return [split_name(n, system.components, key, system.where) for n in names]
+
+
+def component_experiment(experiment: Experiment, system: SystemDescription, name: str) -> Experiment:
+    """The single-FMU experiment the node of component ``name`` serves: one sample per macro step.
+    The action bounds and the reward are placeholders; a node only applies raw input values."""
+    from bridge.plant.system.component import steps_per_macro
+    from bridge.plant.system.plant import system_timing
+
+    component = system.components[name]
+    t = system_timing(experiment, system)
+    n = steps_per_macro(component, t.step_size_s, None, system.where)
+    ins, outs = component_signals(experiment, system, name)
+    if not ins:
+        raise ConfigError(
+            f"system.components.{name}.node: a component served by a node needs at least one input "
+            f"(connected or driven by the task); {name!r} has none: run it in this process{system.where}"
+        )
+    data = {
+        "name": f"{experiment.name}.{name}",
+        "description": f"component {name} of the system {experiment.name}",
+        "model": {
+            "fmu": str(component.fmu),
+            "interface": component.interface,
+            "step_size": t.step_size_s / n,
+            "sampling_time": t.step_size_s,
+            "start_time": t.start_time_s,
+            "episode_duration": experiment.model.episode_duration,
+            "parameters": dict(component.parameters),
+        },
+        "actions": {"inputs": ins, "low": dict.fromkeys(ins, -1.0), "high": dict.fromkeys(ins, 1.0)},
+        "observations": {"outputs": outs, "scale": "none"},
+        "reward": {"terms": [{"alive": 0.0}]},
+    }
+    return parse_experiment(data, source=experiment.source)
+
+
+def serve_components(
+    experiment: Experiment,
+    names: Sequence[str] = (),
+    *,
+    options: ZenohOptions | None = None,
+    prefix: str = "fmu_bridge",
+    session: Any = None,
+) -> list[FmuNode]:
+    """Start an :class:`FmuNode` for each component with ``node:`` (or those in ``names``), in this
+    process; the caller closes them. Each node opens its own session unless ``session`` is given."""
+    from bridge.net.node import FmuNode
+
+    system = from_experiment(experiment)
+    served = [n for n, c in system.components.items() if c.node is not None]
+    chosen = list(names) or served
+    unknown = [n for n in chosen if n not in served]
+    if not served:
+        raise ConfigError(
+            f"system serve: no component of the system has node:; set system.components.NAME.node "
+            f"to the node name that serves it{system.where}"
+        )
+    if unknown:
+        raise ConfigError(
+            f"system serve: {unknown} is not served by a node; components with node: {served}; "
+            f"set system.components.NAME.node in the file{system.where}"
+        )
+    nodes: list[FmuNode] = []
+    try:
+        for name in chosen:
+            exp = component_experiment(experiment, system, name)
+            node = system.components[name].node or name
+            nodes.append(FmuNode(exp, name=node, options=options, prefix=prefix, session=session))
+    except BaseException:
+        for started in nodes:
+            started.close()
+        raise
+    return nodes
+
+
+class NodeComponent(Plant):
+    """One component of a system served by a node; a sample is one macro step.
+
+    Args:
+        component: the component (its ``node`` names the node).
+        macro_step_s: the system's macro step; the node must serve samples of this length.
+        start_time_s: the system's start time.
+        session: an open Zenoh session (owned by the caller).
+        prefix: the key prefix the node serves under.
+        timeout_s: how long a reset or step may take before :class:`StepTimeout`.
+    """
+
+    def __init__(
+        self,
+        component: Component,
+        macro_step_s: float,
+        start_time_s: float,
+        *,
+        session: Any,
+        prefix: str,
+        timeout_s: float,
+        where: str = "",
+    ) -> None:
+        from bridge.net.remote import NodeClient
+
+        self.component = component
+        node = component.node or component.name
+        self.name = f"component {component.name!r} (node {node!r})"
+        self.client = NodeClient(session, node, prefix=prefix, timeout_s=timeout_s)
+        d = self.client.description
+        self.info = info_from_summary(d["model"])
+        self.timing = _check_timing(self.name, d, macro_step_s, start_time_s, where)
+        self._node_inputs: list[str] = list(d["input_names"])
+        self._node_outputs: list[str] = list(d["output_names"])
+        self._u = np.zeros(len(self._node_inputs))
+        self._in_index: list[int] = []
+        self._out_index: list[int] = []
+        self._time_s = start_time_s
+        self._where = where
+
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
+        super().bind(input_names, output_names)
+        self._in_index = self._positions(self.input_names, self._node_inputs, "inputs")
+        self._out_index = self._positions(self.output_names, self._node_outputs, "outputs")
+        # the usual case (both sides bound alike): values pass through without reordering
+        self._all_inputs = self._in_index == list(range(len(self._node_inputs)))
+        self._all_outputs = self._out_index == list(range(len(self._node_outputs)))
+
+    def _positions(self, names: Sequence[str], served: list[str], what: str) -> list[int]:
+        missing = [n for n in names if n not in served]
+        if missing:
+            raise ConfigError(
+                f"{self.name}: the node serves {what} {served}, not {missing}; restart the node with "
+                f"this experiment file ({SERVE_HINT}){self._where}"
+            )
+        return [served.index(n) for n in names]
+
+    @property
+    def time_s(self) -> float:
+        return self._time_s
+
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        self.episode += 1
+        self.sample, self.terminated = 0, False
+        merged = {**self.component.parameters, **values}
+        for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
+            self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
+        self._write(inputs)
+        frame = self.client.reset(self, merged, self._u.tolist())
+        self._time_s = frame.sim_time_ns / 1e9
+        return frame.values[self._out_index]
+
+    def _write(self, inputs: Sequence[float] | None) -> None:
+        if inputs is not None:
+            self._u[self._in_index] = inputs
+
+    def send(self, inputs: Sequence[float] | None) -> None:
+        if self._all_inputs and inputs is not None:
+            self._u[:] = inputs
+            self.client.send_action(self, self.episode, self.sample + 1, inputs)
+            return
+        self._write(inputs)
+        self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist())
+
+    def receive(self) -> FloatArray:
+        frame = self.client.wait(self)
+        self._time_s = frame.sim_time_ns / 1e9
+        self.sample += 1
+        if frame.kind == proto.ERROR:  # the FMU's own words and log
+            detail, _, log = frame.message.partition(FMU_LOG_HEADER)
+            raise self.failure(
+                StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=self.sample, log=log.split("\n  ")
+            )
+        self.terminated = frame.terminated
+        return frame.values if self._all_outputs else frame.values[self._out_index]
+
+    def provenance(self) -> dict[str, str]:
+        d = self.client.description
+        return {"fmu": str(self.component.fmu), "fmu_sha256": d.get("fmu_sha256", ""), "node": d["node"]}
+
+    def close(self) -> None:
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+            self.client = None  # type: ignore[assignment]
+
+
+def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, where: str) -> Any:
+    from bridge.experiment.validate import Timing
+
+    if not math.isclose(d["sampling_time_s"], macro_s, rel_tol=1e-12) or d["start_time_s"] != t0:
+        raise ConfigError(
+            f"{name}: the node steps {d['sampling_time_s']} s from t0 = {d['start_time_s']} s; the system "
+            f"has macro step {macro_s} s from {t0} s: start the node from this system file ({SERVE_HINT})"
+            f"{where}"
+        )
+    return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
+
+
+def _start(value: Any) -> float:
+    try:
+        return float(value) if value is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0

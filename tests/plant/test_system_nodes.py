@@ -1,0 +1,161 @@
+"""Systems with components served by nodes: real `fmu-bridge system serve` subprocesses on 127.0.0.1.
+
+The same seed gives the same trajectory whether the components run in this process, in nodes,
+or mixed, under Jacobi and Gauss-Seidel; a component node that dies is reported by name.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError, PlantDied
+from bridge.experiment.config import load_experiment
+from bridge.plant.system.plant import SystemPlant
+from tests.conftest import Loopback, _wait_for_line, _wait_for_node, free_port
+
+pytestmark = pytest.mark.integration
+EXAMPLE = Path(__file__).parents[2] / "examples" / "dcmotor_system.yaml"
+NODES = {"controller": "ctrl-node", "motor": "motor-node", "load": "load-node"}
+
+
+def system_file(directory: Path, name: str, nodes: dict[str, str], algorithm: str = "jacobi") -> Path:
+    """The example system with ``node:`` on the components in ``nodes``."""
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["system"]["algorithm"] = algorithm
+    for component, node in nodes.items():
+        data["system"]["components"][component]["node"] = node
+    path = directory / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+@contextlib.contextmanager
+def serve(file: Path, net: Loopback, *components: str) -> Iterator[subprocess.Popen[str]]:
+    """``fmu-bridge system serve`` as a real subprocess, stopped (and reaped) at the end."""
+    extra = [a for c in components for a in ("--component", c)]
+    cmd = [sys.executable, "-m", "bridge.cli", "system", "serve", str(file), "--connect", net.endpoint]
+    cmd += ["--prefix", net.prefix, *extra]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+    try:
+        _wait_for_line(process, "component node(s) serving", timeout_s=120)
+        data = yaml.safe_load(file.read_text())["system"]["components"]
+        for name in components or [c for c in data if "node" in data[c]]:
+            _wait_for_node(net, data[name]["node"], timeout_s=30)
+        yield process
+    finally:
+        if process.poll() is None:
+            process.terminate()
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait(timeout=20)
+        if process.stdout is not None:
+            process.stdout.close()
+
+
+@pytest.fixture(scope="module")
+def net() -> Iterator[Loopback]:
+    from bridge.net.transport import ZenohOptions, open_session
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
+    try:
+        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
+    finally:
+        session.close()
+
+
+@pytest.fixture(scope="module")
+def served(net: Loopback, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """Every component of the example system in its own node (one serve process)."""
+    directory = tmp_path_factory.mktemp("system_nodes")
+    with serve(system_file(directory, "served", NODES), net):
+        yield directory
+
+
+def trajectory(env: FmuEnv, seed: int, steps: int = 25) -> np.ndarray:
+    obs, info = env.reset(seed=seed)
+    rows = [np.append(obs, info["time_s"])]
+    for i in range(steps):
+        action = np.array([0.8 * np.sin(0.3 * i + seed)], dtype=np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        rows.append(np.append(obs, [reward, info["time_s"], *info["outputs"]]).astype(np.float64))
+        if terminated or truncated:
+            break
+    return np.concatenate(rows)
+
+
+def remote_env(file: Path, net: Loopback) -> FmuEnv:
+    plant = SystemPlant(load_experiment(file), session=net.session, prefix=net.prefix, timeout_s=60.0)
+    return FmuEnv(file, plant=plant)
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
+@pytest.mark.parametrize("remote", [["motor", "load"], ["controller", "motor", "load"]], ids=["mixed", "all"])
+def test_nodes_give_the_in_process_trajectory(
+    served: Path, net: Loopback, algorithm: str, remote: list[str]
+) -> None:
+    here = system_file(served, f"here_{algorithm}", {}, algorithm)
+    there = system_file(served, f"there_{algorithm}_{len(remote)}", {c: NODES[c] for c in remote}, algorithm)
+    with FmuEnv(here) as local, remote_env(there, net) as distributed:
+        assert all(
+            type(p).__name__ == "NodeComponent" for n, p in distributed.plant.plants.items() if n in remote
+        )
+        for seed in (0, 3, 0):  # the repeat: reset restores the whole system
+            expected, got = trajectory(local, seed), trajectory(distributed, seed)
+            np.testing.assert_array_equal(got, expected)
+        assert np.max(np.abs(expected)) > 1.0  # the motor really turned
+
+
+def test_a_node_component_needs_no_fmu_on_this_machine(served: Path, net: Loopback) -> None:
+    here = system_file(served, "here_nofmu", {})
+    there = system_file(served, "there_nofmu", {"motor": NODES["motor"]})
+    data = yaml.safe_load(there.read_text())
+    data["system"]["components"]["motor"]["fmu"] = "only/on/the/node/dcmotor.fmu"
+    there.write_text(yaml.safe_dump(data))
+    with FmuEnv(here) as local, remote_env(there, net) as distributed:
+        motor = distributed.plant.plants["motor"]  # type: ignore[attr-defined]
+        assert not motor.component.fmu.exists() and "omega" in motor.info.variables
+        np.testing.assert_array_equal(trajectory(distributed, 2), trajectory(local, 2))
+
+
+def test_a_dead_component_node_is_named(net: Loopback, tmp_path: Path) -> None:
+    file = system_file(tmp_path, "dying", {"load": "dying-load"})
+    own = Loopback(net.endpoint, f"test_{uuid.uuid4().hex[:10]}", net.session)
+    with serve(file, own, "load") as process, remote_env(file, own) as env:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        process.send_signal(signal.SIGKILL)
+        process.wait(timeout=30)
+        with pytest.raises(PlantDied, match=r"component 'load' \(node 'dying-load'\) died") as caught:
+            for _ in range(1000):  # the first step after the death notice raises; bounded anyway
+                env.step(env.action_space.sample())
+        assert caught.value.component == "load"  # type: ignore[attr-defined]
+
+
+def test_a_component_node_that_is_not_running_is_a_clear_error(net: Loopback, tmp_path: Path) -> None:
+    file = system_file(tmp_path, "absent", {"motor": "nobody-home"})
+    with pytest.raises(Exception, match=r"no FMU node named 'nobody-home'"):
+        SystemPlant(load_experiment(file), session=net.session, prefix=net.prefix, timeout_s=1.0)
+
+
+def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:
+    from bridge.plant.system.node import serve_components
+
+    file = system_file(tmp_path, "none", {"motor": "m"})
+    with pytest.raises(ConfigError, match=r"\['load'\] is not served by a node"):
+        serve_components(load_experiment(file), ["load"])
