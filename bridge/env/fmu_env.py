@@ -86,7 +86,6 @@ class FmuEnv(gym.Env[ObsType, Any]):
         self.output_names = self.task.output_names
         self._sample = 0
         self._done = True
-        self._last_obs: ObsType | None = None
         self._trace: list[npt.NDArray[np.float64]] = []
         self._last_outputs = np.zeros(len(self.output_names))
 
@@ -105,7 +104,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
             obs = self.task.first_observation(outputs.tolist(), self.np_random)
         except NonFiniteOutputs as exc:
             raise plant.failure(StepError, "the model returned non-finite outputs", str(exc), step=0) from exc
-        self._sample, self._done, self._last_obs = 0, False, obs
+        self._sample, self._done = 0, False
         self._record(outputs, reset=True)
         info = {
             "time_s": plant.time_s,
@@ -118,7 +117,12 @@ class FmuEnv(gym.Env[ObsType, Any]):
         return obs, info
 
     def step(self, action: Any) -> tuple[ObsType, SupportsFloat, bool, bool, dict[str, Any]]:
-        inputs = self._inputs_for(action)
+        # send() and receive() in one, inlined: this is the per-sample hot path
+        if self._done:
+            raise BridgeError("step() called on a finished or never-reset episode: call reset() first")
+        inputs = self.task.action_to_inputs(action, self._sample, self.np_random)
+        if self._state_hook is not None:
+            self._apply_state_hook()
         try:
             outputs = self.plant.step(inputs)
         except PlantError:
@@ -169,7 +173,6 @@ class FmuEnv(gym.Env[ObsType, Any]):
             raise plant.failure(
                 StepError, "the model returned non-finite outputs", str(exc), step=self._sample
             ) from exc
-        self._last_obs = obs
         info: dict[str, Any] = {"time_s": plant.time_s, "step": self._sample, "outputs": outputs}
         if terminated or truncated:
             info["reason"] = reason
@@ -177,11 +180,6 @@ class FmuEnv(gym.Env[ObsType, Any]):
         if self.render_mode is not None:
             self._record(outputs)
         return obs, reward, terminated, truncated, info
-
-    @property
-    def last_observation(self) -> ObsType | None:
-        """The observation returned last (by reset or step); None before the first reset."""
-        return self._last_obs
 
     def _apply_state_hook(self) -> None:
         assert self._state_hook is not None

@@ -59,7 +59,8 @@ class LocalFmuPlant(Plant):
 
     @property
     def time_s(self) -> float:
-        return self.model.time_s
+        m = self.model  # Model.time_s inlined: read once per step on the hot path
+        return m.start_time_s + m.step_index * m.step_size_s
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         assert self._inputs is not None and self._outputs is not None, "bind() first"
