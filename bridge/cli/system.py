@@ -21,9 +21,10 @@ ExperimentArg = Annotated[Path, typer.Argument(help="An experiment file with a s
 
 
 def _open(experiment: Path) -> Any:
+    from bridge.net.system_node import NodeComponents
     from bridge.plant.system.plant import SystemPlant
 
-    return SystemPlant(as_experiment(experiment))
+    return SystemPlant(as_experiment(experiment), remote=NodeComponents())
 
 
 def summary(plant: Any) -> dict[str, Any]:
@@ -179,8 +180,8 @@ def serve_system(  # noqa: PLR0917 (typer options)
     import signal
     import threading
 
+    from bridge.net.system_node import serve_components
     from bridge.net.transport import ZenohOptions, open_session, session_mode
-    from bridge.plant.system.node import serve_components
 
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))

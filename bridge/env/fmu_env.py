@@ -66,7 +66,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
             )
         self.render_mode = render_mode
         if plant is None:
-            from bridge.plant.factory import plant_for
+            from bridge.env.plants import plant_for
 
             plant = plant_for(exp)
         self.plant = plant

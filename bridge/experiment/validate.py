@@ -30,7 +30,7 @@ def resolve_fmu(experiment: Experiment) -> Path:
     if not spec or spec.lower().endswith((".ssp", ".ssd")):
         raise ConfigError(
             f"model.fmu: this experiment is a system of FMUs, not one FMU; use `fmu-bridge system ...` "
-            f"or bridge.plant.factory.plant_for(experiment) [{experiment.source}]"
+            f"or bridge.env.plants.plant_for(experiment) [{experiment.source}]"
         )
     if spec.startswith("example:"):
         from bridge.models import example_fmu

@@ -1,4 +1,6 @@
-"""``plant_for``: the plant an experiment asks for when no plant is given."""
+"""What an experiment's model is without starting it: its variables and its fingerprint.
+
+``bridge.env.plants.plant_for`` builds the plant itself (it may use the network)."""
 
 from __future__ import annotations
 
@@ -7,34 +9,11 @@ import hashlib
 from bridge.experiment.config import Experiment
 from bridge.experiment.system import is_system_file
 from bridge.fmu.vocab import ModelInfo
-from bridge.plant.base import Plant
 
 
 def is_system(experiment: Experiment) -> bool:
     """Whether the experiment couples several FMUs (a ``system:`` section or an .ssp/.ssd)."""
     return experiment.system is not None or is_system_file(experiment.model.fmu)
-
-
-def plant_for(experiment: Experiment) -> Plant:
-    """A :class:`SystemPlant` for a system; the FMU in a child process where ``model.isolation``
-    asks for it (``IsolatedFmuPlant``); else the FMU in this process (``LocalFmuPlant``)."""
-    if is_system(experiment):
-        from bridge.plant.system.plant import SystemPlant
-
-        return SystemPlant(experiment)
-    isolation = experiment.model.isolation
-    if isolation is not None:
-        from bridge.plant.isolated import IsolatedFmuPlant
-
-        return IsolatedFmuPlant(
-            experiment,
-            timeout_s=isolation.timeout,
-            memory_limit_mb=isolation.memory_limit_mb,
-            restart=isolation.restart,
-        )
-    from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
-
-    return LocalFmuPlant(experiment)
 
 
 def model_info_for(experiment: Experiment) -> ModelInfo:

@@ -22,6 +22,7 @@ import yaml
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError, PlantDied
 from bridge.experiment.config import load_experiment
+from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import Loopback, _wait_for_line, _wait_for_node, free_port
 
@@ -100,7 +101,8 @@ def trajectory(env: FmuEnv, seed: int, steps: int = 25) -> np.ndarray:
 
 
 def remote_env(file: Path, net: Loopback) -> FmuEnv:
-    plant = SystemPlant(load_experiment(file), session=net.session, prefix=net.prefix, timeout_s=60.0)
+    remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=60.0)
+    plant = SystemPlant(load_experiment(file), remote=remote)
     return FmuEnv(file, plant=plant)
 
 
@@ -150,11 +152,12 @@ def test_a_dead_component_node_is_named(net: Loopback, tmp_path: Path) -> None:
 def test_a_component_node_that_is_not_running_is_a_clear_error(net: Loopback, tmp_path: Path) -> None:
     file = system_file(tmp_path, "absent", {"motor": "nobody-home"})
     with pytest.raises(Exception, match=r"no FMU node named 'nobody-home'"):
-        SystemPlant(load_experiment(file), session=net.session, prefix=net.prefix, timeout_s=1.0)
+        remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=1.0)
+        SystemPlant(load_experiment(file), remote=remote)
 
 
 def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:
-    from bridge.plant.system.node import serve_components
+    from bridge.net.system_node import serve_components
 
     file = system_file(tmp_path, "none", {"motor": "m"})
     with pytest.raises(ConfigError, match=r"\['load'\] is not served by a node"):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -31,8 +31,17 @@ from bridge.plant.system.description import (
 from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
 from bridge.plant.system.master import Link, Master
 
-if TYPE_CHECKING:
-    from bridge.net.transport import ZenohOptions
+
+class RemoteComponents(Protocol):
+    """Builds the plant of a component served by a node (``bridge.net.system_node`` has one).
+
+    Injected by whoever may use the network (the env), so that plants never import it."""
+
+    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
+        """The component's plant: ``step`` advances one macro step of ``step_size_s``."""
+
+    def close(self) -> None:
+        """Close the session the components share (if this object opened it)."""
 
 
 class SystemPlant(Plant):
@@ -43,27 +52,23 @@ class SystemPlant(Plant):
         experiment: Experiment,
         *,
         plants: Mapping[str, Plant] | None = None,
-        options: ZenohOptions | None = None,
-        session: Any = None,
-        prefix: str = "fmu_bridge",
-        timeout_s: float = 10.0,
+        remote: RemoteComponents | None = None,
     ) -> None:
         self.experiment = exp = experiment
         self.system = system = from_experiment(exp)
         self.name = f"system {exp.name!r} ({len(system.components)} components)"
         self.timing = system_timing(exp, system)
         self.plants: dict[str, Plant] = dict(plants or {})
-        self._session, self._own_session = session, False
-        connect = (options, prefix, timeout_s)
+        self._remote = remote
         try:
             # a node's FMU need not exist here: its variables then come from the node
             for name, component in system.components.items():
                 if component.node and not component.fmu.is_file() and name not in self.plants:
-                    self.plants[name] = self._component(component, *connect)
+                    self.plants[name] = self._component(component)
             self._check(exp, system)
             for name, component in system.components.items():
                 if name not in self.plants:
-                    self.plants[name] = self._component(component, *connect)
+                    self.plants[name] = self._component(component)
         except BaseException:
             self.close()
             raise
@@ -86,29 +91,18 @@ class SystemPlant(Plant):
         _check_driven(exp, system)
         check_experiment(exp, self.info)
 
-    def _component(
-        self, component: Component, options: ZenohOptions | None, prefix: str, timeout_s: float
-    ) -> Plant:
+    def _component(self, component: Component) -> Plant:
         t, where = self.timing, self.system.where
         if component.node is None:
             from bridge.plant.system.component import FmuComponent
 
             return FmuComponent(component, t.step_size_s, t.start_time_s, where)
-        from bridge.plant.system.node import NodeComponent
-
-        if self._session is None:
-            from bridge.net.transport import open_session
-
-            self._session, self._own_session = open_session(options), True
-        return NodeComponent(
-            component,
-            t.step_size_s,
-            t.start_time_s,
-            session=self._session,
-            prefix=prefix,
-            timeout_s=timeout_s,
-            where=where,
-        )
+        if self._remote is None:
+            raise ConfigError(
+                f"system.components: {component.name!r} runs in node {component.node!r}, and this "
+                f"system was built without the network; use FmuEnv (it connects to nodes){where}"
+            )
+        return self._remote(component, t.step_size_s, t.start_time_s, where)
 
     # -- wiring ------------------------------------------------------------------------------------
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
@@ -239,9 +233,10 @@ class SystemPlant(Plant):
     def close(self) -> None:
         for plant in getattr(self, "plants", {}).values():
             plant.close()
-        if getattr(self, "_own_session", False) and self._session is not None:
-            self._session.close()
-            self._session = None
+        remote = getattr(self, "_remote", None)
+        if remote is not None:
+            remote.close()
+            self._remote = None
 
 
 def describe_system(experiment: Experiment) -> ModelInfo:

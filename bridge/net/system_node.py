@@ -59,7 +59,9 @@ def _ends(names: Sequence[str], system: SystemDescription, key: str) -> list[Any
 
 def component_experiment(experiment: Experiment, system: SystemDescription, name: str) -> Experiment:
     """The single-FMU experiment the node of component ``name`` serves: one sample per macro step.
-    The action bounds and the reward are placeholders; a node only applies raw input values."""
+    The reward is a placeholder; a node only applies raw input values. The action bounds are the
+    FMU's declared min/max, else wide (values between components are physical, and the node
+    refuses values outside the bounds it serves)."""
     from bridge.plant.system.component import steps_per_macro
     from bridge.plant.system.plant import system_timing
 
@@ -84,11 +86,23 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
         },
-        "actions": {"inputs": ins, "low": dict.fromkeys(ins, -1.0), "high": dict.fromkeys(ins, 1.0)},
+        "actions": {"inputs": ins, **_input_bounds(component, ins)},
         "observations": {"outputs": outs, "scale": "none"},
         "reward": {"terms": [{"alive": 0.0}]},
     }
     return parse_experiment(data, source=experiment.source)
+
+
+_WIDE = 1e15  # no declared bound: anything a connected component can produce
+
+
+def _input_bounds(component: Component, inputs: Sequence[str]) -> dict[str, dict[str, float]]:
+    from bridge.fmu import read_model_info
+
+    variables = read_model_info(component.fmu).variables
+    low = {n: -_WIDE if variables[n].min is None else variables[n].min for n in inputs}
+    high = {n: _WIDE if variables[n].max is None else variables[n].max for n in inputs}
+    return {"low": low, "high": high}  # type: ignore[dict-item]
 
 
 def serve_components(
@@ -254,3 +268,47 @@ def _start(value: Any) -> float:
         return float(value) if value is not None else 0.0
     except (TypeError, ValueError):
         return 0.0
+
+
+class NodeComponents:
+    """Builds the plants of a system's node components on one shared Zenoh session.
+
+    Given to ``SystemPlant(remote=...)`` by the env, so that plants never import the network.
+
+    Args:
+        options: how to open the session (when ``session`` is None; opened on first use).
+        session: an open session to share (owned by the caller).
+        prefix: the key prefix the component nodes serve under.
+        timeout_s: how long a reset or macro step may take before :class:`StepTimeout`.
+    """
+
+    def __init__(
+        self,
+        *,
+        options: ZenohOptions | None = None,
+        session: Any = None,
+        prefix: str = "fmu_bridge",
+        timeout_s: float = 10.0,
+    ) -> None:
+        self._options, self._session, self._own = options, session, False
+        self.prefix, self.timeout_s = prefix, timeout_s
+
+    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
+        if self._session is None:
+            from bridge.net.transport import open_session
+
+            self._session, self._own = open_session(self._options), True
+        return NodeComponent(
+            component,
+            step_size_s,
+            start_time_s,
+            session=self._session,
+            prefix=self.prefix,
+            timeout_s=self.timeout_s,
+            where=where,
+        )
+
+    def close(self) -> None:
+        if self._own and self._session is not None:
+            self._session.close()
+        self._session = None
