@@ -170,7 +170,7 @@ def test_plant_fmu_and_policy_fmu_reproduce_the_python_closed_loop(runs: dict[st
             obs, _, terminated, truncated, info = env.step(policy.act(obs, {}))
             if terminated or truncated:
                 break
-        fmu_path, step_s = env.fmu_path, env.timing.sampling_time_s
+        fmu_path, step_s = env.plant.fmu_path, env.timing.sampling_time_s
     fmu_loop = []
     with (
         FmuPolicy(export_fmu(run, "3", run / "loop.fmu")) as agent,

@@ -136,7 +136,12 @@ def test_a_reset_after_the_node_died_says_so_at_once(loopback: Loopback) -> None
 def test_a_dead_node_is_reported_while_a_stopped_one_still_times_out(loopback: Loopback) -> None:
     with node_process(CARTPOLE, "v-0", loopback) as stopped, node_process(CARTPOLE, "v-1", loopback) as dead:
         vec = RemoteVecEnv(
-            CARTPOLE, ["v-0", "v-1"], session=loopback.session, prefix=loopback.prefix, timeout_s=8.0
+            CARTPOLE,
+            ["v-0", "v-1"],
+            session=loopback.session,
+            prefix=loopback.prefix,
+            timeout_s=8.0,
+            on_error="raise",
         )
         try:
             vec.reset()
