@@ -19,7 +19,6 @@ in its info's ``plant_error``, the episode truncated and reset); ``on_error="rai
 from __future__ import annotations
 
 import logging
-import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal
@@ -30,6 +29,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.plant.batch import BatchPlant
@@ -238,7 +238,7 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         self.engine.close()
 
 
-class BatchVecEnv:
+class BatchVecEnv(Sb3VecEnv):
     """stable-baselines3's ``VecEnv`` interface over :class:`BatchEnv` (same arguments).
 
     ``infos[i]`` is empty while env ``i``'s episode runs; when it ends it holds
@@ -247,7 +247,7 @@ class BatchVecEnv:
     """
 
     def __init__(self, experiment: Experiment | str | Path, n_envs: int, **kwargs: Any) -> None:
-        _register_with_sb3()
+        super().__init__()
         self.engine = BatchEnv(experiment, n_envs, **kwargs)
         self.num_envs = n_envs
         self.observation_space = self.engine.task.observation_space
@@ -281,14 +281,8 @@ class BatchVecEnv:
             self.reset_infos[i] = end["reset_info"]
         return obs, reward.astype(np.float32), terminated | truncated, infos
 
-    def step(self, actions: Any) -> tuple[ObsArray, Any, Any, list[dict[str, Any]]]:
-        self.step_async(actions)
-        return self.step_wait()
-
     def seed(self, seed: int | None = None) -> list[int | None]:
-        if seed is None:
-            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
-        self._seeds = _seeds(seed, self.num_envs)
+        self._seeds = _seeds(self._new_seed(seed), self.num_envs)
         return list(self._seeds)
 
     def set_options(self, options: list[dict[str, Any]] | dict[str, Any] | None = None) -> None:
@@ -300,46 +294,6 @@ class BatchVecEnv:
     def close(self) -> None:
         self.engine.close()
 
-    def _indices(self, indices: Any) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        return [indices] if isinstance(indices, int) else list(indices)
-
-    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self, attr_name)] * len(self._indices(indices))
-
-    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        setattr(self, attr_name, value)
-
-    def has_attr(self, attr_name: str) -> bool:
-        return hasattr(self, attr_name)
-
-    def env_method(self, method_name: str, *args: Any, indices: Any = None, **kwargs: Any) -> list[Any]:
-        return [getattr(self, method_name)(*args, **kwargs) for _ in self._indices(indices)]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False for _ in self._indices(indices)]
-
-    def get_images(self) -> list[None]:
-        return [None] * self.num_envs
-
-    def render(self, mode: str | None = None) -> None:
-        return None
-
-    @property
-    def unwrapped(self) -> BatchVecEnv:
-        return self
-
-    def getattr_recursive(self, name: str) -> Any:
-        return getattr(self, name)
-
-    def getattr_depth_check(self, name: str, already_found: bool) -> str | None:
-        return (
-            f"{type(self).__module__}.{type(self).__name__}"
-            if hasattr(self, name) and already_found
-            else None
-        )
-
 
 def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
     if isinstance(seed, list):
@@ -347,10 +301,3 @@ def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
             raise ConfigError(f"reset(seed=[...]) needs {n} seeds (one per env), got {len(seed)}")
         return list(seed)
     return [None] * n if seed is None else [seed + i for i in range(n)]
-
-
-def _register_with_sb3() -> None:
-    """Make ``isinstance(batch_vec_env, VecEnv)`` true in SB3, without importing SB3 here."""
-    module = sys.modules.get("stable_baselines3.common.vec_env.base_vec_env")
-    if module is not None:
-        module.VecEnv.register(BatchVecEnv)

@@ -19,7 +19,6 @@ what SB3's ``isinstance`` checks need.
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import time
 from collections.abc import Iterable, Sequence
@@ -31,6 +30,7 @@ import numpy.typing as npt
 
 from bridge.env.fmu_env import FmuEnv
 from bridge.env.remote import RemoteFmuEnv
+from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import ConfigError, PlantDied, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.net import protocol as proto
@@ -42,7 +42,7 @@ OnError = Literal["raise", "truncate"]
 Result = tuple[Any, float, bool, bool, dict[str, Any]]
 
 
-class PlantVecEnv:
+class PlantVecEnv(Sb3VecEnv):
     """N envs stepped together, each over its own plant.
 
     Args:
@@ -51,7 +51,7 @@ class PlantVecEnv:
     """
 
     def __init__(self, envs: Sequence[FmuEnv], *, on_error: OnError = "truncate") -> None:
-        _register_with_sb3()
+        super().__init__()
         if not envs:
             raise ConfigError("a vector env needs at least one env")
         if on_error not in ("raise", "truncate"):
@@ -152,18 +152,13 @@ class PlantVecEnv:
             obs, reset_info = self.envs[index].reset(seed=seed, options=options)
             return obs, {**reset_info, **info}
 
-    def step(self, actions: Any) -> tuple[Any, Any, Any, list[dict[str, Any]]]:
-        self.step_async(actions)
-        return self.step_wait()
-
     def close(self) -> None:
         for env in getattr(self, "envs", []):
             env.close()
         self.envs = []
 
     def seed(self, seed: int | None = None) -> list[int | None]:
-        if seed is None:
-            seed = int(np.random.randint(0, np.iinfo(np.uint32).max, dtype=np.uint32))
+        seed = self._new_seed(seed)
         self._seeds = [seed + i for i in range(self.num_envs)]
         return list(self._seeds)
 
@@ -172,48 +167,8 @@ class PlantVecEnv:
             options = {}
         self._options = list(options) if isinstance(options, list) else [dict(options) for _ in self.envs]
 
-    def _indices(self, indices: int | Iterable[int] | None) -> list[int]:
-        if indices is None:
-            return list(range(self.num_envs))
-        return [indices] if isinstance(indices, int) else list(indices)
-
-    def get_attr(self, attr_name: str, indices: int | Iterable[int] | None = None) -> list[Any]:
-        return [getattr(self.envs[i], attr_name) for i in self._indices(indices)]
-
-    def has_attr(self, attr_name: str) -> bool:
-        return hasattr(self.envs[0], attr_name)
-
-    def set_attr(self, attr_name: str, value: Any, indices: int | Iterable[int] | None = None) -> None:
-        for i in self._indices(indices):
-            setattr(self.envs[i], attr_name, value)
-
-    def env_method(
-        self, method_name: str, *args: Any, indices: int | Iterable[int] | None = None, **kwargs: Any
-    ) -> list[Any]:
-        return [getattr(self.envs[i], method_name)(*args, **kwargs) for i in self._indices(indices)]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: int | Iterable[int] | None = None) -> list[bool]:
-        return [False for _ in self._indices(indices)]
-
-    def get_images(self) -> list[None]:
-        return [None for _ in self.envs]
-
-    def render(self, mode: str | None = None) -> None:
-        return None
-
-    @property
-    def unwrapped(self) -> PlantVecEnv:
-        return self
-
-    def getattr_recursive(self, name: str) -> Any:
-        return getattr(self, name)
-
-    def getattr_depth_check(self, name: str, already_found: bool) -> str | None:
-        return (
-            f"{type(self).__module__}.{type(self).__name__}"
-            if hasattr(self, name) and already_found
-            else None
-        )
+    def _attr_targets(self, indices: list[int]) -> list[Any]:
+        return [self.envs[i] for i in indices]
 
 
 class RemoteVecEnv(PlantVecEnv):
@@ -349,10 +304,3 @@ class RemoteVecEnv(PlantVecEnv):
         if getattr(self, "_own_session", False) and getattr(self, "_session", None) is not None:
             self._session.close()
             self._session = None
-
-
-def _register_with_sb3() -> None:
-    """Make ``isinstance(remote_vec_env, VecEnv)`` true in SB3, without importing SB3 here."""
-    module = sys.modules.get("stable_baselines3.common.vec_env.base_vec_env")
-    if module is not None:
-        module.VecEnv.register(PlantVecEnv)
