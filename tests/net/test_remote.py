@@ -115,6 +115,9 @@ def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(lo
             assert f"{me:016x}" in stranger.message
             far = send(1, 2, [1e308])
             assert far.kind == proto.REJECT and "outside its declared range [-10, 10]" in far.message
+            # These frames were sent under the env's own client id, so the env's subscriber sees
+            # their replies too: let them arrive before the env waits for its own step 2.
+            time.sleep(1.0)
             _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
             assert info["step"] == 2  # the node stepped exactly twice
             counters = _info(loopback, "cp")["counters"]
