@@ -11,7 +11,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from bridge.errors import FmuError, StepError
+from bridge.errors import BridgeError, FmuError, StepError
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import Model, read_model_info, sha256
@@ -47,6 +47,12 @@ class LocalFmuPlant(Plant):
         self._inputs: SignalGroup | None = None
         self._outputs: SignalGroup | None = None
         self._pending: Sequence[float] | None = None
+        self._write: Any = self._unbound
+        self._advance: Any = self._unbound
+        self._read: Any = self._unbound
+
+    def _unbound(self, *_: Any) -> Any:
+        raise BridgeError(f"{self.name}: bind() the plant to its input and output names first")
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
@@ -56,6 +62,8 @@ class LocalFmuPlant(Plant):
         except BaseException:
             self.close()
             raise
+        # bound once: step() is the per-sample hot path
+        self._write, self._advance, self._read = self._inputs.write, self.model.advance, self._outputs.read
 
     @property
     def time_s(self) -> float:
@@ -81,12 +89,11 @@ class LocalFmuPlant(Plant):
         return self.step(self._pending)
 
     def step(self, inputs: Sequence[float] | None) -> FloatArray:
-        assert self._inputs is not None and self._outputs is not None, "bind() first"
         try:
             if inputs is not None:
-                self._inputs.write(inputs)
-            self.terminated = self.model.advance(self._n)
-            outputs = self._outputs.read()
+                self._write(inputs)
+            self.terminated = self._advance(self._n)
+            outputs: FloatArray = self._read()
         except FmuError as exc:
             raise self._failed(exc) from exc
         self.sample += 1
