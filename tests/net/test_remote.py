@@ -73,6 +73,14 @@ def _send(
 ) -> proto.Frame:
     """Send a raw action frame; return the node's answer for that action's (episode, step)."""
     sent = proto.decode(payload)
+    # Replies to earlier frames may still be on their way (same episode and step): let them land
+    # first, so that the answer taken is this frame's (bounded: at most 3 s of quiet-waiting).
+    settle = time.monotonic() + 3
+    while time.monotonic() < settle:
+        before = len(frames)
+        time.sleep(0.3)
+        if len(frames) == before:
+            break
     count = len(frames)
     net.session.put(proto.Keys(net.prefix, node).actions, payload)  # type: ignore[attr-defined]
     deadline = time.monotonic() + 5
