@@ -8,19 +8,14 @@ an experiment: a macro step of ``H`` is ``n`` FMU steps of the component's own s
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
-import numpy as np
-
-from bridge.errors import ConfigError, FmuError, StepError
+from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
-from bridge.fmu import Model, read_model_info, sha256
-from bridge.fmu.signals import SignalGroup
-from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.fmu import Model, read_model_info
+from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
-
-_EMPTY = np.zeros(0)
 
 
 def steps_per_macro(component: Component, macro_step_s: float, default_s: float | None, where: str) -> int:
@@ -38,15 +33,14 @@ def steps_per_macro(component: Component, macro_step_s: float, default_s: float 
     return n
 
 
-class FmuComponent(Plant):
+class FmuComponent(FmuInstancePlant):
     """One component's FMU in this process; a sample is one macro step of ``macro_step_s``."""
-
-    can_set_values = True
 
     def __init__(
         self, component: Component, macro_step_s: float, start_time_s: float, where: str = ""
     ) -> None:
         self.component = component
+        self.fmu_path = component.fmu
         self.info = read_model_info(component.fmu)
         self.name = f"component {component.name!r} ({component.fmu.name})"
         n = steps_per_macro(component, macro_step_s, None, where)  # default: one step per macro step
@@ -58,59 +52,9 @@ class FmuComponent(Plant):
             interface=component.interface,
             instance_name=component.name,
         )
-        self._inputs: SignalGroup | None = None
-        self._outputs: SignalGroup | None = None
-        self._pending: Sequence[float] | None = None
 
-    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
-        super().bind(input_names, output_names)
-        model = self.model
-        self._inputs = model.signals(self.input_names, writable=True, role="input") if input_names else None
-        self._outputs = model.signals(self.output_names, role="output") if output_names else None
-
-    @property
-    def time_s(self) -> float:
-        return self.model.time_s
-
-    def _read(self) -> FloatArray:
-        return self._outputs.read() if self._outputs is not None else _EMPTY
-
-    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
-        self.episode += 1
-        self.sample, self.terminated = 0, False
-        try:
-            self.model.reset({**self.component.parameters, **values})
-            self._write(inputs)
-            return self._read()
-        except FmuError as exc:
-            raise self._failed(exc, step=None) from exc
-
-    def _write(self, inputs: Sequence[float] | None) -> None:
-        if inputs is not None and self._inputs is not None:
-            self._inputs.write(inputs)
-
-    def send(self, inputs: Sequence[float] | None) -> None:
-        self._pending = inputs
-
-    def receive(self) -> FloatArray:
-        return self.step(self._pending)
-
-    def step(self, inputs: Sequence[float] | None) -> FloatArray:
-        try:
-            self._write(inputs)
-            self.terminated = self.model.advance(self.timing.steps_per_sample)
-            outputs = self._read()
-        except FmuError as exc:
-            raise self._failed(exc) from exc
-        self.sample += 1
-        return outputs
-
-    def _failed(self, exc: FmuError, **fields: Any) -> StepError:
-        detail = exc.detail if isinstance(exc, StepError) else str(exc)
-        return self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, log=exc.log, **fields)
-
-    def set_values(self, values: Mapping[str, Any]) -> None:
-        self.model.set(values)
+    def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
+        return {**self.component.parameters, **values}
 
     # -- state for fixed-point iteration (the FMU's own get/set state) ------------------------------
     @property
@@ -128,11 +72,3 @@ class FmuComponent(Plant):
 
     def discard(self, saved: tuple[Any, int, int, bool]) -> None:
         self.model._backend.free_state(saved[0])
-
-    def provenance(self) -> dict[str, str]:
-        return {"fmu": str(self.component.fmu), "fmu_sha256": sha256(self.component.fmu), "node": ""}
-
-    def close(self) -> None:
-        model = getattr(self, "model", None)
-        if model is not None:
-            model.close()

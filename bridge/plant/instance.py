@@ -1,0 +1,111 @@
+"""``FmuInstancePlant``: one FMU instance in this process as a plant.
+
+What ``LocalFmuPlant`` (an experiment's FMU) and a system's ``FmuComponent`` share: writing the
+inputs, advancing ``n`` FMU steps a sample, reading the outputs, and turning FMU errors into the
+plant's :class:`StepError`. Subclasses build ``model``, ``info``, ``timing``, ``name`` and
+``fmu_path``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bridge.errors import BridgeError, FmuError, StepError
+from bridge.fmu import Model, sha256
+from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+
+_EMPTY = np.zeros(0)
+
+
+class FmuInstancePlant(Plant):
+    """A plant over ``self.model``; ``bind`` binds the per-sample calls once (the hot path)."""
+
+    can_set_values = True
+    model: Model
+    fmu_path: Path
+    _pending: Sequence[float] | None = None
+
+    def _unbound(self, *_: Any) -> Any:
+        raise BridgeError(f"{self.name}: bind() the plant to its input and output names first")
+
+    _write: Any = _unbound
+    _read: Any = _unbound
+    _advance: Any = _unbound
+    _n = 1
+
+    def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
+        super().bind(input_names, output_names)
+        model = self.model
+        try:
+            inputs = model.signals(self.input_names, writable=True, role="input") if input_names else None
+            outputs = model.signals(self.output_names, role="output") if output_names else None
+        except BaseException:
+            self.close()
+            raise
+        self._write = inputs.write if inputs is not None else _ignore
+        self._read = outputs.read if outputs is not None else _empty
+        self._advance, self._n = model.advance, self.timing.steps_per_sample
+
+    @property
+    def time_s(self) -> float:
+        m = self.model  # Model.time_s inlined: read once per step on the hot path
+        return m.start_time_s + m.step_index * m.step_size_s
+
+    def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
+        return values
+
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        self.episode += 1
+        self.sample, self.terminated = 0, False
+        try:
+            self.model.reset(self._reset_values(values))
+            if inputs is not None:
+                self._write(inputs)
+            outputs: FloatArray = self._read()
+        except StepError as exc:
+            raise self._failed(exc, step=None) from exc
+        return outputs
+
+    def send(self, inputs: Sequence[float] | None) -> None:
+        self._pending = inputs
+
+    def receive(self) -> FloatArray:
+        return self.step(self._pending)
+
+    def step(self, inputs: Sequence[float] | None) -> FloatArray:
+        try:
+            if inputs is not None:
+                self._write(inputs)
+            self.terminated = self._advance(self._n)
+            outputs: FloatArray = self._read()
+        except FmuError as exc:
+            raise self._failed(exc) from exc
+        self.sample += 1
+        return outputs
+
+    def _failed(self, exc: FmuError, **fields: Any) -> StepError:
+        detail = exc.detail if isinstance(exc, StepError) else str(exc)
+        return self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, log=exc.log, **fields)
+
+    def set_values(self, values: Mapping[str, Any]) -> None:
+        self.model.set(values)
+
+    def provenance(self) -> dict[str, str]:
+        return {"fmu": str(self.fmu_path), "fmu_sha256": sha256(self.fmu_path), "node": ""}
+
+    def close(self) -> None:
+        model = getattr(self, "model", None)
+        if model is not None:
+            model.close()
+
+
+def _ignore(_: Any) -> None:
+    """Writing to a model without inputs."""
+
+
+def _empty() -> FloatArray:
+    return _EMPTY
