@@ -149,7 +149,8 @@ def _c_start(v: Variable) -> str:
         data = bytes.fromhex(str(v.start))
         if not data:
             return ".start_size = 0"
-        return f".start_binary = (const uint8_t[]){{{', '.join(str(b) for b in data)}}}, .start_size = {len(data)}"
+        values = ", ".join(str(b) for b in data)
+        return f".start_binary = (const uint8_t[]){{{values}}}, .start_size = {len(data)}"
     if v.type == "String":
         return f".start_string = {_c_string(str(v.start))}"
     if v.type in FLOAT_TYPES:

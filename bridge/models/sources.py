@@ -186,4 +186,6 @@ def _check_fmi3_only(v: Variable) -> None:
     if v.type == "Binary" and v.start is not None:
         bytes.fromhex(str(v.start))  # ValueError names the bad character
     if (v.type == "Clock") != (v.interval is not None) or (v.interval is not None and v.interval <= 0):
-        raise ValueError(f"{v.name}: a Clock needs interval > 0 (a constant interval in s); only clocks have one")
+        raise ValueError(
+            f"{v.name}: a Clock needs interval > 0 (a constant interval in s); only clocks have one"
+        )

@@ -3,8 +3,9 @@
 The corpus: FMUs from other exporters (pythonfmu for FMI 2.0, pythonfmu3 for FMI 3.0, JModelica
 through the FMUs shipped in PyFMI 2.5's source distribution: FMI 1.0/2.0, CS/ME; Dymola through
 eta-ctrl's source distribution) and our own models
-for what those lack (time events with inputs in model exchange; FMI 3.0 Binary, 2-D arrays and clocks). Downloads are cached under
-``$FMU_BRIDGE_CACHE/thirdparty``; a test is skipped, saying why, when they cannot be fetched.
+for what those lack (time events with inputs in model exchange; FMI 3.0 Binary, 2-D arrays and
+clocks). Downloads are cached under ``$FMU_BRIDGE_CACHE/thirdparty``; a test is skipped, saying
+why, when they cannot be fetched.
 """
 
 from __future__ import annotations

@@ -85,7 +85,10 @@ def test_binary_start_value_given_at_initialisation_and_restored_by_reset(typed3
             }, f"episode {episode}"
             model.set({"data_in": bytes([episode]) * (episode + 1)})
             model.advance(2)
-            assert model.get(["data_out", "ticks"]) == {"data_out": bytes([episode]) * (episode + 1), "ticks": 2}
+            assert model.get(["data_out", "ticks"]) == {
+                "data_out": bytes([episode]) * (episode + 1),
+                "ticks": 2,
+            }
 
 
 def test_binary_and_clock_misuse_is_refused_with_the_reason(typed3: Path) -> None:
@@ -119,7 +122,8 @@ def _experiment(tmp_path: Path, fmu: Path) -> Path:
         f"model: {{fmu: {q(str(fmu))}, episode_duration: 1.0, step_size: {STEP_S}}}\n"
         'actions: {inputs: ["u[1]", "u[3]"], low: {"u[1]": -2.0, "u[3]": 0.0}, '
         'high: {"u[1]": 2.0, "u[3]": 4.0}}\n'
-        'observations: {outputs: ["y[2,3]", "y[1,1]", "y[2,1]", "y[2,2]", "ticks", "data_sum"], scale: none}\n'
+        'observations: {outputs: ["y[2,3]", "y[1,1]", "y[2,1]", "y[2,2]", "ticks", "data_sum"], '
+        "scale: none}\n"
         "reward: {terms: [{alive: 1.0}]}\n"
     )
     return config
