@@ -170,3 +170,37 @@ def test_model_info_reads_typed3_without_problems(typed3: Path) -> None:
     info = read_model_info(typed3)
     assert info.problems == ()
     assert info.variables["y"].element_names()[-1] == "y[2,3]" and info.element("y[2,1]")[1] == 3
+
+
+def test_fmpy_bindings_get_arrays_flattened_and_a_wrong_count_is_refused(
+    typed3: Path, tmp_path: Path
+) -> None:
+    """FMPy's own FMI 3.0 calls (not bridge.fmu): nValues is the sum of the element counts."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi3 import FMU3Slave
+
+    md = read_model_description(str(typed3))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    messages: list[str] = []
+    slave = FMU3Slave(
+        guid=md.guid,
+        unzipDirectory=extract(str(typed3), unzipdir=str(tmp_path / "fmu")),
+        modelIdentifier=md.coSimulation.modelIdentifier,
+        instanceName="raw",
+    )
+    slave.instantiate(logMessage=lambda env, status, category, message: messages.append(message.decode()))
+    try:
+        slave.enterInitializationMode(startTime=0.0)
+        slave.exitInitializationMode()
+        slave.setFloat64([vr["u"]], [0.5, -1.0, 4.0])
+        slave.doStep(0.0, 0.5)
+        assert slave.getFloat64([vr["y"]], nValues=6) == [0.5, -1.0, 4.0, 0.25, -0.5, 2.0]
+        assert slave.getFloat64([vr["u"], vr["data_sum"]], nValues=4) == [0.5, -1.0, 4.0, 328.0]
+        slave.setBinary([vr["data_in"]], [b""])
+        slave.doStep(0.5, 0.5)
+        assert slave.getBinary([vr["data_out"]]) == [b""]  # a valid pointer, not NULL
+        with pytest.raises(Exception, match="fmi3GetFloat64"):
+            slave.getFloat64([vr["y"]], nValues=5)
+        assert any("expected 6 values" in m and "got 5" in m for m in messages), messages
+    finally:
+        slave.freeInstance()
