@@ -114,7 +114,6 @@ static bool write_field(FmuInstance* inst, const FmuVariable* v, size_t index, c
         case T_BINARY: return fmu_binary_assign((FmuBinary*)p, in->bin.data, in->bin.size);
         case T_NONE: break;
     }
-    (void)inst;
     return true;
 }
 
