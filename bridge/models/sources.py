@@ -112,9 +112,13 @@ def _parse_variable(vr: int, raw: dict[str, Any]) -> Variable:
     for key in ("min", "max", "nominal"):
         if key in values:
             values[key] = float(values[key])
-    for key in ("fmi_versions", "interfaces"):
+    for key in ("fmi_versions", "interfaces", "dimensions"):
         if key in values:
             values[key] = tuple(values[key])
+    if isinstance(values.get("start"), list):
+        values["start"] = tuple(float(x) for x in values["start"])
+    if "interval" in values:
+        values["interval"] = float(values["interval"])
     return Variable(vr=vr, **values)
 
 
@@ -162,8 +166,26 @@ def _check_variable(spec: Spec, v: Variable, table: Mapping[str, object]) -> Non
         raise ValueError(f"{v.name}: the derivative of {v.derivative} must belong to a Float64 state")
     if v.unit is not None and v.unit not in table:
         raise ValueError(f"{v.name}: unit {v.unit!r} is not defined in common/units.json")
+    built = {version for version, _ in spec.variants}
     for version in v.fmi_versions:
-        if version != "3.0" and v.type not in FMI2_TYPES:
-            raise ValueError(
-                f"{v.name}: type {v.type} does not exist in FMI {version}; restrict fmi_versions"
-            )
+        if version in built and version != "3.0" and (v.type not in FMI2_TYPES or v.dimensions):
+            what = "arrays do" if v.dimensions else f"type {v.type} does"
+            raise ValueError(f"{v.name}: {what} not exist in FMI {version}; restrict fmi_versions")
+    _check_fmi3_only(v)
+
+
+def _check_fmi3_only(v: Variable) -> None:
+    """Arrays, Binary and Clock: what the generator and the C framework support of them."""
+    if v.dimensions:
+        if v.type != "Float64" or any(n < 1 for n in v.dimensions):
+            raise ValueError(f"{v.name}: arrays must be Float64 with sizes >= 1, got {v.type} {v.dimensions}")
+        if isinstance(v.start, tuple) and len(v.start) != v.size:
+            raise ValueError(f"{v.name}: start has {len(v.start)} values for {v.size} elements")
+    elif isinstance(v.start, tuple):
+        raise ValueError(f"{v.name}: a list as start value needs dimensions")
+    if v.type == "Binary" and v.start is not None:
+        bytes.fromhex(str(v.start))  # ValueError names the bad character
+    if (v.type == "Clock") != (v.interval is not None) or (v.interval is not None and v.interval <= 0):
+        raise ValueError(
+            f"{v.name}: a Clock needs interval > 0 (a constant interval in s); only clocks have one"
+        )

@@ -18,7 +18,7 @@ INTERFACES: Final = ("cs", "me")
 FLOAT_TYPES: Final = frozenset({"Float32", "Float64"})
 UNSIGNED_TYPES: Final = frozenset({"UInt8", "UInt16", "UInt32", "UInt64"})
 INT_TYPES: Final = frozenset({"Int8", "Int16", "Int32", "Int64"}) | UNSIGNED_TYPES
-ALL_TYPES: Final = FLOAT_TYPES | INT_TYPES | {"Boolean", "String", "Enumeration"}
+ALL_TYPES: Final = FLOAT_TYPES | INT_TYPES | {"Boolean", "String", "Enumeration", "Binary", "Clock"}
 #: FMI 1.0/2.0 element names of the types that exist there (model.json uses the FMI 3.0 names).
 FMI2_TYPES: Final = dict(
     Float64="Real", Int32="Integer", Boolean="Boolean", String="String", Enumeration="Enumeration"
@@ -27,6 +27,8 @@ CAUSALITIES: Final = ("parameter", "calculatedParameter", "input", "output", "lo
 VARIABILITIES: Final = ("constant", "fixed", "tunable", "discrete", "continuous")
 
 Scalar = float | int | bool | str
+#: A start value: a scalar, one float per element of a Float64 array, or a Binary's bytes as hex text.
+Start = Scalar | tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -40,7 +42,7 @@ class Variable:
     variability: str
     initial: str | None
     description: str
-    start: Scalar | None = None
+    start: Start | None = None
     unit: str | None = None
     min: float | None = None
     max: float | None = None
@@ -49,6 +51,16 @@ class Variable:
     derivative: str | None = None
     fmi_versions: tuple[str, ...] = FMI_VERSIONS
     interfaces: tuple[str, ...] = INTERFACES
+    dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays (Float64 only): sizes, row-major
+    interval: float | None = None  # FMI 3.0 Clock: constant interval in s
+
+    @property
+    def size(self) -> int:
+        """Number of elements: the product of the dimensions, 1 for a scalar."""
+        count = 1
+        for n in self.dimensions:
+            count *= n
+        return count
 
     @property
     def c_name(self) -> str:

@@ -688,6 +688,7 @@ def test_model_names_and_variants() -> None:
         "pi_controller",
         "stair",
         "typed",
+        "typed3",
         "vehicle",
     ]
     by_model: dict[str, set[tuple[str, str]]] = {}
@@ -698,6 +699,7 @@ def test_model_names_and_variants() -> None:
     assert by_model["dcmotor"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["bouncing_ball"] == {("2.0", "me"), ("3.0", "me"), ("2.0", "cs")}
     assert by_model["typed"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["typed3"] == {("3.0", "cs")}
     assert by_model["stair"] == {(v, i) for v in ("1.0", "2.0", "3.0") for i in ("cs", "me")}
     assert by_model["gearload"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
@@ -706,7 +708,8 @@ def test_model_names_and_variants() -> None:
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed, vehicle"
+    names = "bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed, "
+    names += "typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
