@@ -101,7 +101,8 @@ def c_table(spec: Spec, fmi_version: str, interface: str) -> str:
 def _c_string(text: str) -> str:
     if any(not (32 <= ord(c) < 127) for c in text):
         raise BridgeError(f"C string literals of the generator must be printable ASCII, got {text!r}")
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"')
+    return '"' + escaped.replace("?", "\\?") + '"'  # \? keeps "??=" from being read as a trigraph
 
 
 def _c_field(v: Variable) -> str:

@@ -7,6 +7,7 @@ The sources are ``models/`` of a source checkout, or ``bridge/_models`` of an in
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final
@@ -27,6 +28,13 @@ from bridge.models.spec import (
     Variable,
 )
 
+_C_IDENTIFIER: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+#: C99 keywords and the macros of <stdbool.h> a struct field must not be named after.
+_C_KEYWORDS: Final = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if inline int "
+    "long register restrict return short signed sizeof static struct switch typedef union unsigned void "
+    "volatile while _Bool _Complex _Imaginary bool true false".split()
+)
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
     | {"type_definitions", "variables"}
@@ -145,6 +153,7 @@ def _check_spec(spec: Spec) -> None:
     names = [v.name for v in spec.variables]
     if len(set(names)) != len(names):
         raise ValueError(f"variable names are not unique: {names}")
+    _check_c_names(spec.variables)
     table = units()
     for v in spec.variables:
         _check_variable(spec, v, table)
@@ -153,13 +162,30 @@ def _check_spec(spec: Spec) -> None:
             raise ValueError(f"event indicator {name} must be a Float64 variable")
 
 
+def _check_c_names(variables: tuple[Variable, ...]) -> None:
+    """Every variable needs its own valid C identifier; the name itself becomes a C string literal."""
+    seen: dict[str, str] = {}
+    for v in variables:
+        if not v.name or any(not 32 <= ord(ch) < 127 for ch in v.name):
+            raise ValueError(f"{v.name!r}: variable names must be non-empty printable ASCII")
+        if not _C_IDENTIFIER.fullmatch(v.c_name) or v.c_name in _C_KEYWORDS:
+            raise ValueError(
+                f"{v.name}: its C identifier {v.c_name!r} is not a valid C identifier (or is a C keyword); "
+                'give one with the key "c", e.g. "c": "x1"'
+            )
+        if v.c_name in seen:
+            raise ValueError(
+                f"{v.name}: its C identifier {v.c_name!r} is also the one of {seen[v.c_name]}; "
+                'give one of them another with the key "c"'
+            )
+        seen[v.c_name] = v.name
+
+
 def _check_variable(spec: Spec, v: Variable, table: Mapping[str, object]) -> None:
     if v.type not in ALL_TYPES or v.causality not in CAUSALITIES or v.variability not in VARIABILITIES:
         raise ValueError(
             f"{v.name}: type/causality/variability {v.type}/{v.causality}/{v.variability} unknown"
         )
-    if not v.c_name.isidentifier():
-        raise ValueError(f"{v.name}: not usable as a C identifier ({v.c_name})")
     if (v.type == "Enumeration") != (v.declared_type in spec.enums):
         raise ValueError(f"{v.name}: Enumeration variables need a declared_type from type_definitions")
     if v.derivative is not None and spec.variable(v.derivative).type != "Float64":
