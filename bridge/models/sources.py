@@ -30,11 +30,12 @@ from bridge.models.spec import (
 
 _C_IDENTIFIER: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 #: C99 keywords and the macros of <stdbool.h> a struct field must not be named after.
-_C_KEYWORDS: Final = frozenset(
-    "auto break case char const continue default do double else enum extern float for goto if inline int "
-    "long register restrict return short signed sizeof static struct switch typedef union unsigned void "
-    "volatile while _Bool _Complex _Imaginary bool true false".split()
-)
+_C_KEYWORD_TEXT: Final = """
+    auto break case char const continue default do double else enum extern float for goto if inline int long
+    register restrict return short signed sizeof static struct switch typedef union unsigned void volatile
+    while _Bool _Complex _Imaginary bool true false
+"""
+_C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
     | {"type_definitions", "variables"}

@@ -294,13 +294,16 @@ def test_generated_c_value_references_match_model_description(
     with zipfile.ZipFile(fmus[variant]) as archive:
         names = archive.namelist()
         header = archive.read("sources/model_gen.h").decode()
+        table = archive.read("sources/model_gen.c").decode()
     binary = ("binaries/x86_64-linux/" if version == "3.0" else "binaries/linux64/") + f"{name}.so"
     assert {"modelDescription.xml", binary, "sources/model.c", "sources/model.json"} <= set(names)
     in_c = {m[0]: int(m[1]) for m in re.findall(r"#define VR_(\w+) (\d+)", header)}
+    rows = re.findall(r'\[VR_(\w+)\] = \{\.name = "((?:[^"\\]|\\.)*)"', table)
+    c_names = {re.sub(r"\\(.)", r"\1", literal): c_name for c_name, literal in rows}  # C string -> name
     description = read_model_description(str(fmus[variant]))
+    assert len(rows) >= len(description.modelVariables)
     for v in description.modelVariables:
-        c_name = re.sub(r"^der\((\w+)\)$", r"der_\1", v.name)
-        assert in_c[c_name] == v.valueReference, v.name
+        assert in_c[c_names[v.name]] == v.valueReference, v.name
     assert (
         description.coSimulation is not None if interface == "cs" else description.modelExchange is not None
     )
