@@ -56,7 +56,6 @@ class Variable:
     interval: float | None = None  # FMI 3.0 Clock: constant interval in s
     c: str | None = None  # the C identifier, when the one derived from the name does not fit
 
-
     @property
     def size(self) -> int:
         """Number of elements: the product of the dimensions, 1 for a scalar."""

@@ -687,6 +687,7 @@ def test_model_names_and_variants() -> None:
         "cartpole",
         "dcmotor",
         "gearload",
+        "modelica_names",
         "motor_gearload",
         "pi_controller",
         "stair",
@@ -708,11 +709,12 @@ def test_model_names_and_variants() -> None:
     assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["motor_gearload"] == {("2.0", "cs")}
     assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["modelica_names"] == {("2.0", "cs"), ("2.0", "me"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, gearload, motor_gearload, pi_controller, stair, typed, "
-    names += "typed3, vehicle"
+    names = "bouncing_ball, cartpole, dcmotor, gearload, modelica_names, motor_gearload, pi_controller, stair, "
+    names += "typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
