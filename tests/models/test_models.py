@@ -713,8 +713,8 @@ def test_model_names_and_variants() -> None:
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, gearload, modelica_names, motor_gearload, pi_controller, stair, "
-    names += "typed, typed3, vehicle"
+    names = "bouncing_ball, cartpole, dcmotor, gearload, modelica_names, motor_gearload, pi_controller, "
+    names += "stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):
