@@ -50,6 +50,10 @@ def metric_spec(experiment: Experiment) -> MetricSpec:
         success=config.success,
         user=[load_callable(path, "evaluation.metrics.user") for path in config.user],
         band=config.settling_band,
+        duration_s=experiment.model.episode_duration,
+        scenario_durations={
+            name: sc.episode_duration for name, sc in experiment.scenarios.items() if sc.episode_duration
+        },
     )
 
 
