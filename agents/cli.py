@@ -259,7 +259,7 @@ def evaluate_cmd(
         list[str],
         typer.Argument(
             help="Models/run dirs, baselines (zero, random, constant:V, "
-            "names in evaluation.baselines) or python:module:function."
+            "names in evaluation.baselines) or python:module:function; NAME=AGENT names one."
         ),
     ],
     config: Annotated[Path, typer.Option("--config", help="The experiment YAML file.")],

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import multiprocessing
+import re
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -50,6 +51,10 @@ def metric_spec(experiment: Experiment) -> MetricSpec:
         success=config.success,
         user=[load_callable(path, "evaluation.metrics.user") for path in config.user],
         band=config.settling_band,
+        duration_s=experiment.model.episode_duration,
+        scenario_durations={
+            name: sc.episode_duration for name, sc in experiment.scenarios.items() if sc.episode_duration
+        },
     )
 
 
@@ -161,7 +166,7 @@ def evaluate(
         raise ConfigError("evaluate --batch does not record episodes; pass --no-record (or drop --batch)")
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
-    names = _agent_names(agents)
+    agents, names = _named(agents)
     chosen: list[str | None] = list(
         scenarios or config.scenarios or experiment.schedule.evaluation or experiment.scenarios
     )
@@ -200,6 +205,22 @@ def _map(
     context = multiprocessing.get_context("spawn")  # a fresh process per worker: no inherited FMU state
     with ProcessPoolExecutor(max_workers=min(workers, len(cells)), mp_context=context) as pool:
         return list(pool.map(run, cells))
+
+
+def _named(agents: Sequence[str]) -> tuple[list[str], list[str]]:
+    """Agent specs and their names: ``NAME=SPEC`` names an agent (``residual=runs/r/model.zip``),
+    otherwise the name comes from the run directory, the model file or the baseline word."""
+    specs, given = [], []
+    for agent in agents:
+        name, sep, spec = agent.partition("=")
+        named = bool(sep) and bool(spec) and re.fullmatch(r"[\w.+-]+", name) is not None
+        specs.append(spec if named else agent)
+        given.append(name if named else None)
+    derived = _agent_names(specs)
+    names = [g or d for g, d in zip(given, derived)]
+    if len(set(names)) < len(names):
+        raise ConfigError(f"agents need distinct names; got {names}")
+    return specs, names
 
 
 def _agent_names(agents: Sequence[str]) -> list[str]:

@@ -136,6 +136,18 @@ class MetricSpec:
     success: str | None = None  # an expression over metric names, e.g. "episode_return >= 475"
     user: list[Callable[[Trace], Mapping[str, float] | float]] = field(default_factory=list)
     band: float = 0.02
+    duration_s: float | None = None  # the full episode, for ``iae_held``
+    scenario_durations: dict[str, float] = field(default_factory=dict)  # scenarios of their own length
+
+
+def held_iae(error: FloatArray, dt: float, duration_s: float) -> float:
+    """IAE over the full episode duration: an episode that ended early keeps its last |error| until
+    ``duration_s`` after the start, so leaving the envelope early is not rewarded with a short sum.
+    ``error`` holds one sample per action, each standing for ``dt`` seconds."""
+    if error.size == 0:
+        return math.nan
+    remaining = max(0.0, duration_s - error.size * dt)
+    return float(np.sum(np.abs(error)) * dt + abs(error[-1]) * remaining)
 
 
 def compute(trace: Trace, spec: MetricSpec) -> dict[str, Any]:
@@ -150,6 +162,9 @@ def compute(trace: Trace, spec: MetricSpec) -> dict[str, Any]:
             **step_response(y, r, t, band=spec.band),
         }.items():
             row[f"{output}.{key}"] = value
+        duration_s = spec.scenario_durations.get(trace.scenario, spec.duration_s)
+        if duration_s is not None:
+            row[f"{output}.iae_held"] = held_iae(r - y, dt, duration_s)
     for name in spec.effort:
         for key, value in effort_metrics(trace.inputs[name]).items():
             row[f"{name}.{key}"] = value

@@ -48,10 +48,14 @@ class PidSpec(BaseModel):
     anti_windup: str = Field(default="clamp", pattern="^(clamp|back_calculation|none)$")
     tracking_time_s: float | None = None
     feedforward: float = 0.0
+    feedforward_gains: dict[str, float] = {}
 
 
 class Pid:
-    """u = kp e + ki sum(e dt) + kd de/dt, saturated to ``limits``, with anti-windup.
+    """u = ff + kp e + ki sum(e dt) + kd de/dt, saturated to ``limits``, with anti-windup.
+
+    The feed-forward ff is ``feedforward`` plus ``feedforward_gains[name] * signal`` for each named
+    task signal (e.g. a steering angle from the path curvature: gain = wheelbase in m).
 
     ``clamp`` freezes the integrator while the output saturates in the direction of the error;
     ``back_calculation`` bleeds the saturation excess back into the integrator with time
@@ -65,7 +69,9 @@ class Pid:
         self._previous: float | None = None
 
     def reset(self, task: Task, seed: int | None) -> None:
-        for key, role in ((self.spec.output, "output"), (self.spec.reference, "reference")):
+        roles = [(self.spec.output, "output"), (self.spec.reference, "reference")]
+        roles += [(key, "feed-forward signal") for key in self.spec.feedforward_gains]
+        for key, role in roles:
             if key not in task.signal_names:
                 raise ConfigError(
                     f"baseline {self.name}: {role} {key!r} is not a signal of the task; "
@@ -86,7 +92,8 @@ class Pid:
         error = signals[s.reference] - signals[s.output]
         derivative = 0.0 if self._previous is None else (error - self._previous) / self._dt
         self._previous = error
-        unsaturated = s.feedforward + s.kp * error + self._integral + s.kd * derivative
+        feedforward = s.feedforward + sum(k * signals[name] for name, k in s.feedforward_gains.items())
+        unsaturated = feedforward + s.kp * error + self._integral + s.kd * derivative
         u = unsaturated if s.limits is None else float(np.clip(unsaturated, *s.limits))
         step = s.ki * error * self._dt
         if s.anti_windup == "clamp":

@@ -48,7 +48,9 @@ def headline_columns(rows: list[dict[str, Any]], limit: int = 6) -> list[str]:
     )
     chosen = [k for k in HEADLINE if k in keys]
     chosen += [
-        k for k in keys if k.endswith((".rmse", ".iae", ".overshoot_pct", ".effort_sq")) and k not in chosen
+        k
+        for k in keys
+        if k.endswith((".rmse", ".iae", ".iae_held", ".overshoot_pct", ".effort_sq")) and k not in chosen
     ]
     return chosen[:limit]
 
@@ -221,6 +223,7 @@ def _metric_unit(metric: str, spec: PlotSpec) -> str:
         return metric
     per_kind = {
         "iae": f"{unit}.s",
+        "iae_held": f"{unit}.s",
         "itae": f"{unit}.s2",
         "ise": f"({unit})2.s",
         "rmse": unit,

@@ -45,9 +45,15 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, default=2, help="episodes per training scenario")
     parser.add_argument("--iterations", type=int, default=120, help="Nelder-Mead iterations")
     parser.add_argument("--start", type=float, nargs=3, default=(0.1, 0.01, 0.05), help="kp ki kd")
+    parser.add_argument(
+        "--feedforward", nargs="*", default=None, metavar="SIGNAL:GAIN",
+        help="feed-forward gains held fixed while tuning (default: the experiment's)",
+    )  # fmt: skip
     args = parser.parse_args()
     experiment = load_experiment(EXPERIMENT)
-    base = dict(experiment.evaluation["baselines"]["pid"])
+    base = experiment.evaluation.baselines["pid"].settings()
+    if args.feedforward is not None:
+        base["feedforward_gains"] = {k: float(v) for k, _, v in (f.rpartition(":") for f in args.feedforward)}
     env = FmuEnv(experiment)
     seeds = [1000 + i for i in range(args.seeds)]
     x0 = np.log(np.asarray(args.start))

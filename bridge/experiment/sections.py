@@ -84,14 +84,15 @@ class TrainingSection(Strict):
 
 # -- evaluation -----------------------------------------------------------------------------------
 PID_KEYS: tuple[str, ...] = ("output", "reference", "input", "kp", "ki", "kd", "limits", "anti_windup")
-PID_KEYS += ("tracking_time_s", "feedforward")
+PID_KEYS += ("tracking_time_s", "feedforward", "feedforward_gains")
 BASELINE_KEYS = {"pid": PID_KEYS, "constant": ("value",), "python": ("callable",)}
 
 
 class BaselineSection(Strict):
     """One of ``evaluation.baselines``: ``type: pid`` (the default; output, reference, input, gains,
-    ``limits``, ``anti_windup``), ``type: constant`` (``value`` in physical units) or ``type:
-    python`` (``callable: module:function``)."""
+    ``limits``, ``anti_windup``, a constant ``feedforward`` and ``feedforward_gains`` on signals),
+    ``type: constant`` (``value`` in physical units) or ``type: python`` (``callable:
+    module:function``)."""
 
     type: Literal["pid", "constant", "python"] = "pid"
     output: str | None = None
@@ -104,6 +105,9 @@ class BaselineSection(Strict):
     anti_windup: Literal["clamp", "back_calculation", "none"] = "clamp"
     tracking_time_s: PositiveFloat | None = None
     feedforward: FiniteFloat = 0.0
+    feedforward_gains: dict[str, FiniteFloat] = Field(
+        default={}, description="signal name -> gain: u += gain * signal (e.g. curvature feed-forward)"
+    )
     value: FiniteFloat | None = None
     callable: str | None = None
 

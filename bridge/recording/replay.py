@@ -252,7 +252,8 @@ def _log_tracking(
         if reference is None:
             continue
         entity = f"/tracking/{out}/reference"
-        style = rr.SeriesLines(colors=[sig.REFERENCE_RGB], names=f"{ref}{unit} (reference)", widths=1.5)
+        name = f"{ref}{unit} (reference)"
+        style = rr.SeriesLines(colors=[sig.VIEWER_REFERENCE_RGB], names=name, widths=1.5)
         stream.log(entity, style, static=True)
         _send(rr, stream, entity, rows, lambda m, c=reference: rr.Scalars.columns(scalars=c[m]))
 

@@ -31,7 +31,9 @@ AGENT_PALETTE = [
     (23, 190, 207),
 ]
 FIXED_AGENTS = {"pid": (127, 127, 127), "zero": (188, 189, 34), "random": (160, 160, 200)}
-REFERENCE_RGB = (0, 0, 0)
+REFERENCE_RGB = (0, 0, 0)  # reports: black, dashed, on white
+#: The reference in the Rerun viewer, whose plots have a near-black background: near-white there.
+VIEWER_REFERENCE_RGB = (235, 235, 235)
 
 
 def agent_colour(name: str) -> tuple[int, int, int]:

@@ -13,6 +13,7 @@ from scipy.linalg import expm
 
 from agents.evaluate import evaluate
 from agents.report import summary, write
+from bridge.errors import ConfigError
 
 R, L, K, J, B = 1.0, 0.0025, 0.1, 0.01, 1e-4
 H, VOLTS, REF, N = 0.01, 12.0, 50.0, 100
@@ -104,3 +105,12 @@ def test_every_agent_sees_the_same_seeds(tmp_path: Path) -> None:
     result = evaluate(["zero", "random"], example_experiment("cartpole_continuous"), episodes=3, seed=11)
     seeds = {(r["agent"], r["episode"]): r["seed"] for r in result.rows}
     assert [seeds[("zero", i)] for i in range(3)] == [seeds[("random", i)] for i in range(3)] == [11, 12, 13]
+
+
+def test_name_equals_agent_names_an_agent_and_names_must_differ(experiment: Path) -> None:
+    named = evaluate(["half=constant:6", "constant:12"], experiment, episodes=1)
+    assert {r["agent"] for r in named.rows} == {"half", "constant:12"}
+    same = {r["return"] for r in named.rows if r["agent"] == "half"}
+    assert same == {r["return"] for r in evaluate(["constant:6"], experiment, episodes=1).rows}
+    with pytest.raises(ConfigError, match="distinct names"):
+        evaluate(["a=constant:6", "a=constant:12"], experiment, episodes=1)

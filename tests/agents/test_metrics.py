@@ -13,6 +13,7 @@ from agents.metrics import (
     compute,
     constraint_metrics,
     effort_metrics,
+    held_iae,
     step_response,
     success,
     tracking_metrics,
@@ -87,6 +88,30 @@ def test_compute_from_a_trace_with_success_and_user_metric() -> None:
     assert row["y.rmse"] == pytest.approx(math.sqrt(1 / 3))
     assert row["u.effort_sq"] == 10.0 and row["y.violations"] == 2
     assert row["peak"] == 2.0 and row["success"] is True
+
+
+def test_held_iae_charges_the_last_error_until_the_episode_would_have_ended() -> None:
+    error = np.array([0.5, -1.0, 4.2])  # three samples of 0.1 s, then off the envelope at 0.3 s
+    assert held_iae(error, 0.1, 1.0) == pytest.approx((0.5 + 1.0 + 4.2) * 0.1 + 4.2 * 0.7)
+    assert held_iae(error, 0.1, 0.3) == pytest.approx((0.5 + 1.0 + 4.2) * 0.1)  # ran to the end
+    assert math.isnan(held_iae(np.array([]), 0.1, 1.0))
+
+
+def test_compute_gives_held_iae_with_the_scenarios_own_duration() -> None:
+    trace = Trace(
+        time_s=np.array([0.0, 0.1, 0.2]),
+        signals={"y": np.array([0.0, 1.0, 3.0]), "r": np.zeros(3)},
+        inputs={"u": np.zeros(2)},
+        rewards=np.zeros(2),
+        reason="bounds",
+        terminated=True,
+        scenario="short",
+    )
+    spec = MetricSpec(tracking=[("y", "r")], duration_s=2.0, scenario_durations={"short": 1.0})
+    row = compute(trace, spec)
+    assert row["y.iae"] == pytest.approx((1 + 3) * 0.1)
+    assert row["y.iae_held"] == pytest.approx((1 + 3) * 0.1 + 3 * 0.8)
+    assert "y.iae_held" not in compute(trace, MetricSpec(tracking=[("y", "r")]))
 
 
 def test_success_condition_uses_the_safe_evaluator() -> None:

@@ -69,6 +69,30 @@ def test_pid_acts_through_the_action_space(motor: FmuEnv) -> None:
     np.testing.assert_allclose(action, [0.5])  # 12 V of +-24 V
 
 
+def test_pid_feedforward_adds_gain_times_signal(motor: FmuEnv) -> None:
+    spec = PidSpec(
+        output="omega",
+        reference="omega_ref",
+        input="voltage",
+        kp=2.0,
+        feedforward=0.5,
+        feedforward_gains={"omega_ref": 0.25, "load_torque": -3.0},
+        limits=(-24.0, 24.0),
+    )
+    pid = Pid(spec)
+    pid.reset(motor.task, 0)
+    u = pid.control({"omega": 1.0, "omega_ref": 4.0, "load_torque": 0.2})
+    assert u == pytest.approx(0.5 + 0.25 * 4.0 - 3.0 * 0.2 + 2.0 * (4.0 - 1.0))
+    saturated = pid.control({"omega": 0.0, "omega_ref": 200.0, "load_torque": 0.0})
+    assert saturated == 24.0  # the feed-forward goes through the same limits
+
+
+def test_pid_feedforward_signal_names_are_checked(motor: FmuEnv) -> None:
+    spec = PidSpec(output="omega", reference="omega_ref", input="voltage", feedforward_gains={"kappa": 1.0})
+    with pytest.raises(ConfigError, match="feed-forward signal 'kappa' is not a signal"):
+        Pid(spec).reset(motor.task, 0)
+
+
 def test_pid_names_are_checked(motor: FmuEnv) -> None:
     with pytest.raises(ConfigError, match="'speed' is not a signal"):
         Pid(PidSpec(output="speed", reference="omega_ref", input="voltage")).reset(motor.task, 0)
