@@ -80,6 +80,13 @@ class ModelSection(Strict):
     start_values: dict[str, Scalar] = {}
     reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
     tolerance: PositiveFloat | None = None
+    solver: Literal["cvode", "rk4", "euler"] = Field(
+        default="cvode",
+        description="model exchange: CVode (variable step), or rk4/euler: fixed steps in native code",
+    )
+    solver_substeps: Annotated[int, Field(ge=1)] = Field(
+        default=1, description="fixed-step solvers: integration steps per FMU step (step_size)"
+    )
     isolation: IsolationSection | None = None
 
     @model_validator(mode="after")
