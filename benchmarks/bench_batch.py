@@ -12,6 +12,9 @@ Run: python benchmarks/bench_batch.py [--n 256] [--repeats 5] [--ppo-timesteps 8
    cart-pole (a balancing state feedback, so episodes run their 500 samples) and the DC motor
    (random voltages, 300-sample episodes with scenarios, uncertainty and sensor noise).
 3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters).
+4. Model exchange vs co-simulation per sample on the same model (``Model``: write inputs, advance,
+   read outputs): the native fixed-step RK4 loop with as many substeps as the CS variant's own RK4
+   (so both evaluate the equations equally often), and CVode.
 """
 
 from __future__ import annotations
@@ -31,6 +34,8 @@ from bridge.env.batch import BatchVecEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.fmu import Model
+from bridge.models import example_fmu
 from bridge.plant.batch import BatchPlant
 
 TYPED = "model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 1.0}\n" \
@@ -167,13 +172,62 @@ def ppo_comparison(timesteps: int, repeats: int) -> list[tuple[str, ...]]:
     ]
 
 
+# model, inputs, outputs, FMU step, RK4 substeps of the CS variant (h / its solver_step)
+ME_CASES = (
+    ("cartpole", ["force"], ["x", "x_dot", "theta", "theta_dot"], 0.02, 20),
+    ("dcmotor", ["voltage", "load_torque"], ["omega", "current"], 0.01, 100),
+    ("bouncing_ball", [], ["h", "v"], 0.01, 1),
+)
+
+
+def model_loop(
+    path: Path, inputs: list[str], outputs: list[str], h: float, **kw: Any
+) -> Callable[[int], None]:
+    model = Model(path, step_size_s=h, **kw)
+    model.initialize()
+    write = model.signals(inputs, writable=True).write if inputs else None
+    read = model.signals(outputs).read
+    u = [0.5] * len(inputs)
+
+    def run(samples: int) -> None:
+        model.reset()  # every run from t0: a few us against thousands of samples
+        for _ in range(samples):
+            if write is not None:
+                write(u)
+            model.advance(1)
+            read()
+
+    return run
+
+
+def me_vs_cs(repeats: int) -> list[tuple[str, ...]]:
+    rows: list[tuple[str, ...]] = []
+    for name, inputs, outputs, h, substeps in ME_CASES:
+        loops = {
+            "CS": model_loop(example_fmu(name, "2.0", "cs"), inputs, outputs, h),
+            "ME rk4": model_loop(
+                example_fmu(name, "2.0", "me"), inputs, outputs, h, solver="rk4", solver_substeps=substeps
+            ),
+            "ME cvode": model_loop(example_fmu(name, "2.0", "me"), inputs, outputs, h),
+        }
+        rates = interleaved(loops, 2000, repeats)
+        us = {key: 1e6 / rate for key, rate in rates.items()}
+        rows += [(f"{name} (FMI 2.0), {key}", f"{value:.1f} us") for key, value in us.items()]
+        rows.append((f"{name}: ME rk4 x{substeps} / CS", f"{us['ME rk4'] / us['CS']:.2f}x"))
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--n", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--ppo-timesteps", type=int, default=8192)
     parser.add_argument("--no-ppo", action="store_true")
+    parser.add_argument("--only-me", action="store_true", help="only the ME vs CS comparison")
     args = parser.parse_args()
+    if args.only_me:
+        print(table(me_vs_cs(args.repeats), ("model exchange vs co-simulation", "per sample or ratio")))
+        return
     rows = raw_stepping(max(args.n, 1024), args.repeats)
     print(table(rows, ("what (median, one core)", "steps/s")), flush=True)
     for name in ("cartpole_balance", "dcmotor_tracking"):
@@ -181,6 +235,7 @@ def main() -> None:
         print(table(rows[-5:], ("what (median, one core)", "steps/s or ratio")), flush=True)
     if not args.no_ppo:
         rows += ppo_comparison(args.ppo_timesteps, max(1, args.repeats // 2))
+    rows += me_vs_cs(args.repeats)
     print(table(rows, ("what (median, one core)", "steps/s or ratio")))
 
 
