@@ -27,6 +27,7 @@ from bridge.fmu.events import EventCalls, needs_completed_step
 
 METHODS: Final = {"euler": 0, "rk4": 1}
 END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE, FAILED = 0, 1, 2, 3, 4, 64
+MAX_EVENTS: Final = 100_000  # per sample: more means the model chatters
 _FUNCTIONS: Final = {
     2: ("SetTime", "SetContinuousStates", "GetContinuousStates", "GetDerivatives",
         "GetEventIndicators", "CompletedIntegratorStep"),
@@ -137,7 +138,7 @@ class FixedStepper:
         call.end = end_s
         call.total = total = max(1, round((end_s - start_s) / self._h)) * self._substeps
         call.substep = (end_s - start_s) / total
-        while True:
+        for _ in range(MAX_EVENTS):
             event = self.next_event_s
             time_s = call.time
             due = event is not None and time_s < event and not _close(time_s, event)
@@ -151,6 +152,14 @@ class FixedStepper:
                 raise self._failure(code, step, call.time)
             if self.handle_event(call.time, step):
                 return True
+        raise StepError(
+            f"{self._backend.info.model_name}: more than {MAX_EVENTS} events between t={start_s:g} s and "
+            f"t={end_s:g} s (step {step}, now t={call.time:g} s): the model chatters (events that keep "
+            f"re-triggering); check its event indicators, or sample more often",
+            step=step,
+            time_s=call.time,
+            log=self._backend.log.recent(),
+        )
 
     def _failure(self, code: int, step: int, time_s: float) -> StepError:
         b = self._backend

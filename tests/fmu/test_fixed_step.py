@@ -11,7 +11,7 @@ import pytest
 from fmpy import simulate_fmu
 from scipy.linalg import expm
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, StepError
 from bridge.fmu import Model
 from bridge.models import example_fmu
 from tests.fmu.test_me_events import PERIOD, H, closed_form, run_stair
@@ -197,3 +197,16 @@ def test_bad_solver_settings_are_refused(
 ) -> None:
     with pytest.raises(ConfigError, match=match):
         Model(example_fmu(*fmu), step_size_s=0.02, interface=fmu[2], **kwargs)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_an_fmi_call_the_fmu_rejects_is_a_step_error_with_its_log(version: str) -> None:
+    with Model(example_fmu("cartpole", version, "me"), step_size_s=0.02, solver="rk4") as model:
+        model.initialize()
+        model._backend.fmu.terminate()  # behind the model's back: the FMU now refuses every step call
+        with pytest.raises(StepError, match=f"fmi{version[0]}SetTime returned Error at t=0 s") as caught:
+            model.advance(1)
+        assert any("not allowed in terminated" in line for line in caught.value.log)
+        model.reset()
+        model.advance(1)  # usable again after a reset
+        assert model.time_s == pytest.approx(0.02)
