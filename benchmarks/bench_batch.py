@@ -13,7 +13,8 @@ Run: python benchmarks/bench_batch.py [--n 256] [--repeats 5] [--ppo-timesteps 8
    ``FmuEnv``, and vs the same FMU's doStep-only loop in C over the same N instances, on the
    cart-pole (a balancing state feedback, so episodes run their 500 samples) and the DC motor
    (random voltages, 300-sample episodes with scenarios, uncertainty and sensor noise).
-3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters).
+3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters,
+   one torch thread).
 4. Model exchange vs co-simulation per sample on the same model (``Model``: write inputs, advance,
    read outputs): the native fixed-step RK4 loop with as many substeps as the CS variant's own RK4
    (so both evaluate the equations equally often), and CVode.
@@ -161,9 +162,14 @@ def env_comparison(name: str, n: int, repeats: int) -> list[tuple[str, ...]]:
 
 
 def ppo_comparison(timesteps: int, repeats: int) -> list[tuple[str, ...]]:
+    import torch
     from bench_train import HYPERPARAMS
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
+
+    # One learner thread: on a shared machine torch's thread pool oversubscribes the cores (measured
+    # at load 11 on 2 cores: 16 steps/s with the default pool, 650-700 with one thread).
+    torch.set_num_threads(1)
 
     exp = load_experiment(example_experiment("cartpole_balance"))
     makers = {
