@@ -92,6 +92,12 @@ class ModelSection(Strict):
     @model_validator(mode="after")
     def _samples(self) -> ModelSection:
         check_samples("episode_duration", self.episode_duration, self.sampling_time or self.step_size)
+        if self.solver != "cvode" and self.interface == "cs":
+            raise invalid(
+                "solver",
+                f"{self.solver!r} integrates model exchange, but interface is 'cs' (the FMU's own "
+                "solver): set interface: me, or drop solver",
+            )
         return self
 
 
