@@ -97,34 +97,35 @@ static int get_z(const Ctx* c, double* z) {
                             : ((fmi2GetEventIndicatorsTYPE*)c->s->get_z)(c->c, z, n);
 }
 
-/* dx = f(t, x): the instance is left at (t, x). */
-static int rhs(const Ctx* c, double t, const double* x, double* dx) {
+/* dx = f(t, x): the instance is left at (t, x); `there`: it is there already (no set calls). */
+static int rhs(const Ctx* c, double t, const double* x, double* dx, bool there) {
     size_t n = (size_t)c->s->nx;
-    TRY(set_time(c, t), F_SET_TIME);
+    if (!there) TRY(set_time(c, t), F_SET_TIME);
     if (n == 0) return FS_END;
-    TRY(set_x(c, x), F_SET_X);
+    if (!there) TRY(set_x(c, x), F_SET_X);
     TRY(c->s->major == 3 ? ((fmi3GetContinuousStateDerivativesTYPE*)c->s->get_dx)(c->c, dx, n)
                          : ((fmi2GetDerivativesTYPE*)c->s->get_dx)(c->c, dx, n),
         F_GET_DX);
     return FS_END;
 }
 
-/* out = one step from (t, x) to t_end; the instance is left at (t_end, out). */
-static int step(const Ctx* c, double t, const double* x, double t_end, double* out) {
+/* out = one step from (t, x) to t_end; the instance is left at (t_end, out). `there`: the
+ * instance is at (t, x) already (the end of the previous substep). */
+static int step(const Ctx* c, double t, const double* x, double t_end, double* out, bool there) {
     int nx = c->s->nx, r;
     double h = t_end - t;
     double *k = c->k, *xs = c->xs;
-    if ((r = rhs(c, t, x, k)) != FS_END) return r;
+    if ((r = rhs(c, t, x, k, there)) != FS_END) return r;
     if (c->s->method == 0) {
         for (int i = 0; i < nx; i++) out[i] = x[i] + h * k[i];
     } else {
         double *k2 = k + nx, *k3 = k + 2 * nx, *k4 = k + 3 * nx;
         for (int i = 0; i < nx; i++) xs[i] = x[i] + 0.5 * h * k[i];
-        if ((r = rhs(c, t + 0.5 * h, xs, k2)) != FS_END) return r;
+        if ((r = rhs(c, t + 0.5 * h, xs, k2, false)) != FS_END) return r;
         for (int i = 0; i < nx; i++) xs[i] = x[i] + 0.5 * h * k2[i];
-        if ((r = rhs(c, t + 0.5 * h, xs, k3)) != FS_END) return r;
+        if ((r = rhs(c, t + 0.5 * h, xs, k3, false)) != FS_END) return r;
         for (int i = 0; i < nx; i++) xs[i] = x[i] + h * k3[i];
-        if ((r = rhs(c, t + h, xs, k4)) != FS_END) return r;
+        if ((r = rhs(c, t + h, xs, k4, false)) != FS_END) return r;
         for (int i = 0; i < nx; i++) out[i] = x[i] + h / 6.0 * (k[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     }
     TRY(set_time(c, t_end), F_SET_TIME);
@@ -147,12 +148,12 @@ static int locate(const Ctx* c, double t, double h, double* stop) {
     int r;
     for (int i = 0; i < FS_BISECTIONS && hi - lo > 1e-13 * (fabs(t) + h); i++) {
         double mid = 0.5 * (lo + hi);
-        if ((r = step(c, t, c->xa, t + mid, c->x)) != FS_END) return r;
+        if ((r = step(c, t, c->xa, t + mid, c->x, false)) != FS_END) return r;
         TRY(get_z(c, c->zt), F_GET_Z);
         if (crossed(c->za, c->zt, c->s->nz)) hi = mid;
         else lo = mid;
     }
-    if ((r = step(c, t, c->xa, t + hi, c->x)) != FS_END) return r;
+    if ((r = step(c, t, c->xa, t + hi, c->x, false)) != FS_END) return r;
     *stop = t + hi;
     return FS_END;
 }
@@ -183,13 +184,14 @@ int fixed_step_advance(const FixedSpec* s, FixedCall* call) {
     if (nx > 0) TRY(get_x(&c, c.xa), F_GET_X);
     TRY(get_z(&c, c.za), F_GET_Z);
     bool has_event = !isnan(call->next_event);
+    bool there = false; /* the first substep of a call sets time and states itself */
     while (call->time < call->end) {
         long long j = next_point(call);
         double target = j == call->total ? call->end : call->origin + (double)j * call->substep;
         bool time_event = has_event && call->next_event <= target + 1e-12 * (fabs(target) + 1.0);
         if (time_event) target = call->next_event > call->time ? call->next_event : call->time;
         double t = call->time;
-        if ((r = step(&c, t, c.xa, target, c.x)) != FS_END) return r;
+        if ((r = step(&c, t, c.xa, target, c.x, there)) != FS_END) return r;
         TRY(get_z(&c, c.zb), F_GET_Z);
         if (crossed(c.za, c.zb, nz)) {
             if ((r = locate(&c, t, target - t, &call->time)) != FS_END) return r;
@@ -199,6 +201,7 @@ int fixed_step_advance(const FixedSpec* s, FixedCall* call) {
         if ((r = completed(&c)) != FS_END) return r;
         if (time_event) return FS_TIME_EVENT;
         memcpy(c.xa, c.x, sizeof(double) * (size_t)nx);
+        there = true;
         memcpy(c.za, c.zb, sizeof(double) * (size_t)nz);
     }
     return FS_END;
