@@ -429,6 +429,17 @@ class Model:
             "bool_status": address("fmi2GetBooleanStatus") if b.major == 2 else 0,
         }
 
+    @property
+    def steppable(self) -> bool:
+        """True if :meth:`advance` would step now (open, initialised, not terminated, not failed)."""
+        return self._initialized and not self.terminated and not self._failed_status and not self._closed
+
+    def native_terminated(self, step_index: int) -> None:
+        """Account for a native stepper's doStep after which the FMU asked to terminate; the
+        model now stands at ``step_index`` (the step included) and refuses further steps."""
+        self.step_index = step_index
+        self.terminated = True
+
     def native_step_failed(self, step_index: int, status: int) -> bool:
         """Account for a doStep that a native stepper made at step ``step_index`` and that returned
         ``status`` (> Warning): True if the FMU asked to terminate, else :class:`StepError`."""

@@ -202,24 +202,42 @@ class SignalGroup:
         if self._notify:
             self._model._inputs_written()
 
-    def _write_direct(self, component: Any, values: Any) -> None:
-        """All-Float64 groups (the common case): plain-Python checks beat numpy for a few values."""
+    def native_buffer(self, *, writing: bool) -> tuple[int, int, int] | None:
+        """(value-reference array address, count, float64 buffer address) of an all-Float64
+        group, for a native stepper that sets (``writing``) or gets the group itself; None for
+        other groups (mixed types, array elements, not settable during a step, model exchange)."""
         block = self._blocks[0]
-        if block.set is None:
-            raise self._not_settable()
+        if not self._direct or self._notify or (writing and block.set is None):
+            return None
+        return block.vrs, block.n, block.ptr
+
+    def stage(self, values: Any) -> None:
+        """Check ``values`` (finite, one per variable) and place them in the group's buffer
+        without calling the FMU: the native stepper passes that buffer to the setter. All-Float64
+        groups only (see :meth:`native_buffer`); plain-Python checks beat numpy for a few values."""
         try:
             for v in values:
                 if v - v != 0.0:  # NaN or infinity
-                    raise self._value_error(np.asarray(values, dtype=np.float64).reshape(-1), block)
+                    raise self._value_error(np.asarray(values, dtype=np.float64).reshape(-1), self._blocks[0])
             self._cbuf[:] = values
         except (TypeError, ValueError) as exc:
             if isinstance(exc, VariableError):
                 raise
             flat = np.asarray(values, dtype=np.float64).reshape(-1)
-            if flat.shape != (len(block.buf),):
+            if flat.shape != (len(self._blocks[0].buf),):
                 raise self._shape_error(values) from exc
-            self._write_direct(component, flat.tolist())
-            return
+            self.stage(flat.tolist())
+
+    def latest(self) -> FloatArray:
+        """A copy of the values a native stepper last read into the buffer (all-Float64 groups)."""
+        return self._blocks[0].buf.copy()
+
+    def _write_direct(self, component: Any, values: Any) -> None:
+        """All-Float64 groups (the common case)."""
+        block = self._blocks[0]
+        if block.set is None:
+            raise self._not_settable()
+        self.stage(values)
         status = block.set(component, block.vrs, block.n, block.ptr, *block.nargs)
         if status > WARNING:
             self._fail("set", block, status)

@@ -14,7 +14,13 @@ from bridge.errors import BridgeError
 from bridge.models.spec import FLOAT_TYPES, INT_TYPES, UNSIGNED_TYPES, Spec, Variable
 
 _C_TYPES: Final = dict(
-    Float32="float", Float64="double", Boolean="bool", String="char*", Enumeration="int64_t"
+    Float32="float",
+    Float64="double",
+    Boolean="bool",
+    String="char*",
+    Enumeration="int64_t",
+    Binary="FmuBinary",
+    Clock="bool",
 ) | {t: f"{t.lower()}_t" for t in INT_TYPES}
 
 
@@ -49,7 +55,7 @@ def c_header(spec: Spec, fmi_version: str, interface: str, token: str) -> str:
         *(f"#define {e.name}_{item} {value}" for e in spec.enums.values() for item, value, _ in e.items),
         *([""] if spec.enums else []),
         "typedef struct {",
-        *(f"    {_C_TYPES[v.type]} {v.c_name};  /* {_c_comment(v)} */" for v in spec.variables[1:]),
+        *(f"    {_C_TYPES[v.type]} {_c_field(v)};  /* {_c_comment(v)} */" for v in spec.variables[1:]),
         "} ModelData;",
         "",
         "extern const FmuVariable MODEL_VARIABLES[MODEL_N_VARS];",
@@ -95,7 +101,13 @@ def c_table(spec: Spec, fmi_version: str, interface: str) -> str:
 def _c_string(text: str) -> str:
     if any(not (32 <= ord(c) < 127) for c in text):
         raise BridgeError(f"C string literals of the generator must be printable ASCII, got {text!r}")
-    return '"' + text.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    escaped = text.replace("\\", "\\\\").replace('"', '\\"')
+    return '"' + escaped.replace("?", "\\?") + '"'  # \? keeps "??=" from being read as a trigraph
+
+
+def _c_field(v: Variable) -> str:
+    """The struct member: arrays are flat C arrays in row-major order (``y[2,3]`` is ``y[6]``)."""
+    return f"{v.c_name}[{v.size}]" if v.dimensions else v.c_name
 
 
 def _c_comment(v: Variable) -> str:
@@ -114,6 +126,10 @@ def _c_row(spec: Spec, v: Variable, fmi_version: str, interface: str) -> str:
         f".exposed = {str(v.present_in(fmi_version, interface)).lower()}",
         f".offset = {offset}",
     ]
+    if v.dimensions:
+        fields.append(f".n_elements = {v.size}")
+    if v.type == "Clock":
+        fields.append(f".interval = {v.interval!r}")
     if v.start is not None:
         fields += [".has_start = true", _c_start(v)]
     low, high = (v.min, v.max)
@@ -128,6 +144,14 @@ def _c_row(spec: Spec, v: Variable, fmi_version: str, interface: str) -> str:
 
 
 def _c_start(v: Variable) -> str:
+    if isinstance(v.start, tuple):
+        return f".start_array = (const double[]){{{', '.join(repr(float(x)) for x in v.start)}}}"
+    if v.type == "Binary":
+        data = bytes.fromhex(str(v.start))
+        if not data:
+            return ".start_size = 0"
+        values = ", ".join(str(b) for b in data)
+        return f".start_binary = (const uint8_t[]){{{values}}}, .start_size = {len(data)}"
     if v.type == "String":
         return f".start_string = {_c_string(str(v.start))}"
     if v.type in FLOAT_TYPES:

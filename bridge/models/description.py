@@ -12,7 +12,7 @@ from typing import Final
 
 from bridge.errors import BridgeError
 from bridge.models.sources import units
-from bridge.models.spec import FLOAT_TYPES, FMI2_TYPES, INT_TYPES, Scalar, Spec, Variable
+from bridge.models.spec import FLOAT_TYPES, FMI2_TYPES, INT_TYPES, Spec, Start, Variable
 
 GENERATION_TOOL: Final = "fmu-bridge (bridge.models)"
 
@@ -23,7 +23,9 @@ _LOG_CATEGORIES: Final = {
 }
 
 
-def _xml_value(value: Scalar) -> str:
+def _xml_value(value: Start) -> str:
+    if isinstance(value, tuple):  # an array's start: one value per element, space separated
+        return " ".join(_xml_value(x) for x in value)
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
@@ -31,7 +33,7 @@ def _xml_value(value: Scalar) -> str:
     return str(value)
 
 
-def _attributes(**values: Scalar | None) -> dict[str, str]:
+def _attributes(**values: Start | None) -> dict[str, str]:
     return {key: _xml_value(value) for key, value in values.items() if value is not None}
 
 
@@ -96,7 +98,10 @@ def _append(parent: ET.Element, *children: ET.Element | None) -> None:
 
 def _type_attributes(v: Variable, fmi_version: str) -> dict[str, str]:
     numeric = v.type in FLOAT_TYPES or v.type in INT_TYPES
-    start = None if (v.type == "String" and fmi_version == "3.0") else v.start  # FMI 3.0: <Start value=.../>
+    child_start = fmi_version == "3.0" and v.type in ("String", "Binary")  # FMI 3.0: <Start value=.../>
+    start = None if child_start else v.start
+    if v.dimensions and start is not None and not isinstance(start, tuple):
+        start = (float(start),) * v.size
     return _attributes(
         declaredType=v.declared_type,
         unit=v.unit,
@@ -191,8 +196,13 @@ def _variable_element(v: Variable, fmi_version: str) -> tuple[ET.Element, ET.Ele
     if fmi_version == "2.0":
         scalar = ET.Element("ScalarVariable", common)
         return scalar, ET.SubElement(scalar, FMI2_TYPES[v.type], _type_attributes(v, "2.0"))
+    if v.type == "Clock":  # a time-based clock with a constant interval; no start, no initial
+        clock = _attributes(intervalVariability="constant", intervalDecimal=v.interval)
+        return ET.Element("Clock", common | clock), ET.Element("Clock")
     element = ET.Element(v.type, common | _type_attributes(v, "3.0"))
-    if v.type == "String" and v.start is not None:
+    for size in v.dimensions:
+        ET.SubElement(element, "Dimension", start=str(size))
+    if v.type in ("String", "Binary") and v.start is not None:
         ET.SubElement(element, "Start", value=str(v.start))
     return element, element
 

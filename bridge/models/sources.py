@@ -7,6 +7,7 @@ The sources are ``models/`` of a source checkout, or ``bridge/_models`` of an in
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Final
@@ -27,6 +28,14 @@ from bridge.models.spec import (
     Variable,
 )
 
+_C_IDENTIFIER: Final = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+#: C99 keywords and the macros of <stdbool.h> a struct field must not be named after.
+_C_KEYWORD_TEXT: Final = """
+    auto break case char const continue default do double else enum extern float for goto if inline int long
+    register restrict return short signed sizeof static struct switch typedef union unsigned void volatile
+    while _Bool _Complex _Imaginary bool true false
+"""
+_C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
     | {"type_definitions", "variables"}
@@ -112,9 +121,13 @@ def _parse_variable(vr: int, raw: dict[str, Any]) -> Variable:
     for key in ("min", "max", "nominal"):
         if key in values:
             values[key] = float(values[key])
-    for key in ("fmi_versions", "interfaces"):
+    for key in ("fmi_versions", "interfaces", "dimensions"):
         if key in values:
             values[key] = tuple(values[key])
+    if isinstance(values.get("start"), list):
+        values["start"] = tuple(float(x) for x in values["start"])
+    if "interval" in values:
+        values["interval"] = float(values["interval"])
     return Variable(vr=vr, **values)
 
 
@@ -141,6 +154,7 @@ def _check_spec(spec: Spec) -> None:
     names = [v.name for v in spec.variables]
     if len(set(names)) != len(names):
         raise ValueError(f"variable names are not unique: {names}")
+    _check_c_names(spec.variables)
     table = units()
     for v in spec.variables:
         _check_variable(spec, v, table)
@@ -149,21 +163,56 @@ def _check_spec(spec: Spec) -> None:
             raise ValueError(f"event indicator {name} must be a Float64 variable")
 
 
+def _check_c_names(variables: tuple[Variable, ...]) -> None:
+    """Every variable needs its own valid C identifier; the name itself becomes a C string literal."""
+    seen: dict[str, str] = {}
+    for v in variables:
+        if not v.name or any(not 32 <= ord(ch) < 127 for ch in v.name):
+            raise ValueError(f"{v.name!r}: variable names must be non-empty printable ASCII")
+        if not _C_IDENTIFIER.fullmatch(v.c_name) or v.c_name in _C_KEYWORDS:
+            raise ValueError(
+                f"{v.name}: its C identifier {v.c_name!r} is not a valid C identifier (or is a C keyword); "
+                'give one with the key "c", e.g. "c": "x1"'
+            )
+        if v.c_name in seen:
+            raise ValueError(
+                f"{v.name}: its C identifier {v.c_name!r} is also the one of {seen[v.c_name]}; "
+                'give one of them another with the key "c"'
+            )
+        seen[v.c_name] = v.name
+
+
 def _check_variable(spec: Spec, v: Variable, table: Mapping[str, object]) -> None:
     if v.type not in ALL_TYPES or v.causality not in CAUSALITIES or v.variability not in VARIABILITIES:
         raise ValueError(
             f"{v.name}: type/causality/variability {v.type}/{v.causality}/{v.variability} unknown"
         )
-    if not v.c_name.isidentifier():
-        raise ValueError(f"{v.name}: not usable as a C identifier ({v.c_name})")
     if (v.type == "Enumeration") != (v.declared_type in spec.enums):
         raise ValueError(f"{v.name}: Enumeration variables need a declared_type from type_definitions")
     if v.derivative is not None and spec.variable(v.derivative).type != "Float64":
         raise ValueError(f"{v.name}: the derivative of {v.derivative} must belong to a Float64 state")
     if v.unit is not None and v.unit not in table:
         raise ValueError(f"{v.name}: unit {v.unit!r} is not defined in common/units.json")
+    built = {version for version, _ in spec.variants}
     for version in v.fmi_versions:
-        if version != "3.0" and v.type not in FMI2_TYPES:
-            raise ValueError(
-                f"{v.name}: type {v.type} does not exist in FMI {version}; restrict fmi_versions"
-            )
+        if version in built and version != "3.0" and (v.type not in FMI2_TYPES or v.dimensions):
+            what = "arrays do" if v.dimensions else f"type {v.type} does"
+            raise ValueError(f"{v.name}: {what} not exist in FMI {version}; restrict fmi_versions")
+    _check_fmi3_only(v)
+
+
+def _check_fmi3_only(v: Variable) -> None:
+    """Arrays, Binary and Clock: what the generator and the C framework support of them."""
+    if v.dimensions:
+        if v.type != "Float64" or any(n < 1 for n in v.dimensions):
+            raise ValueError(f"{v.name}: arrays must be Float64 with sizes >= 1, got {v.type} {v.dimensions}")
+        if isinstance(v.start, tuple) and len(v.start) != v.size:
+            raise ValueError(f"{v.name}: start has {len(v.start)} values for {v.size} elements")
+    elif isinstance(v.start, tuple):
+        raise ValueError(f"{v.name}: a list as start value needs dimensions")
+    if v.type == "Binary" and v.start is not None:
+        bytes.fromhex(str(v.start))  # ValueError names the bad character
+    if (v.type == "Clock") != (v.interval is not None) or (v.interval is not None and v.interval <= 0):
+        raise ValueError(
+            f"{v.name}: a Clock needs interval > 0 (a constant interval in s); only clocks have one"
+        )

@@ -7,6 +7,7 @@ FMI 1.0/2.0 element names are mapped where the XML is written.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -18,7 +19,7 @@ INTERFACES: Final = ("cs", "me")
 FLOAT_TYPES: Final = frozenset({"Float32", "Float64"})
 UNSIGNED_TYPES: Final = frozenset({"UInt8", "UInt16", "UInt32", "UInt64"})
 INT_TYPES: Final = frozenset({"Int8", "Int16", "Int32", "Int64"}) | UNSIGNED_TYPES
-ALL_TYPES: Final = FLOAT_TYPES | INT_TYPES | {"Boolean", "String", "Enumeration"}
+ALL_TYPES: Final = FLOAT_TYPES | INT_TYPES | {"Boolean", "String", "Enumeration", "Binary", "Clock"}
 #: FMI 1.0/2.0 element names of the types that exist there (model.json uses the FMI 3.0 names).
 FMI2_TYPES: Final = dict(
     Float64="Real", Int32="Integer", Boolean="Boolean", String="String", Enumeration="Enumeration"
@@ -27,6 +28,8 @@ CAUSALITIES: Final = ("parameter", "calculatedParameter", "input", "output", "lo
 VARIABILITIES: Final = ("constant", "fixed", "tunable", "discrete", "continuous")
 
 Scalar = float | int | bool | str
+#: A start value: a scalar, one float per element of a Float64 array, or a Binary's bytes as hex text.
+Start = Scalar | tuple[float, ...]
 
 
 @dataclass(frozen=True)
@@ -40,7 +43,7 @@ class Variable:
     variability: str
     initial: str | None
     description: str
-    start: Scalar | None = None
+    start: Start | None = None
     unit: str | None = None
     min: float | None = None
     max: float | None = None
@@ -49,15 +52,46 @@ class Variable:
     derivative: str | None = None
     fmi_versions: tuple[str, ...] = FMI_VERSIONS
     interfaces: tuple[str, ...] = INTERFACES
+    dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays (Float64 only): sizes, row-major
+    interval: float | None = None  # FMI 3.0 Clock: constant interval in s
+    c: str | None = None  # the C identifier, when the one derived from the name does not fit
+
+    @property
+    def size(self) -> int:
+        """Number of elements: the product of the dimensions, 1 for a scalar."""
+        count = 1
+        for n in self.dimensions:
+            count *= n
+        return count
 
     @property
     def c_name(self) -> str:
-        return "der_" + self.name[4:-1] if self.name.startswith("der(") else self.name
+        """The identifier of the C struct field and of ``VR_<c_name>``: ``c`` if given, else derived."""
+        return self.c if self.c is not None else c_identifier(self.name)
 
     def present_in(self, fmi_version: str, interface: str) -> bool:
         """Whether the variable appears in this variant's modelDescription.xml (the C struct has all)."""
         in_interface = interface in self.interfaces and (self.derivative is None or interface == "me")
         return fmi_version in self.fmi_versions and in_interface
+
+
+_NOT_C: Final = re.compile(r"[^A-Za-z0-9_]+")
+
+
+def c_identifier(name: str) -> str:
+    """The C identifier derived from a variable name (Modelica-style names included).
+
+    ``der(x)`` gives ``der_`` and the identifier of ``x``; an ASCII identifier stays as it is; in any
+    other name each run of characters outside ``[A-Za-z0-9_]`` becomes one ``_`` and ``_`` is stripped
+    from both ends: ``body.frame_a.r_0[1]`` gives ``body_frame_a_r_0_1``, ``'force in N'`` gives
+    ``force_in_N``. The result may still be unusable (a leading digit, a C keyword, two names giving the
+    same identifier): the spec check reports that and asks for an explicit ``c``.
+    """
+    if name.startswith("der(") and name.endswith(")"):
+        return "der_" + c_identifier(name[4:-1])
+    if name.isascii() and name.isidentifier():
+        return name
+    return _NOT_C.sub("_", name).strip("_")
 
 
 VARIABLE_KEYS: Final = frozenset(f.name for f in fields(Variable)) - {"vr"}

@@ -8,6 +8,7 @@ plant's :class:`StepError`. Subclasses build ``model``, ``info``, ``timing``, ``
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,9 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError, StepError
 from bridge.fmu import Model, sha256
+from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.plant.native_sample import NativeSample
 
 _EMPTY = np.zeros(0)
 
@@ -36,6 +39,8 @@ class FmuInstancePlant(Plant):
     _read: Any = _unbound
     _advance: Any = _unbound
     _n = 1
+    _native: NativeSample | None = None
+    _groups: tuple[SignalGroup | None, SignalGroup | None] | None = None
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
@@ -49,6 +54,13 @@ class FmuInstancePlant(Plant):
         self._write = inputs.write if inputs is not None else _ignore
         self._read = outputs.read if outputs is not None else _empty
         self._advance, self._n = model.advance, self.timing.steps_per_sample
+        self._groups = (inputs, outputs)
+        self._native = None
+
+    @property
+    def native_stepping(self) -> bool:
+        """True once samples run as one native call (``bridge.plant.native_sample``)."""
+        return self._native is not None
 
     @property
     def time_s(self) -> float:
@@ -68,7 +80,18 @@ class FmuInstancePlant(Plant):
             outputs: FloatArray = self._read()
         except StepError as exc:
             raise self._failed(exc, step=None) from exc
+        self._bind_native()
         return outputs
+
+    def _bind_native(self) -> None:
+        """The one-call native sample where it applies (once the instance exists), re-pointed at
+        the instance after every reset; ``FMU_BRIDGE_NO_NATIVE=1`` keeps the Python path."""
+        if self._native is None:
+            if self._groups is not None and not os.environ.get("FMU_BRIDGE_NO_NATIVE"):
+                self._native = NativeSample.create(self.model, *self._groups, self._n)
+                self._groups = None  # decided once
+        else:
+            self._native.refresh()
 
     def send(self, inputs: Sequence[float] | None) -> None:
         self._pending = inputs
@@ -77,11 +100,16 @@ class FmuInstancePlant(Plant):
         return self.step(self._pending)
 
     def step(self, inputs: Sequence[float] | None) -> FloatArray:
+        native = self._native
         try:
-            if inputs is not None:
-                self._write(inputs)
-            self.terminated = self._advance(self._n)
-            outputs: FloatArray = self._read()
+            if native is not None:
+                outputs: FloatArray = native(inputs)
+                self.terminated = native.terminated
+            else:
+                if inputs is not None:
+                    self._write(inputs)
+                self.terminated = self._advance(self._n)
+                outputs = self._read()
         except FmuError as exc:
             raise self._failed(exc) from exc
         self.sample += 1

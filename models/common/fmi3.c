@@ -1,6 +1,7 @@
 /* FMI 3.0 wrapper (co-simulation and model exchange) over the fmu-bridge model core.
- * Arrays, clocks, binaries, configuration mode and scheduled execution are not used by our
- * models; their functions exist (importers bind every symbol) and report an error when called. */
+ * Arrays (Float64) and Binary variables are read and written; clocks are declared with a constant
+ * interval but never tick (no event mode in co-simulation). Configuration mode and scheduled execution
+ * are not used by our models; their functions exist (importers bind every symbol) and report an error. */
 #include "fmi3Functions.h"
 #include "fmu_core.h"
 
@@ -140,18 +141,27 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
 }
 
 /* --- typed access -------------------------------------------------------------------------- */
+/* FMI 3.0 passes arrays flattened: nValues is the sum of the element counts of the value references. */
+static bool check_value_count(FmuInstance* inst, const char* fn, const fmi3ValueReference vr[], size_t nvr,
+                              size_t nValues) {
+    size_t expected = 0;
+    for (size_t k = 0; k < nvr; k++) expected += fmu_value_count(vr[k]);
+    return fmu_check_count(inst, fn, nValues, expected, "values (the element counts of the value references)");
+}
+
 #define DEFINE_GET(NAME, CTYPE, MASK, FROM)                                                           \
     fmi3Status NAME(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, CTYPE values[], \
                     size_t nValues) {                                                                 \
         INSTANCE_OR_ERROR(instance);                                                                  \
-        if (!fmu_check_count(inst, #NAME, nValues, nvr, "values (one per scalar value reference)")) {  \
-            return fmi3Error;                                                                         \
-        }                                                                                             \
+        if (!check_value_count(inst, #NAME, vr, nvr, nValues)) return fmi3Error;                     \
+        size_t n = 0;                                                                                 \
         for (size_t k = 0; k < nvr; k++) {                                                            \
-            FmuValue v;                                                                               \
-            FmuStatus status = fmu_get(inst, #NAME, MASK, vr[k], &v);                                 \
-            if (status >= FMU_ERROR) return (fmi3Status)status;                                       \
-            values[k] = FROM;                                                                         \
+            for (size_t e = 0; e < fmu_value_count(vr[k]); e++, n++) {                                \
+                FmuValue v;                                                                           \
+                FmuStatus status = fmu_get_element(inst, #NAME, MASK, vr[k], e, &v);                  \
+                if (status >= FMU_ERROR) return (fmi3Status)status;                                   \
+                values[n] = FROM;                                                                     \
+            }                                                                                         \
         }                                                                                             \
         return fmi3OK;                                                                                \
     }
@@ -160,16 +170,17 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
     fmi3Status NAME(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, const CTYPE values[], \
                     size_t nValues) {                                                                       \
         INSTANCE_OR_ERROR(instance);                                                                        \
-        if (!fmu_check_count(inst, #NAME, nValues, nvr, "values (one per scalar value reference)")) {        \
-            return fmi3Error;                                                                               \
-        }                                                                                                   \
+        if (!check_value_count(inst, #NAME, vr, nvr, nValues)) return fmi3Error;                           \
         FmuStatus worst = FMU_OK;                                                                           \
+        size_t n = 0;                                                                                       \
         for (size_t k = 0; k < nvr; k++) {                                                                  \
-            FmuValue v;                                                                                     \
-            TO;                                                                                             \
-            FmuStatus status = fmu_set(inst, #NAME, MASK, vr[k], &v);                                       \
-            if (status >= FMU_ERROR) return (fmi3Status)status;                                             \
-            if (status > worst) worst = status;                                                             \
+            for (size_t e = 0; e < fmu_value_count(vr[k]); e++, n++) {                                      \
+                FmuValue v;                                                                                 \
+                TO;                                                                                         \
+                FmuStatus status = fmu_set_element(inst, #NAME, MASK, vr[k], e, &v);                        \
+                if (status >= FMU_ERROR) return (fmi3Status)status;                                         \
+                if (status > worst) worst = status;                                                         \
+            }                                                                                               \
         }                                                                                                   \
         return (fmi3Status)worst;                                                                           \
     }
@@ -187,54 +198,82 @@ DEFINE_GET(fmi3GetInt64, fmi3Int64, BIT(T_INT64) | BIT(T_ENUMERATION), v.i)
 DEFINE_GET(fmi3GetUInt64, fmi3UInt64, BIT(T_UINT64), v.u)
 DEFINE_GET(fmi3GetBoolean, fmi3Boolean, BIT(T_BOOLEAN), v.b)
 DEFINE_GET(fmi3GetString, fmi3String, BIT(T_STRING), v.s)
-DEFINE_SET(fmi3SetFloat32, fmi3Float32, BIT(T_FLOAT32), v.f = values[k])
-DEFINE_SET(fmi3SetFloat64, fmi3Float64, BIT(T_FLOAT64), v.f = values[k])
-DEFINE_SET(fmi3SetInt8, fmi3Int8, BIT(T_INT8), v.i = values[k])
-DEFINE_SET(fmi3SetUInt8, fmi3UInt8, BIT(T_UINT8), v.u = values[k])
-DEFINE_SET(fmi3SetInt16, fmi3Int16, BIT(T_INT16), v.i = values[k])
-DEFINE_SET(fmi3SetUInt16, fmi3UInt16, BIT(T_UINT16), v.u = values[k])
-DEFINE_SET(fmi3SetInt32, fmi3Int32, BIT(T_INT32), v.i = values[k])
-DEFINE_SET(fmi3SetUInt32, fmi3UInt32, BIT(T_UINT32), v.u = values[k])
-DEFINE_SET(fmi3SetInt64, fmi3Int64, BIT(T_INT64) | BIT(T_ENUMERATION), v.i = values[k])
-DEFINE_SET(fmi3SetUInt64, fmi3UInt64, BIT(T_UINT64), v.u = values[k])
-DEFINE_SET(fmi3SetBoolean, fmi3Boolean, BIT(T_BOOLEAN), v.b = values[k])
-DEFINE_SET(fmi3SetString, fmi3String, BIT(T_STRING), v.s = values[k])
+DEFINE_SET(fmi3SetFloat32, fmi3Float32, BIT(T_FLOAT32), v.f = values[n])
+DEFINE_SET(fmi3SetFloat64, fmi3Float64, BIT(T_FLOAT64), v.f = values[n])
+DEFINE_SET(fmi3SetInt8, fmi3Int8, BIT(T_INT8), v.i = values[n])
+DEFINE_SET(fmi3SetUInt8, fmi3UInt8, BIT(T_UINT8), v.u = values[n])
+DEFINE_SET(fmi3SetInt16, fmi3Int16, BIT(T_INT16), v.i = values[n])
+DEFINE_SET(fmi3SetUInt16, fmi3UInt16, BIT(T_UINT16), v.u = values[n])
+DEFINE_SET(fmi3SetInt32, fmi3Int32, BIT(T_INT32), v.i = values[n])
+DEFINE_SET(fmi3SetUInt32, fmi3UInt32, BIT(T_UINT32), v.u = values[n])
+DEFINE_SET(fmi3SetInt64, fmi3Int64, BIT(T_INT64) | BIT(T_ENUMERATION), v.i = values[n])
+DEFINE_SET(fmi3SetUInt64, fmi3UInt64, BIT(T_UINT64), v.u = values[n])
+DEFINE_SET(fmi3SetBoolean, fmi3Boolean, BIT(T_BOOLEAN), v.b = values[n])
+DEFINE_SET(fmi3SetString, fmi3String, BIT(T_STRING), v.s = values[n])
 
-/* No Binary or Clock variables exist: any value reference passed here is wrong. */
-static fmi3Status no_such_type(fmi3Instance instance, const char* fn, const fmi3ValueReference vr[], size_t nvr,
-                               const char* type) {
-    INSTANCE_OR_ERROR(instance);
-    if (nvr == 0) return fmi3OK;
-    fmu_log_error(inst, "%s: value reference %u is not a %s variable; %s has no %s variables", fn, vr[0], type,
-                  MODEL_NAME, type);
-    return fmi3Error;
-}
-
+/* Binary values point into memory the instance owns; they stay valid until the next call. */
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, size_t valueSizes[],
                          fmi3Binary values[], size_t nValues) {
-    UNUSED(valueSizes);
-    UNUSED(values);
-    UNUSED(nValues);
-    return no_such_type(instance, "fmi3GetBinary", vr, nvr, "Binary");
+    INSTANCE_OR_ERROR(instance);
+    if (!check_value_count(inst, "fmi3GetBinary", vr, nvr, nValues)) return fmi3Error;
+    for (size_t k = 0; k < nvr; k++) {
+        FmuValue v;
+        FmuStatus status = fmu_get(inst, "fmi3GetBinary", BIT(T_BINARY), vr[k], &v);
+        if (status >= FMU_ERROR) return (fmi3Status)status;
+        values[k] = v.bin.data;
+        valueSizes[k] = v.bin.size;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                          const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
-    UNUSED(valueSizes);
-    UNUSED(values);
-    UNUSED(nValues);
-    return no_such_type(instance, "fmi3SetBinary", vr, nvr, "Binary");
+    INSTANCE_OR_ERROR(instance);
+    if (!check_value_count(inst, "fmi3SetBinary", vr, nvr, nValues)) return fmi3Error;
+    FmuStatus worst = FMU_OK;
+    for (size_t k = 0; k < nvr; k++) {
+        FmuValue v;
+        v.bin.data = values[k];
+        v.bin.size = valueSizes[k];
+        FmuStatus status = fmu_set(inst, "fmi3SetBinary", BIT(T_BINARY), vr[k], &v);
+        if (status >= FMU_ERROR) return (fmi3Status)status;
+        if (status > worst) worst = status;
+    }
+    return (fmi3Status)worst;
 }
 
+/* Clocks are declared (their kind and interval) but only tick in event mode, which these
+ * co-simulation models do not offer (hasEventMode is false): a clock reads inactive, and
+ * activating one is refused. */
 fmi3Status fmi3GetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Clock values[]) {
-    UNUSED(values);
-    return no_such_type(instance, "fmi3GetClock", vr, nvr, "Clock");
+    INSTANCE_OR_ERROR(instance);
+    for (size_t k = 0; k < nvr; k++) {
+        FmuValue v;
+        FmuStatus status = fmu_get(inst, "fmi3GetClock", BIT(T_CLOCK), vr[k], &v);
+        if (status >= FMU_ERROR) return (fmi3Status)status;
+        values[k] = v.b;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3SetClock(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                         const fmi3Clock values[]) {
+    UNUSED(vr);
     UNUSED(values);
-    return no_such_type(instance, "fmi3SetClock", vr, nvr, "Clock");
+    INSTANCE_OR_ERROR(instance);
+    if (nvr == 0) return fmi3OK;
+    return (fmi3Status)fmu_unsupported(inst, "fmi3SetClock", "clocks tick only in event mode and hasEventMode is "
+                                       "false");
+}
+
+/* Any other value reference passed to a clock function is wrong. */
+static fmi3Status no_such_type(fmi3Instance instance, const char* fn, const fmi3ValueReference vr[], size_t nvr,
+                               const char* type) {
+    INSTANCE_OR_ERROR(instance);
+    if (nvr == 0) return fmi3OK;
+    fmu_log_error(inst, "%s: value reference %u is not a %s variable with that property; see "
+                  "modelDescription.xml of %s", fn, vr[0], type, MODEL_NAME);
+    return fmi3Error;
 }
 
 /* --- dependencies, FMU state, derivatives -------------------------------------------------- */
@@ -349,9 +388,14 @@ fmi3Status fmi3ExitConfigurationMode(fmi3Instance instance) {
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                   fmi3Float64 intervals[], fmi3IntervalQualifier qualifiers[]) {
-    UNUSED(intervals);
-    UNUSED(qualifiers);
-    return no_such_type(instance, "fmi3GetIntervalDecimal", vr, nvr, "Clock");
+    INSTANCE_OR_ERROR(instance);
+    for (size_t k = 0; k < nvr; k++) {
+        FmuValue v;
+        if (fmu_get(inst, "fmi3GetIntervalDecimal", BIT(T_CLOCK), vr[k], &v) >= FMU_ERROR) return fmi3Error;
+        intervals[k] = MODEL_VARIABLES[vr[k]].interval; /* constant intervals, declared in the XML */
+        qualifiers[k] = fmi3IntervalUnchanged;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,

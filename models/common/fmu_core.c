@@ -63,6 +63,12 @@ bool fmu_check_count(FmuInstance* inst, const char* fn, size_t given, size_t exp
 
 static bool apply_start_value(ModelData* d, const FmuVariable* v) {
     void* p = (char*)d + v->offset;
+    if (v->n_elements > 0) { /* arrays: Float64 only (the generator rejects others) */
+        for (size_t k = 0; k < v->n_elements; k++) {
+            ((double*)p)[k] = v->start_array != NULL ? v->start_array[k] : v->start_real;
+        }
+        return true;
+    }
     switch (v->type) {
         case T_FLOAT32: *(float*)p = (float)v->start_real; break;
         case T_FLOAT64: *(double*)p = v->start_real; break;
@@ -75,7 +81,9 @@ static bool apply_start_value(ModelData* d, const FmuVariable* v) {
         case T_INT64: *(int64_t*)p = v->start_int; break;
         case T_UINT64: *(uint64_t*)p = v->start_uint; break;
         case T_BOOLEAN: *(bool*)p = v->start_int != 0; break;
+        case T_CLOCK: *(bool*)p = false; break;
         case T_ENUMERATION: *(int64_t*)p = v->start_int; break;
+        case T_BINARY: return fmu_binary_assign((FmuBinary*)p, v->start_binary, v->start_size);
         case T_STRING: {
             const char* text = v->start_string != NULL ? v->start_string : "";
             char* copy = malloc(strlen(text) + 1);
@@ -89,9 +97,9 @@ static bool apply_start_value(ModelData* d, const FmuVariable* v) {
     return true;
 }
 
-/* Start values from the variable table; strings become instance-owned copies. */
+/* Start values from the variable table; strings and binaries become instance-owned copies. */
 static FmuStatus apply_defaults(FmuInstance* inst, const char* fn) {
-    fmu_free_strings(&inst->s.d);
+    fmu_free_owned(&inst->s.d);
     memset(&inst->s, 0, sizeof inst->s);
     for (size_t vr = 0; vr < MODEL_N_VARS; vr++) {
         const FmuVariable* v = &MODEL_VARIABLES[vr];
@@ -131,7 +139,7 @@ FmuStatus fmu_setup(FmuInstance* inst, const char* fn, const char* name, const c
 }
 
 void fmu_teardown(FmuInstance* inst) {
-    fmu_free_strings(&inst->s.d);
+    fmu_free_owned(&inst->s.d);
     free(inst->name);
     inst->name = NULL;
 }

@@ -69,6 +69,15 @@ void fmu_log(FmuInstance* inst, FmuStatus status, FmuLogCategory category, const
 /* --- variables ----------------------------------------------------------------------------- */
 FmuStatus fmu_get(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, FmuValue* out);
 FmuStatus fmu_set(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, const FmuValue* in);
+/* FMI 3.0 arrays: element index (row-major) of the variable vr; scalars have the one element 0. */
+FmuStatus fmu_get_element(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, size_t index,
+                          FmuValue* out);
+FmuStatus fmu_set_element(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, size_t index,
+                          const FmuValue* in);
+/* Number of values of vr in an FMI 3.0 get/set call: its element count, 1 for scalars and unknown vrs. */
+size_t fmu_value_count(unsigned vr);
+/* Replace dst's bytes with an instance-owned copy of size bytes at data; false when out of memory. */
+bool fmu_binary_assign(FmuBinary* dst, const uint8_t* data, size_t size);
 bool fmu_check_count(FmuInstance* inst, const char* fn, size_t given, size_t expected, const char* what);
 
 /* --- snapshots (FMU state) ----------------------------------------------------------------- */
@@ -76,7 +85,7 @@ FmuSnapshot* fmu_snapshot_new(FmuInstance* inst, const char* fn);
 FmuStatus fmu_snapshot_update(FmuInstance* inst, const char* fn, FmuSnapshot* snap);
 FmuStatus fmu_snapshot_restore(FmuInstance* inst, const char* fn, const FmuSnapshot* snap);
 void fmu_snapshot_free(FmuSnapshot* snap);
-void fmu_free_strings(ModelData* d);
+void fmu_free_owned(ModelData* d); /* strings and binaries */
 
 /* --- co-simulation ------------------------------------------------------------------------- */
 FmuStatus fmu_do_step(FmuInstance* inst, const char* fn, double t, double h);

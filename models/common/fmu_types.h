@@ -17,8 +17,15 @@ typedef enum { FMU_CS = 1, FMU_ME = 2 } FmuInterface;
 /* T_NONE is 0 so that an unused (zero-initialised) row of the variable table is never a variable. */
 typedef enum {
     T_NONE, T_FLOAT32, T_FLOAT64, T_INT8, T_UINT8, T_INT16, T_UINT16, T_INT32, T_UINT32,
-    T_INT64, T_UINT64, T_BOOLEAN, T_STRING, T_ENUMERATION
+    T_INT64, T_UINT64, T_BOOLEAN, T_STRING, T_ENUMERATION, T_BINARY, T_CLOCK
 } FmuType;
+
+/* FMI 3.0 Binary storage: instance-owned bytes; data is never NULL after setup (an empty value
+ * points at one allocated byte), so an importer always receives a valid pointer. */
+typedef struct {
+    uint8_t* data;
+    size_t size;
+} FmuBinary;
 
 /* Bit masks of accepted types, used by the typed get/set functions of the wrappers. */
 #define FMU_TYPE_BIT(t) (1u << (t))
@@ -31,7 +38,9 @@ typedef enum { V_CONSTANT, V_FIXED, V_TUNABLE, V_DISCRETE, V_CONTINUOUS } FmuVar
 
 /* One row of the generated variable table (model_gen.c), indexed by value reference.
  * Storage: Float32 float, Float64 double, IntN/UIntN intN_t/uintN_t, Boolean bool,
- * Enumeration int64_t, String char* (owned by the instance, always non-NULL after setup). */
+ * Enumeration int64_t, String char* (owned by the instance, always non-NULL after setup),
+ * Binary FmuBinary, Clock bool (active). An FMI 3.0 array (n_elements > 0) is a C array of its
+ * element type in row-major order. */
 typedef struct {
     const char* name;
     FmuType type;            /* T_NONE marks an unused value reference */
@@ -48,6 +57,11 @@ typedef struct {
     bool has_max;
     double min;              /* declarations only: values outside are accepted and logged */
     double max;
+    size_t n_elements;       /* FMI 3.0 arrays: number of elements; 0 for a scalar */
+    const double* start_array;   /* Float64 arrays: one start value per element */
+    const uint8_t* start_binary; /* Binary: start bytes (start_size of them) */
+    size_t start_size;
+    double interval;         /* Clock: interval in s of a clock with a constant interval */
 } FmuVariable;
 
 /* A scalar in transit between a wrapper and the variable table. */
@@ -57,6 +71,10 @@ typedef union {
     uint64_t u;
     bool b;
     const char* s;
+    struct {
+        const uint8_t* data;
+        size_t size;
+    } bin;
 } FmuValue;
 
 /* Result of a model-exchange event update (maps onto fmi2EventInfo / fmi3UpdateDiscreteStates). */

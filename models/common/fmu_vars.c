@@ -8,7 +8,7 @@
 static const char* type_name(const FmuInstance* inst, FmuType type) {
     static const char* const fmi3_names[] = {
         "none", "Float32", "Float64", "Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32",
-        "Int64", "UInt64", "Boolean", "String", "Enumeration"};
+        "Int64", "UInt64", "Boolean", "String", "Enumeration", "Binary", "Clock"};
     if (inst->fmi_version < 3 && type == T_FLOAT64) return "Real";
     if (inst->fmi_version < 3 && type == T_INT32) return "Integer";
     return fmi3_names[type];
@@ -36,8 +36,26 @@ static const FmuVariable* find_variable(FmuInstance* inst, const char* fn, unsig
     return v;
 }
 
-static void read_field(const FmuInstance* inst, const FmuVariable* v, FmuValue* out) {
-    const void* p = (const char*)&inst->s.d + v->offset;
+/* Bytes per element of each type's storage (arrays are C arrays of these). */
+static size_t element_size(FmuType type) {
+    switch (type) {
+        case T_FLOAT32: return sizeof(float);
+        case T_INT8: case T_UINT8: return 1;
+        case T_INT16: case T_UINT16: return 2;
+        case T_INT32: case T_UINT32: return 4;
+        case T_BOOLEAN: case T_CLOCK: return sizeof(bool);
+        case T_STRING: return sizeof(char*);
+        case T_BINARY: return sizeof(FmuBinary);
+        default: return 8; /* Float64, Int64, UInt64, Enumeration */
+    }
+}
+
+static void* field(const ModelData* d, const FmuVariable* v, size_t index) {
+    return (char*)d + v->offset + index * element_size(v->type);
+}
+
+static void read_field(const FmuInstance* inst, const FmuVariable* v, size_t index, FmuValue* out) {
+    const void* p = field(&inst->s.d, v, index);
     switch (v->type) {
         case T_FLOAT32: out->f = *(const float*)p; break;
         case T_FLOAT64: out->f = *(const double*)p; break;
@@ -49,15 +67,29 @@ static void read_field(const FmuInstance* inst, const FmuVariable* v, FmuValue* 
         case T_UINT32: out->u = *(const uint32_t*)p; break;
         case T_INT64: out->i = *(const int64_t*)p; break;
         case T_UINT64: out->u = *(const uint64_t*)p; break;
-        case T_BOOLEAN: out->b = *(const bool*)p; break;
+        case T_BOOLEAN: case T_CLOCK: out->b = *(const bool*)p; break;
         case T_ENUMERATION: out->i = *(const int64_t*)p; break;
         case T_STRING: out->s = *(char* const*)p; break;
+        case T_BINARY:
+            out->bin.data = ((const FmuBinary*)p)->data;
+            out->bin.size = ((const FmuBinary*)p)->size;
+            break;
         case T_NONE: break;
     }
 }
 
-static bool write_field(FmuInstance* inst, const FmuVariable* v, const FmuValue* in) {
-    void* p = (char*)&inst->s.d + v->offset;
+bool fmu_binary_assign(FmuBinary* dst, const uint8_t* data, size_t size) {
+    uint8_t* copy = malloc(size > 0 ? size : 1);
+    if (copy == NULL) return false;
+    if (size > 0) memcpy(copy, data, size);
+    free(dst->data);
+    dst->data = copy;
+    dst->size = size;
+    return true;
+}
+
+static bool write_field(FmuInstance* inst, const FmuVariable* v, size_t index, const FmuValue* in) {
+    void* p = field(&inst->s.d, v, index);
     switch (v->type) {
         case T_FLOAT32: *(float*)p = (float)in->f; break;
         case T_FLOAT64: *(double*)p = in->f; break;
@@ -69,7 +101,7 @@ static bool write_field(FmuInstance* inst, const FmuVariable* v, const FmuValue*
         case T_UINT32: *(uint32_t*)p = (uint32_t)in->u; break;
         case T_INT64: *(int64_t*)p = in->i; break;
         case T_UINT64: *(uint64_t*)p = in->u; break;
-        case T_BOOLEAN: *(bool*)p = in->b; break;
+        case T_BOOLEAN: case T_CLOCK: *(bool*)p = in->b; break;
         case T_ENUMERATION: *(int64_t*)p = in->i; break;
         case T_STRING: {
             char* copy = malloc(strlen(in->s) + 1);
@@ -79,12 +111,19 @@ static bool write_field(FmuInstance* inst, const FmuVariable* v, const FmuValue*
             *(char**)p = copy;
             break;
         }
+        case T_BINARY: return fmu_binary_assign((FmuBinary*)p, in->bin.data, in->bin.size);
         case T_NONE: break;
     }
     return true;
 }
 
-FmuStatus fmu_get(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, FmuValue* out) {
+size_t fmu_value_count(unsigned vr) {
+    if (vr >= MODEL_N_VARS || MODEL_VARIABLES[vr].n_elements == 0) return 1;
+    return MODEL_VARIABLES[vr].n_elements;
+}
+
+FmuStatus fmu_get_element(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, size_t index,
+                          FmuValue* out) {
     const FmuVariable* v = find_variable(inst, fn, type_mask, vr);
     if (v == NULL) return FMU_ERROR;
     if (v->causality == C_INDEPENDENT) {
@@ -95,8 +134,12 @@ FmuStatus fmu_get(FmuInstance* inst, const char* fn, unsigned type_mask, unsigne
         model_evaluate(inst);
         inst->dirty = false;
     }
-    read_field(inst, v, out);
+    read_field(inst, v, index, out);
     return FMU_OK;
+}
+
+FmuStatus fmu_get(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, FmuValue* out) {
+    return fmu_get_element(inst, fn, type_mask, vr, 0, out);
 }
 
 /* Which modes may set a variable: FMI 2.0/3.0 rules, FMI 1.0 treats every parameter as fixed. */
@@ -142,6 +185,11 @@ static FmuStatus check_value(FmuInstance* inst, const char* fn, const FmuVariabl
         fmu_log_error(inst, "%s: NULL is not a valid value for String %s; pass an empty string", fn, v->name);
         return FMU_ERROR;
     }
+    if (v->type == T_BINARY && in->bin.data == NULL && in->bin.size > 0) {
+        fmu_log_error(inst, "%s: NULL data with size %zu for Binary %s; pass a valid pointer", fn,
+                      in->bin.size, v->name);
+        return FMU_ERROR;
+    }
     if (!v->has_min && !v->has_max) return FMU_OK;
     double x;
     if (v->type == T_FLOAT32 || v->type == T_FLOAT64) x = in->f;
@@ -160,14 +208,15 @@ static FmuStatus check_value(FmuInstance* inst, const char* fn, const FmuVariabl
     return FMU_WARNING;
 }
 
-FmuStatus fmu_set(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, const FmuValue* in) {
+FmuStatus fmu_set_element(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, size_t index,
+                          const FmuValue* in) {
     const FmuVariable* v = find_variable(inst, fn, type_mask, vr);
     if (v == NULL) return FMU_ERROR;
     FmuStatus status = check_settable(inst, fn, v, vr);
     if (status != FMU_OK) return status;
     status = check_value(inst, fn, v, in);
     if (status >= FMU_ERROR) return status;
-    if (!write_field(inst, v, in)) {
+    if (!write_field(inst, v, index, in)) {
         fmu_log_error(inst, "%s: out of memory while copying the value of %s", fn, v->name);
         return FMU_FATAL;
     }
@@ -175,27 +224,45 @@ FmuStatus fmu_set(FmuInstance* inst, const char* fn, unsigned type_mask, unsigne
     return status;
 }
 
-/* Deep copy of the instance-owned strings; dst's string fields are overwritten, not freed. */
-static bool copy_strings(ModelData* dst, const ModelData* src) {
+FmuStatus fmu_set(FmuInstance* inst, const char* fn, unsigned type_mask, unsigned vr, const FmuValue* in) {
+    return fmu_set_element(inst, fn, type_mask, vr, 0, in);
+}
+
+/* Deep copy of the instance-owned strings and binaries; dst's fields are overwritten, not freed. */
+static bool copy_owned(ModelData* dst, const ModelData* src) {
     bool ok = true;
     for (size_t vr = 0; vr < MODEL_N_VARS; vr++) {
-        if (MODEL_VARIABLES[vr].type != T_STRING) continue;
-        size_t offset = MODEL_VARIABLES[vr].offset;
-        const char* text = *(char* const*)((const char*)src + offset);
+        const FmuVariable* v = &MODEL_VARIABLES[vr];
+        if (v->type == T_BINARY) {
+            FmuBinary* to = field(dst, v, 0);
+            const FmuBinary* from = field(src, v, 0);
+            to->data = NULL;
+            ok = fmu_binary_assign(to, from->data, from->size) && ok;
+            continue;
+        }
+        if (v->type != T_STRING) continue;
+        const char* text = *(char* const*)field(src, v, 0);
         char* copy = malloc(strlen(text) + 1);
         if (copy != NULL) strcpy(copy, text);
         else ok = false;
-        *(char**)((char*)dst + offset) = copy;
+        *(char**)field(dst, v, 0) = copy;
     }
     return ok;
 }
 
-void fmu_free_strings(ModelData* d) {
+void fmu_free_owned(ModelData* d) {
     for (size_t vr = 0; vr < MODEL_N_VARS; vr++) {
-        if (MODEL_VARIABLES[vr].type != T_STRING) continue;
-        char** field = (char**)((char*)d + MODEL_VARIABLES[vr].offset);
-        free(*field);
-        *field = NULL;
+        const FmuVariable* v = &MODEL_VARIABLES[vr];
+        if (v->type == T_BINARY) {
+            FmuBinary* bin = field(d, v, 0);
+            free(bin->data);
+            bin->data = NULL;
+            bin->size = 0;
+        } else if (v->type == T_STRING) {
+            char** text = field(d, v, 0);
+            free(*text);
+            *text = NULL;
+        }
     }
 }
 
@@ -210,9 +277,9 @@ FmuSnapshot* fmu_snapshot_new(FmuInstance* inst, const char* fn) {
 }
 
 FmuStatus fmu_snapshot_update(FmuInstance* inst, const char* fn, FmuSnapshot* snap) {
-    fmu_free_strings(&snap->d);
+    fmu_free_owned(&snap->d);
     *snap = inst->s;
-    if (!copy_strings(&snap->d, &inst->s.d)) {
+    if (!copy_owned(&snap->d, &inst->s.d)) {
         fmu_log_error(inst, "%s: out of memory while saving the FMU state", fn);
         return FMU_FATAL;
     }
@@ -224,10 +291,10 @@ FmuStatus fmu_snapshot_restore(FmuInstance* inst, const char* fn, const FmuSnaps
         fmu_log_error(inst, "%s: the FMU state is NULL; pass a state returned by the get function", fn);
         return FMU_ERROR;
     }
-    fmu_free_strings(&inst->s.d);
+    fmu_free_owned(&inst->s.d);
     inst->s = *snap;
     inst->dirty = true;
-    if (!copy_strings(&inst->s.d, &snap->d)) {
+    if (!copy_owned(&inst->s.d, &snap->d)) {
         fmu_log_error(inst, "%s: out of memory while restoring the FMU state", fn);
         return FMU_FATAL;
     }
@@ -236,6 +303,6 @@ FmuStatus fmu_snapshot_restore(FmuInstance* inst, const char* fn, const FmuSnaps
 
 void fmu_snapshot_free(FmuSnapshot* snap) {
     if (snap == NULL) return;
-    fmu_free_strings(&snap->d);
+    fmu_free_owned(&snap->d);
     free(snap);
 }

@@ -3,7 +3,8 @@
 The corpus: FMUs from other exporters (pythonfmu for FMI 2.0, pythonfmu3 for FMI 3.0, JModelica
 through the FMUs shipped in PyFMI 2.5's source distribution: FMI 1.0/2.0, CS/ME; Dymola through
 eta-ctrl's source distribution) and our own models
-for what those lack (time events with inputs in model exchange). Downloads are cached under
+for what those lack (time events with inputs in model exchange; FMI 3.0 Binary, 2-D arrays and
+clocks; Modelica-style names in model exchange and FMI 3.0). Downloads are cached under
 ``$FMU_BRIDGE_CACHE/thirdparty``; a test is skipped, saying why, when they cannot be fetched.
 """
 
@@ -113,6 +114,12 @@ CORPUS: dict[str, tuple[Callable[[pytest.FixtureRequest], Path], bool]] = {
     "stair (FMI 2.0 ME, time events, Int32 input)": (_example("stair", "2.0", "me"), True),
     "stair (FMI 3.0 ME, time events, Int32 input)": (_example("stair", "3.0", "me"), True),
     "typed (FMI 3.0 CS, every integer type)": (_example("typed", "3.0", "cs"), True),
+    "typed3 (FMI 3.0 CS, arrays, Binary, clock)": (_example("typed3", "3.0", "cs"), True),
+    "modelica_names (FMI 2.0 ME, Modelica names, states as locals)": (
+        _example("modelica_names", "2.0", "me"),
+        True,
+    ),
+    "modelica_names (FMI 3.0 CS, Modelica names)": (_example("modelica_names", "3.0", "cs"), True),
 }
 
 

@@ -294,13 +294,16 @@ def test_generated_c_value_references_match_model_description(
     with zipfile.ZipFile(fmus[variant]) as archive:
         names = archive.namelist()
         header = archive.read("sources/model_gen.h").decode()
+        table = archive.read("sources/model_gen.c").decode()
     binary = ("binaries/x86_64-linux/" if version == "3.0" else "binaries/linux64/") + f"{name}.so"
     assert {"modelDescription.xml", binary, "sources/model.c", "sources/model.json"} <= set(names)
     in_c = {m[0]: int(m[1]) for m in re.findall(r"#define VR_(\w+) (\d+)", header)}
+    rows = re.findall(r'\[VR_(\w+)\] = \{\.name = "((?:[^"\\]|\\.)*)"', table)
+    c_names = {re.sub(r"\\(.)", r"\1", literal): c_name for c_name, literal in rows}  # C string -> name
     description = read_model_description(str(fmus[variant]))
+    assert len(rows) >= len(description.modelVariables)
     for v in description.modelVariables:
-        c_name = re.sub(r"^der\((\w+)\)$", r"der_\1", v.name)
-        assert in_c[c_name] == v.valueReference, v.name
+        assert in_c[c_names[v.name]] == v.valueReference, v.name
     assert (
         description.coSimulation is not None if interface == "cs" else description.modelExchange is not None
     )
@@ -708,10 +711,12 @@ def test_model_names_and_variants() -> None:
         "dcmotor",
         "feedthrough",
         "gearload",
+        "modelica_names",
         "motor_gearload",
         "pi_controller",
         "stair",
         "typed",
+        "typed3",
         "vehicle",
     ]
     by_model: dict[str, set[tuple[str, str]]] = {}
@@ -722,19 +727,19 @@ def test_model_names_and_variants() -> None:
     assert by_model["dcmotor"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["bouncing_ball"] == {("2.0", "me"), ("3.0", "me"), ("2.0", "cs")}
     assert by_model["typed"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["typed3"] == {("3.0", "cs")}
     assert by_model["stair"] == {(v, i) for v in ("1.0", "2.0", "3.0") for i in ("cs", "me")}
     assert by_model["gearload"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["motor_gearload"] == {("2.0", "cs")}
     assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["modelica_names"] == {("2.0", "cs"), ("2.0", "me"), ("3.0", "cs")}
     assert by_model["feedthrough"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = (
-        "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, motor_gearload, pi_controller, stair, "
-        "typed, vehicle"
-    )
+    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, modelica_names, motor_gearload, "
+    names += "pi_controller, stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):

@@ -146,6 +146,11 @@ int batch_step(const BatchSpec* spec, int n, void* const* comps, const unsigned 
     return failed;
 }
 
+/* One sample of one instance (the single plant's hot path): the same calls as batch_step. */
+int step_one(const BatchSpec* spec, void* comp, const double* inputs, double* outputs, long long* k) {
+    return one(spec, comp, inputs, outputs, k);
+}
+
 /* The doStep-only loop over the same instances (no inputs, no outputs): the benchmark's floor. */
 int batch_do_steps(const BatchSpec* spec, int n, void* const* comps, long long* k, int samples) {
     int failed = 0;

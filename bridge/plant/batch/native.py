@@ -18,17 +18,22 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Final
+from typing import TYPE_CHECKING, Final
 
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import BridgeError
+from bridge.errors import BridgeError, FmuError
+from bridge.fmu.backend import STATUS_NAMES
 from bridge.models import cache_dir
 from bridge.models.build import _fmi_headers_dir
+
+if TYPE_CHECKING:
+    from bridge.fmu import Model
 
 _log = logging.getLogger(__name__)
 SOURCE: Final = Path(__file__).with_name("batch.c")
@@ -71,6 +76,10 @@ class NativeStepper:
         self._do_steps = self.library.batch_do_steps
         self._do_steps.argtypes = [p, ctypes.c_int, p, p, ctypes.c_int]
         self._do_steps.restype = ctypes.c_int
+        self.step_one = self.library.step_one
+        """``step_one(spec, component, inputs, outputs, k)``: one sample of one instance."""
+        self.step_one.argtypes = [p, p, p, p, p]
+        self.step_one.restype = ctypes.c_int
 
     def step(
         self,
@@ -156,3 +165,24 @@ def load() -> NativeStepper | None:
     except (BridgeError, OSError) as exc:
         _log.warning("native batch stepping unavailable, stepping in Python instead: %s", exc)
         return None
+
+
+def native_failure(
+    model: Model, status: int, k: int, input_names: Sequence[str], output_names: Sequence[str]
+) -> FmuError:
+    """The error for a native sample of ``model`` that ended in ``status`` (above Warning, not
+    TERMINATED) at step ``k``: a failed set or get names the variables, a failed doStep is
+    accounted in the model (which then refuses to step until reset) and carries its message."""
+    if status >= SET_FAILED:
+        what, names = ("get", output_names) if status >= GET_FAILED else ("set", input_names)
+        t = model.start_time_s + k * model.step_size_s
+        return FmuError(
+            f"{model.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[status & 15]} "
+            f"at step {k} (t={t:g} s)",
+            log=model.log,
+        )
+    try:
+        model.native_step_failed(k, status)
+    except FmuError as exc:
+        return exc
+    return FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log)

@@ -31,7 +31,6 @@ from bridge.plant.batch import native as nat
 
 _log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
-STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 
 
 @dataclass
@@ -223,23 +222,8 @@ class BatchPlant:
         self.ready[result.terminated] = False
 
     def _native_error(self, i: int, status: int) -> StepError:
-        model = self.models[i]
-        if status >= nat.SET_FAILED:
-            what, names = (
-                ("get", self.output_names) if status >= nat.GET_FAILED else ("set", self.input_names)
-            )
-            code = status & 15
-            exc = FmuError(
-                f"{self.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[code]} "
-                f"at step {int(self.k[i])} (t={self.time_s(i):g} s)",
-                log=model.log,
-            )
-            return self._failed(i, exc)
-        try:
-            model.native_step_failed(int(self.k[i]), status)
-        except FmuError as exc:
-            return self._failed(i, exc)
-        return self._failed(i, FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log))
+        exc = nat.native_failure(self.models[i], status, int(self.k[i]), self.input_names, self.output_names)
+        return self._failed(i, exc)
 
     def _failed(self, i: int, exc: FmuError, **fields: Any) -> StepError:
         detail = exc.detail if isinstance(exc, StepError) else str(exc)
