@@ -4,14 +4,20 @@ Rates are per CPU second of this process (``time.process_time``), so they are pe
 diluted by other load on the machine; PPO is in wall-clock timesteps/s.
 
 Run: python benchmarks/bench_batch.py [--n 256] [--repeats 5] [--ppo-timesteps 8192] [--no-ppo]
+     [--only raw|env|ppo|me ...]
 
-1. Raw batch stepping on the trivial ``typed`` FMU (FMI 2.0 CS): the native call alone and
-   ``BatchPlant.step`` (inputs in, outputs out), in instance-steps per second on one core.
+1. Raw batch stepping on the trivial ``feedthrough`` FMU (FMI 2.0 CS, ``y = u``) and on ``typed``
+   (every variable type, a counter and hooks): the native call alone and ``BatchPlant.step``
+   (inputs in, outputs out), in instance-steps per second on one core.
 2. The batch env (SB3 interface, Task included) at N envs vs SB3's ``DummyVecEnv`` over N
    ``FmuEnv``, and vs the same FMU's doStep-only loop in C over the same N instances, on the
    cart-pole (a balancing state feedback, so episodes run their 500 samples) and the DC motor
    (random voltages, 300-sample episodes with scenarios, uncertainty and sensor noise).
-3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters).
+3. PPO timesteps/s on the batch env vs ``DummyVecEnv`` (8 envs, bench_train's hyperparameters,
+   one torch thread).
+4. Model exchange vs co-simulation per sample on the same model (``Model``: write inputs, advance,
+   read outputs): the native fixed-step RK4 loop with as many substeps as the CS variant's own RK4
+   (so both evaluate the equations equally often), and CVode.
 """
 
 from __future__ import annotations
@@ -31,11 +37,25 @@ from bridge.env.batch import BatchVecEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.fmu import Model
+from bridge.models import example_fmu
 from bridge.plant.batch import BatchPlant
 
-TYPED = "model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 1.0}\n" \
-    "actions: {inputs: [real_in], low: {real_in: -1}, high: {real_in: 1}}\n" \
-    "observations: {outputs: [real_out]}\nreward: {terms: [{alive: 1.0}]}\n"  # fmt: skip
+RAW = {
+    "feedthrough": ("u", "y"),
+    "typed": ("real_in", "real_out"),
+}  # model: (input, output)
+
+
+def raw_experiment(model: str) -> str:
+    u, y = RAW[model]
+    return (
+        f"model: {{fmu: 'example:{model}', step_size: 0.1, episode_duration: 1.0}}\n"
+        f"actions: {{inputs: [{u}], low: {{{u}: -1}}, high: {{{u}: 1}}}}\n"
+        f"observations: {{outputs: [{y}]}}\nreward: {{terms: [{{alive: 1.0}}]}}\n"
+    )
+
+
 GAINS = np.array([1.0, 1.5, 30.0, 5.0])  # a stabilising state feedback for the cart-pole
 
 
@@ -53,12 +73,12 @@ def interleaved(named: dict[str, Callable[[int], None]], steps: int, repeats: in
     return {name: statistics.median(values) for name, values in rates.items()}
 
 
-def raw_stepping(n: int, repeats: int) -> list[tuple[str, ...]]:
+def raw_stepping(model: str, n: int, repeats: int) -> list[tuple[str, ...]]:
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "typed.yaml"
-        path.write_text(TYPED)
+        path = Path(tmp) / f"{model}.yaml"
+        path.write_text(raw_experiment(model))
         plant = BatchPlant(load_experiment(path), n, native=True)
-    plant.bind(["real_in"], ["real_out"])
+    plant.bind([RAW[model][0]], [RAW[model][1]])
     for i in range(n):
         plant.reset(i, {}, [0.0])
     stepper, spec = plant._stepper, plant._spec
@@ -84,7 +104,7 @@ def raw_stepping(n: int, repeats: int) -> list[tuple[str, ...]]:
         {"native call": native, "BatchPlant.step": plant_step, "doStep only": do_steps}, n * 4000, repeats
     )
     plant.close()
-    return [(f"typed, N={n}: {name}", f"{rate / 1e6:.1f} M") for name, rate in rates.items()]
+    return [(f"{model}, N={n}: {name}", f"{rate / 1e6:.1f} M") for name, rate in rates.items()]
 
 
 def cartpole_policy(obs: np.ndarray) -> np.ndarray:
@@ -142,9 +162,14 @@ def env_comparison(name: str, n: int, repeats: int) -> list[tuple[str, ...]]:
 
 
 def ppo_comparison(timesteps: int, repeats: int) -> list[tuple[str, ...]]:
+    import torch
     from bench_train import HYPERPARAMS
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import DummyVecEnv
+
+    # One learner thread: on a shared machine torch's thread pool oversubscribes the cores (measured
+    # at load 11 on 2 cores: 16 steps/s with the default pool, 650-700 with one thread).
+    torch.set_num_threads(1)
 
     exp = load_experiment(example_experiment("cartpole_balance"))
     makers = {
@@ -167,21 +192,79 @@ def ppo_comparison(timesteps: int, repeats: int) -> list[tuple[str, ...]]:
     ]
 
 
+# model, inputs, outputs, FMU step, RK4 substeps of the CS variant (h / its solver_step)
+ME_CASES = (
+    ("cartpole", ["force"], ["x", "x_dot", "theta", "theta_dot"], 0.02, 20),
+    ("dcmotor", ["voltage", "load_torque"], ["omega", "current"], 0.01, 100),
+    ("bouncing_ball", [], ["h", "v"], 0.01, 1),
+)
+
+
+def model_loop(
+    path: Path, inputs: list[str], outputs: list[str], h: float, **kw: Any
+) -> Callable[[int], None]:
+    model = Model(path, step_size_s=h, **kw)
+    model.initialize()
+    write = model.signals(inputs, writable=True).write if inputs else None
+    read = model.signals(outputs).read
+    u = [0.5] * len(inputs)
+
+    def run(samples: int) -> None:
+        model.reset()  # every run from t0: a few us against thousands of samples
+        for _ in range(samples):
+            if write is not None:
+                write(u)
+            model.advance(1)
+            read()
+
+    return run
+
+
+def me_vs_cs(repeats: int) -> list[tuple[str, ...]]:
+    rows: list[tuple[str, ...]] = []
+    for name, inputs, outputs, h, substeps in ME_CASES:
+        loops = {
+            "CS": model_loop(example_fmu(name, "2.0", "cs"), inputs, outputs, h),
+            "ME rk4": model_loop(
+                example_fmu(name, "2.0", "me"), inputs, outputs, h, solver="rk4", solver_substeps=substeps
+            ),
+            "ME cvode": model_loop(example_fmu(name, "2.0", "me"), inputs, outputs, h),
+        }
+        rates = interleaved(loops, 2000, repeats)
+        us = {key: 1e6 / rate for key, rate in rates.items()}
+        rows += [(f"{name} (FMI 2.0), {key}", f"{value:.1f} us") for key, value in us.items()]
+        rows.append((f"{name}: ME rk4 x{substeps} / CS", f"{us['ME rk4'] / us['CS']:.2f}x"))
+    return rows
+
+
+SECTIONS = ("raw", "env", "ppo", "me")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--n", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--ppo-timesteps", type=int, default=8192)
     parser.add_argument("--no-ppo", action="store_true")
+    parser.add_argument("--only", choices=SECTIONS, action="append", help="run only these sections")
     args = parser.parse_args()
-    rows = raw_stepping(max(args.n, 1024), args.repeats)
-    print(table(rows, ("what (median, one core)", "steps/s")), flush=True)
-    for name in ("cartpole_balance", "dcmotor_tracking"):
-        rows += env_comparison(name, args.n, args.repeats)
-        print(table(rows[-5:], ("what (median, one core)", "steps/s or ratio")), flush=True)
-    if not args.no_ppo:
+    sections = set(args.only or SECTIONS) - ({"ppo"} if args.no_ppo else set())
+    rows: list[tuple[str, ...]] = []
+    header = ("what (median, one core)", "steps/s, us/sample or ratio")
+    if "raw" in sections:
+        rows += [row for model in RAW for row in raw_stepping(model, max(args.n, 1024), args.repeats)]
+        if len(sections) > 1:  # progress: the other sections take minutes
+            print(table(rows, header), flush=True)
+    if "env" in sections:
+        for name in ("cartpole_balance", "dcmotor_tracking"):
+            rows += env_comparison(name, args.n, args.repeats)
+            if len(sections) > 1:
+                print(table(rows[-5:], header), flush=True)
+    if "ppo" in sections:
         rows += ppo_comparison(args.ppo_timesteps, max(1, args.repeats // 2))
-    print(table(rows, ("what (median, one core)", "steps/s or ratio")))
+    if "me" in sections:
+        rows += me_vs_cs(args.repeats)
+    print(table(rows, header))
 
 
 if __name__ == "__main__":

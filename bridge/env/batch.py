@@ -147,7 +147,7 @@ class BatchEnv:
         errors = result.errors
         for i in np.flatnonzero(bad).tolist():
             if i not in errors:
-                detail = str(task.tasks[i]._bad_output(result.outputs[i].tolist(), int(self.samples[i])))
+                detail = str(task.tasks[i].bad_output(result.outputs[i].tolist(), int(self.samples[i])))
                 errors[i] = plant.failure(
                     i, "the model returned non-finite outputs", detail, step=int(self.samples[i])
                 )

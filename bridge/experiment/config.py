@@ -80,11 +80,24 @@ class ModelSection(Strict):
     start_values: dict[str, Scalar] = {}
     reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
     tolerance: PositiveFloat | None = None
+    solver: Literal["cvode", "rk4", "euler"] = Field(
+        default="cvode",
+        description="model exchange: CVode (variable step), or rk4/euler: fixed steps in native code",
+    )
+    solver_substeps: Annotated[int, Field(ge=1)] = Field(
+        default=1, description="fixed-step solvers: integration steps per FMU step (step_size)"
+    )
     isolation: IsolationSection | None = None
 
     @model_validator(mode="after")
     def _samples(self) -> ModelSection:
         check_samples("episode_duration", self.episode_duration, self.sampling_time or self.step_size)
+        if self.solver != "cvode" and self.interface == "cs":
+            raise invalid(
+                "solver",
+                f"{self.solver!r} integrates model exchange, but interface is 'cs' (the FMU's own "
+                "solver): set interface: me, or drop solver",
+            )
         return self
 
 

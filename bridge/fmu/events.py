@@ -7,7 +7,10 @@ modes: values are set at any time and ``fmiEventUpdate`` is iterated until it co
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from bridge.fmu.description import ModelInfo
 
 
 class EventCalls:
@@ -41,6 +44,13 @@ class EventCalls:
         if self.major == 1:
             return bool(result), False
         return bool(result[0]), bool(result[1])
+
+
+def needs_completed_step(info: ModelInfo, major: int) -> bool:
+    """Whether completedIntegratorStep must follow each integrator step (FMI 2.0 declares it;
+    FMI 1.0 and 3.0 always call it)."""
+    me = info.raw.modelExchange if info.raw is not None else None
+    return bool(me is not None and (major != 2 or me.needsCompletedIntegratorStep))
 
 
 Fmi1EventInfo = tuple[bool, bool, bool, bool, bool, float]

@@ -20,6 +20,7 @@ from bridge.fmu import access, archive
 from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
+from bridge.fmu.fixed_step import METHODS, FixedStepper
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.solver import MeStepper
 from bridge.fmu.values import to_c
@@ -28,6 +29,8 @@ _log = logging.getLogger(__name__)
 
 ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
 RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
+Solver = Literal["cvode", "rk4", "euler"]
+SOLVERS: tuple[str, ...] = ("cvode", *METHODS)
 _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8
 # An FMU state and, for model exchange, the next time event it had announced (not part of the state).
@@ -47,6 +50,10 @@ class Model:
             ``"reinstantiate"``, or ``"auto"``: restore where the FMU can get/set its state
             (snapshots are taken for value sets seen more than once), else reset.
         tolerance: relative tolerance for the FMU (and the ODE solver, for model exchange).
+        solver: model exchange only: ``"cvode"`` (variable step, the default), or ``"rk4"`` /
+            ``"euler"``: fixed steps of ``step_size_s / solver_substeps`` in native code
+            (``bridge.fmu.fixed_step``; FMI 2.0/3.0).
+        solver_substeps: fixed-step integration steps per FMU step.
     """
 
     def __init__(
@@ -60,6 +67,8 @@ class Model:
         reset_policy: ResetPolicy = "auto",
         tolerance: float | None = None,
         instance_name: str | None = None,
+        solver: Solver = "cvode",
+        solver_substeps: int = 1,
     ) -> None:
         self.info: ModelInfo = read_model_info(path)
         self.interface: Interface = _choose_interface(self.info, interface)
@@ -72,6 +81,7 @@ class Model:
         if reset_policy not in RESET_POLICIES:
             raise ConfigError(f"reset_policy {reset_policy!r} is unknown; expected one of {RESET_POLICIES}")
         self.reset_policy: ResetPolicy = reset_policy
+        self.solver, self.solver_substeps = _check_solver(self.info, self.interface, solver, solver_substeps)
         self.can_restore = self.info.can_get_set_state.get(self.interface, False) and self.info.fmi_major >= 2
         self.step_index = 0
         self.terminated = False
@@ -79,7 +89,7 @@ class Model:
         self._closed = False
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
-        self._me: MeStepper | None = None
+        self._me: MeStepper | FixedStepper | None = None
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
@@ -305,13 +315,19 @@ class Model:
         if terminate:
             raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
         backend.call("enterContinuousTimeMode", events.enter_continuous_time_mode)
-        if self._me is None or self._me._fmu is not fmu:
-            # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
-            # input change needs a tighter one, so 1e-6 unless the caller asks for another.
-            tolerance = self._requested_tolerance or min(self.tolerance or 1e-6, 1e-6)
-            self._me = MeStepper(self._backend, self.start_time_s, tolerance, self.step_size_s, next_event)
+        if self._me is None or self._me.fmu is not fmu:
+            self._me = self._me_stepper(next_event)
         else:
             self._me.next_event_s = next_event
+
+    def _me_stepper(self, next_event: float | None) -> MeStepper | FixedStepper:
+        if self.solver != "cvode":
+            h = self.step_size_s
+            return FixedStepper(self._backend, self.solver, self.solver_substeps, h, next_event)
+        # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
+        # input change needs a tighter one, so 1e-6 unless the caller asks for another.
+        tolerance = self._requested_tolerance or min(self.tolerance or 1e-6, 1e-6)
+        return MeStepper(self._backend, self.start_time_s, tolerance, self.step_size_s, next_event)
 
     def _restart(self) -> None:
         self.step_index = 0
@@ -490,6 +506,20 @@ def _choose_interface(info: ModelInfo, interface: str) -> Interface:
             f"{', '.join(i.upper() for i in info.interfaces)} [{info.path}]"
         )
     return interface  # type: ignore[return-value]
+
+
+def _check_solver(info: ModelInfo, interface: Interface, solver: str, substeps: int) -> tuple[Solver, int]:
+    if solver not in SOLVERS:
+        raise ConfigError(f"solver {solver!r} is unknown; expected one of {SOLVERS}")
+    if isinstance(substeps, bool) or not isinstance(substeps, int) or substeps < 1:
+        raise ConfigError(f"solver_substeps must be a whole number >= 1, got {substeps!r}")
+    if solver != "cvode" and (interface != "me" or info.fmi_major < 2):
+        raise ConfigError(
+            f"solver {solver!r} integrates FMI 2.0/3.0 model exchange, but {info.path.name} runs "
+            f"FMI {info.fmi_version} {interface.upper()}: choose interface 'me' (FMI 2.0/3.0) "
+            f"or solver 'cvode'"
+        )
+    return solver, substeps  # type: ignore[return-value]
 
 
 def _step_size(info: ModelInfo, step_size_s: float | None) -> float:

@@ -17,7 +17,7 @@ from fmpy.sundials import CVodeSolver
 
 from bridge.errors import StepError
 from bridge.fmu.backend import Backend
-from bridge.fmu.events import EventCalls
+from bridge.fmu.events import EventCalls, needs_completed_step
 
 
 class _HeldInputs:
@@ -49,11 +49,7 @@ class MeStepper:
         info = backend.info
         major = backend.major
         self.events = EventCalls(self._fmu, major)
-        self._needs_completed = bool(
-            info.raw is not None
-            and info.raw.modelExchange is not None
-            and (major != 2 or info.raw.modelExchange.needsCompletedIntegratorStep)
-        )
+        self._needs_completed = needs_completed_step(info, major)
         self.next_event_s = next_event_s
         fmu = self._fmu
         self._get_nominals = (
@@ -73,6 +69,11 @@ class MeStepper:
             maxStep=max_step_s,
             relativeTolerance=tolerance,
         )
+
+    @property
+    def fmu(self) -> Any:
+        """The FMPy object the stepper calls (the same across re-instantiation)."""
+        return self._fmu
 
     def _nominals(self, pointer: Any, n: int) -> None:
         """State nominals scale CVode's absolute tolerance; some exporters report 0 (illegal there)."""

@@ -34,6 +34,8 @@ class LocalFmuPlant(FmuInstancePlant):
             interface=exp.model.interface,
             reset_policy=exp.model.reset_policy,
             tolerance=exp.model.tolerance,
+            solver=exp.model.solver,
+            solver_substeps=exp.model.solver_substeps,
         )
 
     def current_inputs(self) -> list[float]:

@@ -61,26 +61,27 @@ class BatchTask:
 
     # -- set-up -------------------------------------------------------------------------------------
     def _build_actions(self, task: Task) -> None:
-        self._kind = task._kind
+        mapping = task.action_mapping
+        self._kind = mapping.kind
         if self._kind == "continuous":
-            self._centre, self._half = np.array(task._a_centre), np.array(task._a_half_list)
+            self._centre, self._half = np.array(mapping.centre), np.array(mapping.half)
         elif self._kind == "discrete":
-            self._table = np.array(task._table_rows, dtype=np.float64)
+            self._table = np.array(mapping.table, dtype=np.float64)
         else:
-            self._levels = task._levels
-        self._noise_cols = [i for i, _ in task._action_noise]
+            self._levels = mapping.levels
+        self._noise_cols = mapping.noise_columns
 
     def _build_step(self, task: Task) -> None:
         exp, index = self.experiment, {name: i for i, name in enumerate(self.signal_names)}
         pow_ns = {"__builtins__": {}, "abs": np.abs}
         body = _POWER.sub("** _two", terms_source(exp.reward.terms, index, self.action_inputs))
         self._terms = eval(f"lambda s, u, p, _two: {body}", pow_ns) if exp.reward.terms else None
-        self._expression, self._user = task.reward._expression, task.reward._user
+        self._expression, self._user = task.reward.expression, task.reward.user
         self._penalty = float(exp.reward.termination_penalty)
         observer = task.observer
         self._observe = eval(observer.source, {"__builtins__": {}, "min": np.minimum, "max": np.maximum})
-        self._h, self._dim = observer._section.history, observer.dim
-        self._obs_noise = bool(observer._noise)
+        self._h, self._dim = observer.history_length, observer.dim
+        self._obs_noise = observer.has_noise
         self.reasons: list[str | None] = [None]  # reason code -> text; 0: running
         self._bounds: list[tuple[int, float, float, int]] = []
         for name, (lo, hi) in exp.termination.bounds.items():
@@ -102,10 +103,11 @@ class BatchTask:
         task = self.tasks[i]
         spec = task.new_episode(rng, scenario)
         rows = spec.n_samples + 1
-        self._store(i, rows, "refs", task._refs)
-        self._store(i, rows, "profiles", task._profile_inputs)
-        self._store(i, rows, "act_noise", _table(task._action_noise_table, rows))
-        self._store(i, rows, "obs_noise", _table(task.observer._noise_table, rows))
+        tables = task.episode_tables()
+        self._store(i, rows, "refs", tables.references)
+        self._store(i, rows, "profiles", tables.profile_inputs)
+        self._store(i, rows, "act_noise", tables.action_noise)
+        self._store(i, rows, "obs_noise", tables.observation_noise)
         self._rows[i], self.n_samples[i] = rows, spec.n_samples
         return spec
 
@@ -130,8 +132,8 @@ class BatchTask:
         task = self.tasks[i]
         obs = task.first_observation(outputs, rng)
         self.history[i] = obs.reshape(self._h, self._dim)
-        self.inputs[i] = task._inputs
-        self.previous[i] = task._inputs
+        self.inputs[i] = task.applied_inputs
+        self.previous[i] = task.applied_inputs
         return obs
 
     # -- per step, over the batch ---------------------------------------------------------------------
@@ -235,7 +237,3 @@ def _number(value: Any) -> float:
         return float(value)
     except (TypeError, ValueError) as exc:
         raise BridgeError(f"reward.callable returned {value!r}; expected a number") from exc
-
-
-def _table(rows: list[list[float]], n: int) -> FloatArray:
-    return np.array(rows, dtype=np.float64) if rows else np.zeros((n, 0))

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import gymnasium as gym
@@ -55,6 +56,33 @@ def _noise_table(
     if not entries:
         return []
     return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
+
+
+@dataclass(frozen=True)
+class ActionMapping:
+    """How a :class:`Task` turns actions into FMU inputs (the batch task applies it over N envs).
+
+    ``kind`` is the experiment's ``actions.type``; continuous actions in [-1, 1] map to
+    ``centre + half * a``; a discrete action picks a row of ``table``; a multi-discrete one picks
+    one of ``levels[j]`` per input; actuator noise is added to the inputs ``noise_columns``.
+    """
+
+    kind: str
+    centre: list[float] = field(default_factory=list)
+    half: list[float] = field(default_factory=list)
+    table: list[list[float]] = field(default_factory=list)
+    levels: list[FloatArray] = field(default_factory=list)
+    noise_columns: list[int] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class EpisodeTables:
+    """The current episode's per-sample tables, one row per sample ``0..n``."""
+
+    references: FloatArray  # reference_names columns
+    profile_inputs: FloatArray  # the scenario-driven inputs after the action inputs
+    action_noise: FloatArray  # one column per noisy action input (ActionMapping.noise_columns)
+    observation_noise: FloatArray  # one column per noisy observed output
 
 
 class Task:
@@ -198,7 +226,33 @@ class Task:
             raise self._bad_action(action, sample)
         return self._table_rows[index]
 
-    def _bad_output(self, outputs: list[float], sample: int) -> NonFiniteOutputs:
+    @property
+    def variables(self) -> Mapping[str, Variable]:
+        """The model's variables, array elements included as scalars (``y[2]``)."""
+        return self._variables
+
+    @property
+    def action_mapping(self) -> ActionMapping:
+        """The action-to-input mapping (fixed for the task's life)."""
+        noise = [i for i, _ in self._action_noise]
+        if self._kind == "continuous":
+            return ActionMapping(self._kind, self._a_centre, self._a_half_list, noise_columns=noise)
+        if self._kind == "discrete":
+            return ActionMapping(self._kind, table=self._table_rows, noise_columns=noise)
+        return ActionMapping(self._kind, levels=self._levels, noise_columns=noise)
+
+    def episode_tables(self) -> EpisodeTables:
+        """The per-sample tables :meth:`new_episode` drew (references, profiles, noise)."""
+        rows = len(self._refs)
+        return EpisodeTables(
+            self._refs,
+            self._profile_inputs,
+            _as_table(self._action_noise_table, rows),
+            _as_table(self.observer.noise_table, rows),
+        )
+
+    def bad_output(self, outputs: list[float], sample: int) -> NonFiniteOutputs:
+        """The error for non-finite ``outputs`` at ``sample`` (names the offending outputs)."""
         bad = [f"{n}={v}" for n, v in zip(self.output_names, outputs) if v - v != 0.0]
         return NonFiniteOutputs(
             f"non-finite outputs {', '.join(bad)} at sample {sample}: the model diverged "
@@ -297,7 +351,7 @@ class Task:
         """The signal vector [outputs | inputs | references at t_sample] as a list."""
         for value in outputs:
             if value - value != 0.0:  # NaN or infinity from the FMU: never pass it on silently
-                raise self._bad_output(outputs, sample)
+                raise self.bad_output(outputs, sample)
         s = outputs + self._inputs
         if self._has_refs:
             s += self._refs[min(sample, len(self._refs) - 1)].tolist()
@@ -333,3 +387,7 @@ class Task:
 
     def signal_dict(self) -> dict[str, float]:
         return dict(zip(self.signal_names, self._signals))
+
+
+def _as_table(rows: list[list[float]], n: int) -> FloatArray:
+    return np.array(rows, dtype=np.float64) if rows else np.zeros((n, 0))

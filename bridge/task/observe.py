@@ -115,6 +115,21 @@ class ObservationBuilder:
         self.source = source  # also evaluated over whole batches by bridge.task.batch
         return eval(source, {"__builtins__": {}, "min": min, "max": max})  # type: ignore[no-any-return]
 
+    @property
+    def history_length(self) -> int:
+        """Observations stacked per step (``observations.history``)."""
+        return self._section.history
+
+    @property
+    def has_noise(self) -> bool:
+        """Whether sensor noise is added to some observed outputs."""
+        return bool(self._noise)
+
+    @property
+    def noise_table(self) -> list[list[float]]:
+        """This episode's sensor noise, one row per sample, one column per noisy output."""
+        return self._noise_table
+
     # -- per sample ---------------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, rows: int) -> None:
         """Draw the sensor noise of a whole episode at once (rows = samples + 1)."""
@@ -162,7 +177,7 @@ def _action_ranges(task: Task) -> list[tuple[float, float]]:
 
     ranges = []
     for name in task.action_inputs:
-        low, high = action_bounds(task.experiment, task._variables[name])
+        low, high = action_bounds(task.experiment, task.variables[name])
         if _finite(low, high) and high > low:  # type: ignore[operator]
             ranges.append(((high + low) / 2, (high - low) / 2))  # type: ignore[operator]
         else:

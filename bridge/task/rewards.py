@@ -97,6 +97,16 @@ class Reward:
         self._names = tuple(names)
         self._penalty = penalty
 
+    @property
+    def expression(self) -> Any:
+        """The compiled ``reward.expression`` (``f(signals) -> float``), or None."""
+        return self._expression
+
+    @property
+    def user(self) -> Callable[..., Any] | None:
+        """The ``reward.callable`` (``f({name: value}) -> number``), or None."""
+        return self._user
+
     def reset(self) -> None:
         """Nothing is carried between episodes today; kept for stateful rewards."""
 

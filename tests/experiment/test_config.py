@@ -177,3 +177,23 @@ def test_experiment_is_frozen() -> None:
     experiment = parse_experiment(base())
     with pytest.raises(Exception, match="frozen"):
         experiment.model.step_size = 1.0  # type: ignore[misc]
+
+
+def test_a_fixed_step_solver_needs_model_exchange(tmp_path: Path) -> None:
+    data = base()
+    data["model"].update(interface="cs", solver="rk4")
+    with pytest.raises(
+        ConfigError, match=r"model\.solver: 'rk4' integrates model exchange, but interface is 'cs'"
+    ):
+        load_experiment(write(tmp_path, data))
+    data["model"].update(interface="me", solver_substeps=0)
+    with pytest.raises(
+        ConfigError, match=r"model\.solver_substeps: Input should be greater than or equal to 1"
+    ):
+        load_experiment(write(tmp_path, data))
+    data["model"].update(solver_substeps=50)
+    loaded = load_experiment(write(tmp_path, data))
+    assert (loaded.model.solver, loaded.model.solver_substeps) == ("rk4", 50)
+    env = FmuEnv(loaded)
+    assert env.plant.model.solver == "rk4"  # type: ignore[attr-defined]  # the plant's Model got it
+    env.close()

@@ -551,6 +551,29 @@ def test_bouncing_ball_cs_locates_contacts_analytically(fmus: Fmus) -> None:
     assert result["bounces"][-1] == 11
 
 
+# --- feedthrough --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+def test_feedthrough_outputs_the_input_of_the_last_step(
+    fmus: Fmus, open_slave: OpenSlave, version: str
+) -> None:
+    slave = open_slave(fmus["feedthrough", version, "cs"])
+    fmu, u, y = slave.fmu, [slave.vr["u"]], [slave.vr["y"]]
+    set_, get = (fmu.setFloat64, fmu.getFloat64) if version == "3.0" else (fmu.setReal, fmu.getReal)
+    if version == "2.0":
+        fmu.setupExperiment(startTime=0.0)
+    set_(u, [0.25])
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    assert get(y) == [0.25]  # the start value, taken at initialization
+    for k in range(5):
+        set_(u, [k * 1.5 - 2.0])
+        assert get(y) == [0.25 if k == 0 else (k - 1) * 1.5 - 2.0]  # outputs change only at doStep
+        fmu.doStep(k * 0.01, 0.01)
+        assert get(y) == [k * 1.5 - 2.0]
+
+
 # --- typed --------------------------------------------------------------------------------------
 
 FMI3_VALUES: dict[str, tuple[str, Any]] = {
@@ -686,6 +709,7 @@ def test_model_names_and_variants() -> None:
         "bouncing_ball",
         "cartpole",
         "dcmotor",
+        "feedthrough",
         "gearload",
         "modelica_names",
         "motor_gearload",
@@ -710,11 +734,12 @@ def test_model_names_and_variants() -> None:
     assert by_model["motor_gearload"] == {("2.0", "cs")}
     assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["modelica_names"] == {("2.0", "cs"), ("2.0", "me"), ("3.0", "cs")}
+    assert by_model["feedthrough"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, gearload, modelica_names, motor_gearload, pi_controller, "
-    names += "stair, typed, typed3, vehicle"
+    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, modelica_names, motor_gearload, "
+    names += "pi_controller, stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):

@@ -94,6 +94,8 @@ class BatchPlant:
             interface=exp.model.interface,
             reset_policy=exp.model.reset_policy,
             tolerance=exp.model.tolerance,
+            solver=exp.model.solver,
+            solver_substeps=exp.model.solver_substeps,
             instance_name=f"{self.info.model_name}#batch{i}",
         )
 
