@@ -22,7 +22,7 @@ import fmpy
 
 from bridge.errors import BridgeError, DependencyMissing
 
-CFLAGS: Final = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall")
+CFLAGS: Final = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-pthread")
 HEADERS: Final = ("fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 
 

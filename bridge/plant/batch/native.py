@@ -12,12 +12,8 @@ the pure-Python path, which gives the same results.
 from __future__ import annotations
 
 import ctypes
-import hashlib
 import logging
 import os
-import shutil
-import subprocess
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -28,17 +24,14 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, FmuError
+from bridge.fmu import native as native_build
 from bridge.fmu.backend import STATUS_NAMES
-from bridge.models import cache_dir
-from bridge.models.build import _fmi_headers_dir
 
 if TYPE_CHECKING:
     from bridge.fmu import Model
 
 _log = logging.getLogger(__name__)
 SOURCE: Final = Path(__file__).with_name("batch.c")
-CFLAGS: Final = ("-shared", "-fPIC", "-O2", "-std=c99", "-Wall", "-pthread")
-HEADERS: Final = ("fmi2FunctionTypes.h", "fmi2TypesPlatform.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")
 TERMINATED, SET_FAILED, GET_FAILED, INACTIVE = 5, 16, 32, -1
 
 
@@ -117,39 +110,9 @@ class NativeStepper:
         )
 
 
-def library_key() -> str:
-    """sha256 over the C source, the FMI headers it includes and the flags."""
-    digest = hashlib.sha256(SOURCE.read_bytes())
-    headers = _fmi_headers_dir()
-    for name in HEADERS:
-        digest.update(name.encode() + b"\0" + (headers / name).read_bytes())
-    digest.update(" ".join(CFLAGS).encode())
-    return digest.hexdigest()
-
-
 def library_path() -> Path:
-    """Where the built library lives in the per-user cache."""
-    return cache_dir().parent / "native" / f"batch-{library_key()[:16]}.so"
-
-
-def build(target: Path) -> None:
-    """Compile ``batch.c`` into ``target`` (written next to it, then moved in place)."""
-    gcc = shutil.which("gcc")
-    if gcc is None:
-        raise BridgeError(
-            "gcc is not installed; install it (sudo apt-get install gcc) for native batch stepping"
-        )
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix=".build-batch-", dir=target.parent) as tmp:
-        partial = Path(tmp) / "batch.so"
-        command = [gcc, *CFLAGS, f"-I{_fmi_headers_dir()}", "-o", str(partial), str(SOURCE)]
-        result = subprocess.run(command, capture_output=True, text=True, check=False)
-        if result.returncode != 0:
-            raise BridgeError(
-                f"gcc failed to build the batch stepper (exit code {result.returncode}):\n"
-                f"{result.stderr.strip()}\ncommand: {' '.join(command)}"
-            )
-        os.replace(partial, target)
+    """Where the built library lives in the per-user cache (keyed by source, headers and flags)."""
+    return native_build.library_path(SOURCE)
 
 
 @lru_cache(maxsize=1)
@@ -160,7 +123,7 @@ def load() -> NativeStepper | None:
     try:
         target = library_path()
         if not target.is_file():
-            build(target)
+            native_build.build(SOURCE, target)
         return NativeStepper(ctypes.CDLL(str(target)), target)
     except (BridgeError, OSError) as exc:
         _log.warning("native batch stepping unavailable, stepping in Python instead: %s", exc)
