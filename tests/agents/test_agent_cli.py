@@ -117,10 +117,15 @@ def test_latency_statistics_stay_bounded() -> None:
     assert np.isnan(Stats().summary()["latency_p99_us"])
 
 
-def test_zenoh_mode_option() -> None:
-    router = ("tcp/10.0.0.1:7447",)
-    assert session_mode("client", (), router, None) == "client"
+def test_zenoh_mode_is_client_when_only_connecting() -> None:
+    router, here = ("tcp/10.0.0.1:7447",), ("tcp/0.0.0.0:7448",)
+    assert session_mode(None, (), router, None) == "client"  # only connects: to a router
+    assert session_mode(None, (), (), None) is None  # Zenoh's default: a peer finding peers
+    assert session_mode(None, here, router, None) is None  # listens too: a peer
+    assert session_mode(None, (), router, Path("z.json5")) is None  # the file says its mode
     assert session_mode("peer", (), router, None) == "peer"
-    assert session_mode(None, (), router, None) is None  # peer, or the config file's mode
+    assert session_mode("client", (), router, Path("z.json5")) == "client"
     with pytest.raises(Exception, match="client or peer"):
         session_mode("router", (), (), None)
+    with pytest.raises(Exception, match="a client does not accept connections"):
+        session_mode("client", here, router, None)
