@@ -33,7 +33,8 @@ ZenohModeOpt = Annotated[
     str | None,
     typer.Option(
         "--zenoh-mode",
-        help="client (remote hosts: through the router) or peer (default).",
+        help="client (all traffic through the router) or peer; default: client when only "
+        "--connect is given (a router), else peer.",
     ),
 ]
 

@@ -118,6 +118,7 @@ class DeployedAgent:
         self.stats = Stats()
         self._rng = np.random.default_rng(0)
         self._lock = threading.Lock()
+        self._publishing = threading.Lock()  # close() waits for a publish under way
         self._episode_key: Any = None
         self._sample = 0
         self._last_inputs: list[float] | None = None
@@ -157,7 +158,8 @@ class DeployedAgent:
             inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))
             self._last_inputs, self._last_time = inputs, time.monotonic()
             self.stats.observations += 1
-        self._publish(inputs, self._sample)
+        if not self._send(inputs, self._sample):
+            return inputs
         self.stats.actions += 1
         self.stats.latencies_s.append(time.perf_counter() - start)
         return inputs
@@ -182,7 +184,16 @@ class DeployedAgent:
                 "holding the last" if self.settings.missing == "hold" else "publishing the safe",
                 inputs,
             )
-            self._publish(inputs, self._sample)
+            self._send(inputs, self._sample)
+
+    def _send(self, inputs: list[float], sample: int) -> bool:
+        """Publish unless closing: an observation that arrives while the transport closes must not
+        publish on a closed publisher (a ROS publisher raises then)."""
+        with self._publishing:
+            if self._stop.is_set():
+                return False
+            self._publish(inputs, sample)
+            return True
 
     def _safe(self) -> list[float]:
         n = len(self.task.action_inputs)
@@ -190,5 +201,8 @@ class DeployedAgent:
         return safe + (self._last_inputs or [])[n:]
 
     def close(self) -> None:
+        """Stop acting; when it returns nothing is being or will be published."""
         self._stop.set()
+        with self._publishing:  # a publish under way ends before the transport may close
+            pass
         self._watchdog.join(timeout=2.0)

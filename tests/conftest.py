@@ -228,6 +228,19 @@ def _wait_for_node(net: Loopback, name: str, timeout_s: float) -> None:
     pytest.fail(f"node {name!r} did not appear under {net.prefix}/ within {timeout_s} s")
 
 
+@pytest.fixture(scope="session")
+def balancer(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A PPO run that balances the cart-pole FMU (RL Zoo settings; 500/500 from about 20k steps),
+    trained once per session for the deployment tests."""
+    from agents.train import train
+    from bridge.experiment.examples import example_experiment
+
+    run = tmp_path_factory.mktemp("deploy") / "ppo"
+    overrides = {"timesteps": 60_000, "eval_every": 1_000_000}
+    train(example_experiment("cartpole_balance"), overrides=overrides, run_dir=run, progress=False)
+    return run
+
+
 if TYPE_CHECKING:
     from bridge.experiment.config import Experiment
     from bridge.fmu.vocab import ModelInfo

@@ -22,6 +22,7 @@ from bridge.cli.main import (
     ListenOpt,
     PrefixOpt,
     ZenohConfigOpt,
+    ZenohModeOpt,
     _zenoh_options,
     console,
     err_console,
@@ -44,6 +45,7 @@ def record(
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     timeout_s: Annotated[float, typer.Option("--timeout", help="Seconds to wait for the node.")] = 5.0,
     force: Annotated[bool, typer.Option("--force", help="Replace an existing file.")] = False,
@@ -52,7 +54,7 @@ def record(
     from bridge.net.transport import open_session
     from bridge.recording.node_recorder import NodeRecorder
 
-    session = open_session(_zenoh_options(zenoh_config, listen, connect))
+    session = open_session(_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode))
     try:
         chosen = tuple(t.strip() for t in topics.split(",") if t.strip())
         recorder = NodeRecorder(
@@ -97,6 +99,7 @@ def replay_cmd(
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
 ) -> None:
     """Replay a recording in Rerun (viewer, or --save FILE.rrd), or over Zenoh with --publish."""
@@ -113,7 +116,7 @@ def replay_cmd(
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     err_console.print(f"publishing {recording} as node {prefix}/{node} at rate {rate:g}; Ctrl-C stops")
-    options = _zenoh_options(zenoh_config, listen, connect)
+    options = _zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode)
     try:
         sent = play(
             recording, node=node, options=options, prefix=prefix, rate=rate, episode=episode, stop=stop

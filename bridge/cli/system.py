@@ -167,7 +167,10 @@ def serve_system(  # noqa: PLR0917 (typer options)
     connect: Annotated[
         list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")
     ] = None,
-    zenoh_mode: Annotated[str | None, typer.Option("--zenoh-mode", help="client or peer (default).")] = None,
+    zenoh_mode: Annotated[
+        str | None,
+        typer.Option("--zenoh-mode", help="client or peer; default: client when only --connect is given."),
+    ] = None,
     prefix: Annotated[
         str, typer.Option("--prefix", help="Key expression prefix of the nodes.")
     ] = "fmu_bridge",

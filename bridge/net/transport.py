@@ -29,7 +29,8 @@ class ZenohOptions:
 
     Args:
         config_file: a Zenoh JSON5 configuration file (applied first; the other options override it).
-        mode: ``peer`` (default), ``client`` (through a router) or ``router``.
+        mode: ``peer`` (Zenoh's default), ``client`` (through a router) or ``router``; the command
+            line chooses it with :func:`session_mode`.
         listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
         connect: endpoints to connect to.
         scouting: multicast scouting; off whenever endpoints are given explicitly.
@@ -79,18 +80,23 @@ ZENOH_MODES = ("peer", "client")
 def session_mode(
     mode: str | None, listen: tuple[str, ...], connect: tuple[str, ...], config: Path | None
 ) -> str | None:
-    """The Zenoh mode of a command-line session: ``--zenoh-mode`` (client or peer) when given.
-
-    Client mode is the one for remote hosts behind NAT, a firewall or a container (nothing has to
-    connect back; rmw_zenoh documents it for remote hosts). Without the option the session is a
-    peer, or what the config file says. ``listen``/``connect``/``config`` are taken for a future
-    automatic choice (client when only connecting to a router)."""
-    del listen, connect, config
-    if mode is None:
+    """The Zenoh mode of a command-line session: ``--zenoh-mode`` (client or peer) when given;
+    else client when the session only connects (``--connect``, no ``--listen``): to a router, as
+    rmw_zenoh lays out a ROS 2 system, and the mode that works from behind NAT, a firewall or a
+    container, since nothing has to connect back; else peer. ``None`` leaves the mode to Zenoh's
+    default (peer) or to ``--zenoh-config``, whose own mode wins when the option is not given."""
+    if mode is not None:
+        if mode not in ZENOH_MODES:
+            raise TransportError(f"--zenoh-mode {mode!r} is unknown; use client or peer")
+        if mode == "client" and listen:
+            raise TransportError(
+                f"--zenoh-mode client with --listen {list(listen)}: a client does not accept "
+                "connections; drop --listen, or use --zenoh-mode peer"
+            )
+        return mode
+    if config is not None:
         return None
-    if mode not in ZENOH_MODES:
-        raise TransportError(f"--zenoh-mode {mode!r} is unknown; use client or peer")
-    return mode
+    return "client" if connect and not listen else None
 
 
 def quiet_zenoh_logs(level: str = "error") -> None:

@@ -103,6 +103,35 @@ def test_missing_safe_publishes_a_full_vector_for_two_inputs(tmp_path: Path) -> 
     assert sent and all(s[:2] == [1.5, 1.5] for s in sent)
 
 
+def test_close_waits_for_a_publish_under_way_and_later_observations_publish_nothing(
+    tmp_path: Path,
+) -> None:
+    """A transport closes right after ``close()``: a publish may not run on into it, nor start."""
+    import threading
+
+    config = two_input_experiment(tmp_path)
+    experiment, _ = deployment_experiment(tmp_path, config)
+    settings = agent_settings(tmp_path, config, "zenoh", "hold", None, "torch", timeout_s=60.0)
+    entered, events = threading.Event(), []
+
+    def slow_publish(inputs: list[float], step: int) -> None:
+        entered.set()
+        time.sleep(0.3)
+        events.append("published")
+
+    agent = DeployedAgent(
+        Zero(), experiment, model_info_for(experiment, tmp_path, None), settings, slow_publish
+    )
+    worker = threading.Thread(target=agent.observe, args=([10.0, 0.1],), kwargs={"step": 0})
+    worker.start()
+    assert entered.wait(10.0)
+    agent.close()
+    events.append("closed")
+    worker.join(10.0)
+    assert events == ["published", "closed"]
+    assert agent.observe([10.0, 0.1], step=1) == [] and agent.stats.actions == 1
+
+
 def test_latency_statistics_stay_bounded() -> None:
     window = LatencyWindow(capacity=1000)
     for k in range(10_000):
@@ -117,10 +146,15 @@ def test_latency_statistics_stay_bounded() -> None:
     assert np.isnan(Stats().summary()["latency_p99_us"])
 
 
-def test_zenoh_mode_option() -> None:
-    router = ("tcp/10.0.0.1:7447",)
-    assert session_mode("client", (), router, None) == "client"
+def test_zenoh_mode_is_client_when_only_connecting() -> None:
+    router, here = ("tcp/10.0.0.1:7447",), ("tcp/0.0.0.0:7448",)
+    assert session_mode(None, (), router, None) == "client"  # only connects: to a router
+    assert session_mode(None, (), (), None) is None  # Zenoh's default: a peer finding peers
+    assert session_mode(None, here, router, None) is None  # listens too: a peer
+    assert session_mode(None, (), router, Path("z.json5")) is None  # the file says its mode
     assert session_mode("peer", (), router, None) == "peer"
-    assert session_mode(None, (), router, None) is None  # peer, or the config file's mode
+    assert session_mode("client", (), router, Path("z.json5")) == "client"
     with pytest.raises(Exception, match="client or peer"):
         session_mode("router", (), (), None)
+    with pytest.raises(Exception, match="a client does not accept connections"):
+        session_mode("client", here, router, None)

@@ -17,7 +17,6 @@ from conftest import Loopback, node_process
 from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
 from agents.deploy_io import AgentNode
 from agents.policies import Sb3Policy
-from agents.train import train
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
@@ -25,14 +24,6 @@ from bridge.net.remote import describe_nodes
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # training takes minutes when busy
 CARTPOLE = example_experiment("cartpole_balance")
-
-
-@pytest.fixture(scope="module")
-def balancer(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A PPO agent that balances the cart-pole FMU (RL Zoo settings; 500/500 from about 20k steps)."""
-    run = tmp_path_factory.mktemp("deploy") / "ppo"
-    train(CARTPOLE, overrides={"timesteps": 60_000, "eval_every": 1_000_000}, run_dir=run, progress=False)
-    return run
 
 
 def test_deployed_agent_acts_exactly_like_model_predict(balancer: Path) -> None:

@@ -146,3 +146,24 @@ def test_demo_trains_evaluates_and_reports_as_a_real_subprocess(tmp_path: Path) 
     assert float(ppo.split("│")[2]) >= 475.0  # PPO's mean return over 20 episodes
     report = next(line.split()[-1] for line in out.splitlines() if line.startswith("report:"))
     assert (tmp_path / report).is_file()
+
+
+SESSION_COMMANDS = (
+    ["node"], ["nodes"], ["record"], ["replay"], ["agent", "run"], ["train"], ["system", "serve"]
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("command", SESSION_COMMANDS, ids=" ".join)
+def test_every_command_that_opens_a_zenoh_session_takes_the_zenoh_mode(command: list[str]) -> None:
+    assert "--zenoh-mode" in " ".join(invoke(*command, "--help").split())
+
+
+def test_a_bad_zenoh_mode_is_refused_before_a_session_opens(tmp_path: Path) -> None:
+    for mode, extra, message in (
+        ("router", [], "use client or peer"),
+        ("client", ["--listen", "tcp/127.0.0.1:0"], "a client does not accept connections"),
+    ):
+        result = runner.invoke(
+            app, ["record", "--node", "n", "-o", str(tmp_path / "r.mcap"), "--zenoh-mode", mode, *extra]
+        )
+        assert result.exit_code != 0 and message in str(result.exception)
