@@ -116,14 +116,17 @@ class NodeClient:
         else:
             self.alive = True
 
-    def send_action(self, plant: Plant, episode: int, step: int, inputs: Sequence[float]) -> None:
+    def send_action(
+        self, plant: Plant, episode: int, step: int, inputs: Sequence[float], flags: int = 0
+    ) -> None:
+        """Publish the action for ``step``; ``flags``: SAVE_STATE or RESTORE_STATE (rollback)."""
         if not self.alive:
             raise self._dead(plant)
         self._frame = None
         self._event.clear()
         self._want = (episode, step)
         self._deadline = time.monotonic() + self.timeout_s
-        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs))
+        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))
 
     def ready(self) -> bool:
         """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""

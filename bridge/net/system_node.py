@@ -10,7 +10,10 @@ reads. Both sides read the same system file, so they agree on the names; the cli
 bound inputs and outputs onto the node's lists by name and says so when they do not fit.
 
 A node answers in lockstep: ``send`` publishes the stamped inputs at once and ``receive``
-waits for the matching outputs, so Jacobi components in several nodes step in parallel.
+waits for the matching outputs, so Jacobi components in several nodes step in parallel. For
+fixed-point iteration the master saves and restores components: a node component marks its
+next action SAVE_STATE or RESTORE_STATE (``bridge.net.node_state``) and rolls its own step
+stamp back, so a repeated macro step costs no round trip more than the first.
 """
 
 from __future__ import annotations
@@ -183,6 +186,7 @@ class NodeComponent(Plant):
         self._out_index: list[int] = []
         self._time_s = start_time_s
         self._where = where
+        self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
@@ -207,7 +211,7 @@ class NodeComponent(Plant):
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1
-        self.sample, self.terminated = 0, False
+        self.sample, self.terminated, self._flags = 0, False, 0
         merged = {**self.component.parameters, **values}
         for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
             self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
@@ -221,12 +225,13 @@ class NodeComponent(Plant):
             self._u[self._in_index] = inputs
 
     def send(self, inputs: Sequence[float] | None) -> None:
+        flags, self._flags = self._flags, 0
         if self._all_inputs and inputs is not None:
             self._u[:] = inputs
-            self.client.send_action(self, self.episode, self.sample + 1, inputs)
+            self.client.send_action(self, self.episode, self.sample + 1, inputs, flags)
             return
         self._write(inputs)
-        self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist())
+        self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist(), flags)
 
     def receive(self) -> FloatArray:
         frame = self.client.wait(self)
@@ -239,6 +244,34 @@ class NodeComponent(Plant):
             )
         self.terminated = frame.terminated
         return frame.values if self._all_outputs else frame.values[self._out_index]
+
+    # -- saved states (rollback): carried by the next action -----------------------------------------
+    @property
+    def can_save(self) -> bool:
+        """Whether the node can save and restore its FMU state (its ``info`` says so)."""
+        return bool(self.client.description.get("can_save_state", False))
+
+    @property
+    def save_refusal(self) -> str:
+        """Why the node cannot save its state ("" if it can)."""
+        if self.can_save:
+            return ""
+        return str(self.client.description.get("save_state_refusal") or "the node is too old to save states")
+
+    def save(self) -> tuple[int, bool, float, FloatArray]:
+        """The node saves its state with the next action (SAVE_STATE); this keeps the step stamp."""
+        self._flags = proto.SAVE_STATE
+        return self.sample, self.terminated, self._time_s, self._u.copy()
+
+    def restore(self, saved: tuple[int, bool, float, FloatArray]) -> None:
+        """The next action goes back to the saved state first (RESTORE_STATE), stamped as then."""
+        self.sample, self.terminated, self._time_s, u = saved
+        self._u[:] = u
+        self._flags = proto.RESTORE_STATE
+
+    def discard(self, saved: tuple[int, bool, float, FloatArray]) -> None:
+        """Nothing to free here: the node keeps one state, replaced by the next save."""
+        self._flags = 0
 
     def provenance(self) -> dict[str, str]:
         d = self.client.description
