@@ -26,7 +26,7 @@ import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError
 from bridge.experiment.config import Experiment, parse_experiment
-from bridge.fmu.vocab import info_from_summary
+from bridge.fmu.vocab import ModelInfo, info_from_summary
 from bridge.net import protocol as proto
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.description import Component, SystemDescription, from_experiment, split_name
@@ -325,21 +325,41 @@ class NodeComponents:
     ) -> None:
         self._options, self._session, self._own = options, session, False
         self.prefix, self.timeout_s = prefix, timeout_s
+        self._infos: dict[str, dict[str, Any]] = {}
 
-    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
+    def _open(self) -> Any:
         if self._session is None:
             from bridge.net.transport import open_session
 
             self._session, self._own = open_session(self._options), True
+        return self._session
+
+    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
         return NodeComponent(
             component,
             step_size_s,
             start_time_s,
-            session=self._session,
+            session=self._open(),
             prefix=self.prefix,
             timeout_s=self.timeout_s,
             where=where,
         )
+
+    def describe(self, component: Component) -> ModelInfo:
+        """The component's model as its node reports it (the FMU need not be on this machine)."""
+        return info_from_summary(self._info(component)["model"])
+
+    def checksum(self, component: Component) -> str:
+        """The SHA-256 of the FMU the component's node serves."""
+        return str(self._info(component).get("fmu_sha256", ""))
+
+    def _info(self, component: Component) -> dict[str, Any]:
+        from bridge.net.remote import query_info
+
+        node = component.node or component.name
+        if node not in self._infos:
+            self._infos[node] = query_info(self._open(), proto.Keys(self.prefix, node), self.timeout_s)
+        return self._infos[node]
 
     def close(self) -> None:
         if self._own and self._session is not None:
