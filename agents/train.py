@@ -21,10 +21,10 @@ from pydantic import ValidationError
 
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
 from bridge.env.fmu_env import FmuEnv
+from bridge.env.plants import model_fingerprint, model_info_for
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.fmu.vocab import summary_of
-from bridge.plant.factory import model_fingerprint, model_info_for
 
 _log = logging.getLogger(__name__)
 

@@ -30,7 +30,7 @@ H = 1e-3
 
 def system_plant(directory: Path) -> SystemPlant:
     data = {
-        "model": {"step_size": H, "episode_duration": 1e6},
+        "model": {"step_size": H, "episode_duration": 1e4},
         "system": {
             "components": {
                 "motor": {"fmu": "example:dcmotor", "feedthrough": False, "parameters": {"voltage": 12.0}},

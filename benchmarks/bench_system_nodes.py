@@ -27,6 +27,7 @@ from benchmarks.bench_remote import ECHO, ping_pong, start
 from benchmarks.common import table
 from bridge.experiment.config import load_experiment
 from bridge.net import protocol as proto
+from bridge.net.system_node import NodeComponents
 from bridge.net.transport import ZenohOptions, open_session, wait_connected
 from bridge.plant.system.plant import SystemPlant
 
@@ -40,7 +41,7 @@ def chain(directory: Path, n: int) -> Path:
     }
     data = {
         "name": f"chain{n}",
-        "model": {"step_size": H, "episode_duration": 1e6},
+        "model": {"step_size": H, "episode_duration": 1e4},
         "system": {
             "components": components,
             "connections": [f"c{i}.torque -> c{i + 1}.load_torque" for i in range(n - 1)],
@@ -111,7 +112,8 @@ def _measure(
                      f"{fan[0] / bare[0]:.2f}"))  # fmt: skip
     for n in counts:
         exp = load_experiment(chain(directory, n))
-        with SystemPlant(exp, session=session, prefix=prefix, timeout_s=30.0) as plant:
+        remote = NodeComponents(session=session, prefix=prefix, timeout_s=30.0)
+        with SystemPlant(exp, remote=remote) as plant:
             plant.bind(["c0.voltage"], [f"c{n - 1}.omega"])
             median, p99 = _stats(macro_steps(plant, steps))
         rows.append(

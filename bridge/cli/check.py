@@ -15,9 +15,9 @@ from rich.table import Table
 
 from bridge.cli.simulate import make_policy
 from bridge.env.fmu_env import FmuEnv
+from bridge.env.plants import model_info_for
 from bridge.experiment.config import load_experiment
 from bridge.experiment.validate import check_experiment, timing
-from bridge.plant.factory import model_info_for
 from bridge.task.core import Task
 from bridge.task.scenario import describe
 

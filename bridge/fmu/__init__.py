@@ -16,7 +16,7 @@ from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
 if TYPE_CHECKING:
     from bridge.fmu.archive import sha256
     from bridge.fmu.description import read_model_info
-    from bridge.fmu.model import RESET_POLICIES, Model, ResetPolicy
+    from bridge.fmu.model import RESET_POLICIES, Model, ModelState, ResetPolicy
     from bridge.fmu.signals import SignalGroup
 
 _RUNTIME = {
@@ -24,6 +24,7 @@ _RUNTIME = {
     "read_model_info": "bridge.fmu.description",
     "RESET_POLICIES": "bridge.fmu.model",
     "Model": "bridge.fmu.model",
+    "ModelState": "bridge.fmu.model",
     "ResetPolicy": "bridge.fmu.model",
     "SignalGroup": "bridge.fmu.signals",
 }
@@ -33,6 +34,7 @@ __all__ = [
     "DefaultExperiment",
     "Model",
     "ModelInfo",
+    "ModelState",
     "ResetPolicy",
     "SignalGroup",
     "Variable",

@@ -12,6 +12,7 @@ import logging
 import math
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
@@ -35,6 +36,17 @@ _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8
 # An FMU state and, for model exchange, the next time event it had announced (not part of the state).
 _Snapshot = tuple[ctypes.c_void_p, float | None]
+
+
+@dataclass
+class ModelState:
+    """A saved state of one :class:`Model` (``Model.save_state``): the FMU's own state, the step
+    index and, for model exchange, the next time event. Free it with ``Model.free_state``."""
+
+    handle: ctypes.c_void_p | None
+    step_index: int
+    terminated: bool
+    next_event_s: float | None
 
 
 class Model:
@@ -372,6 +384,37 @@ class Model:
             if snapshot is not None:
                 self._backend.free_state(snapshot[0])
         self._snapshots.clear()
+
+    # -- saved states (rollback) ---------------------------------------------------------------
+    def save_state(self) -> ModelState:
+        """The state now (FMU state, step index, time); needs ``can_restore`` (FMI 2.0/3.0 FMUs
+        with canGetAndSetFMUstate), else :class:`FmuError`. Free it with :meth:`free_state`."""
+        if not self.can_restore or not self._initialized:
+            why = "is not initialised" if self.can_restore else "cannot get and set its state"
+            raise FmuError(
+                f"{self.info.model_name}: cannot save the state: the FMU {why} "
+                f"(canGetAndSetFMUstate={self.can_restore}) [{self.info.path}]"
+            )
+        next_event_s = self._me.next_event_s if self._me is not None else None
+        return ModelState(self._backend.get_state(), self.step_index, self.terminated, next_event_s)
+
+    def restore_state(self, state: ModelState) -> None:
+        """Back to ``state`` (from :meth:`save_state` of this model, not yet freed)."""
+        if state.handle is None or self._closed:
+            raise FmuError(f"{self.info.model_name}: cannot restore a freed state or into a closed model")
+        self._backend.set_state(state.handle)
+        self.step_index, self.terminated = state.step_index, state.terminated
+        if self._failed_status < FATAL:
+            self._failed_status = 0
+        if self._me is not None:
+            self._me.restart(self.time_s)
+            self._me.next_event_s = state.next_event_s
+
+    def free_state(self, state: ModelState) -> None:
+        """Release ``state``'s memory in the FMU; safe to call twice."""
+        if state.handle is not None and not self._closed:
+            self._backend.free_state(state.handle)
+        state.handle = None
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, n: int = 1) -> bool:

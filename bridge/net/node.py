@@ -14,7 +14,9 @@ action again for the last step (same values, same client) gets the last outputs 
 retry); a different one is rejected as a ``conflict``; stale, early or out-of-order actions are
 rejected with a reason and counted, never stepped. Malformed payloads are counted and dropped
 while the node keeps serving. An FMU error answers with an ERROR frame carrying the FMU's
-message and ends the episode; the node stays up.
+message and ends the episode; the node stays up. An action may also save the FMU state before
+stepping, or restore the saved one and step again (fixed-point iteration of a system; see
+``bridge.net.node_state``).
 
 Health: a reset or step that outlives ``step_timeout_s`` is reported (``health: hung`` in
 ``info``, an ``unhealthy`` liveliness token, an ERROR frame flagged HUNG). In-process, a hung
@@ -35,6 +37,7 @@ import re
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -45,6 +48,7 @@ from bridge.experiment.config import Experiment, as_experiment
 from bridge.fmu.vocab import summary_of
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
+from bridge.net.node_state import SavedState
 from bridge.net.requests import BadRequest, RequestRules, check_empty, parse_reset
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import ZenohOptions, open_session, undeclare
@@ -113,6 +117,7 @@ class FmuNode:
         plant.bind(self.input_names, self.output_names)
         self.rules = RequestRules(exp, self.info.variables, self.input_names)
         self.lease = Lease(name)
+        self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
         self.health, self.health_detail = "ok", ""
         self._lock = threading.Lock()
@@ -213,6 +218,7 @@ class FmuNode:
         teardown.join(timeout=timeout_s)
         if locked:
             try:
+                self.saved.clear()
                 self.plant.close()
             finally:
                 self._lock.release()
@@ -241,6 +247,8 @@ class FmuNode:
                 raise TransportError(f"a {proto.KIND_NAMES[frame.kind]} frame on the actions key")
             if frame.sim_time_ns < 0:
                 raise TransportError(f"client id {frame.sim_time_ns} is negative")
+            if frame.flags & ~proto.ACTION_FLAGS:
+                raise TransportError(f"action flags {frame.flags:#x} are unknown")
         except TransportError as exc:
             self._malformed(str(exc))
             return
@@ -260,6 +268,8 @@ class FmuNode:
             return self._reject(frame, "out_of_range", reason)
         if self.health == "hung":
             return self._reject(frame, "unhealthy", self.health_detail)
+        if frame.flags and (reason := self.saved.check(frame.flags)) is not None:
+            return self._reject(frame, "state", reason)
         if not self._lock.acquire(timeout=self.step_timeout_s):
             return self._reject(frame, "busy", "the node is busy with a step or reset that has not returned")
         try:
@@ -277,7 +287,12 @@ class FmuNode:
             return self._reject(
                 frame, "stale", f"action for episode {frame.episode}; the node is in {self.episode}"
             )
-        if frame.step == self.step and self._last_frame:
+        if frame.flags & proto.RESTORE_STATE:
+            if not self._state(frame, self.saved.restore):
+                return None
+            self.step, self._ended, self._last_frame = frame.step - 1, False, b""
+            self.counters["restored"] += 1
+        elif frame.step == self.step and self._last_frame:
             if action != self._last_action:
                 return self._reject(
                     frame, "conflict", f"step {frame.step} was already taken with another action or client"
@@ -291,9 +306,22 @@ class FmuNode:
             )
         if self._ended:
             return self._reject(frame, "ended", "the episode is over: reset first")
+        if frame.flags & proto.SAVE_STATE and not self._state(frame, self.saved.save):
+            return None
         self._last_action = action
         self._advance(values)
         return None
+
+    def _state(self, frame: proto.Frame, change: Callable[[int, int], str | None]) -> bool:
+        """Save or restore the state before ``frame``'s step; False: refused or failed (answered)."""
+        try:
+            reason = change(frame.episode, frame.step)
+        except PlantError as exc:
+            self._fail(exc)
+            return False
+        if reason is not None:
+            self._reject(frame, "state", reason)
+        return reason is None
 
     def _advance(self, inputs: list[float] | None) -> None:
         plant = self.plant
@@ -417,6 +445,7 @@ class FmuNode:
         if not self._lock.acquire(timeout=self.step_timeout_s):
             raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned")
         try:
+            self.saved.clear()  # a state of the last episode (and of this FMU instance) is no use
             self.watchdog.begin(f"the reset of episode {episode}")
             try:
                 outputs = self.plant.reset(values, inputs)
@@ -513,6 +542,8 @@ class FmuNode:
             "health_detail": self.health_detail,
             "holder": self.lease.describe(),
             "isolated": self.isolated,
+            "can_save_state": self.saved.available,
+            "save_state_refusal": self.saved.refusal or "",
             "step_timeout_s": self.step_timeout_s,
             "counters": dict(self.counters),
             "model": _summary_without_paths(summary_of(self.info)),

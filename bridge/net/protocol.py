@@ -20,7 +20,10 @@ step, sim_time_ns) then either ``n`` float64 values (``<I`` count + ``n*8`` byte
 ERROR/REJECT, a UTF-8 message. One frame per sample: outputs of a step travel together with
 the step index and simulation time, so consumers can lock step, detect loss and record. An
 ACTION has no simulation time: its last header field carries the sender's client id (0:
-anonymous), which the node checks against the holder of its lease.
+anonymous), which the node checks against the holder of its lease. Its flags may ask the node
+to save its FMU state before stepping (SAVE_STATE) or to go back to that saved state and step
+again from there (RESTORE_STATE): a system's fixed-point iteration repeats a macro step this way
+without a round trip of its own (``bridge.net.node_state``).
 """
 
 from __future__ import annotations
@@ -43,6 +46,9 @@ KIND_NAMES = {OUTPUTS: "outputs", ACTION: "action", ERROR: "error", REJECT: "rej
 TERMINATED = 1  # the FMU requested termination at this step
 FAILED = 2  # the step failed (ERROR frames): the episode is over
 HUNG = 4  # (with FAILED) the FMU did not return within the node's step deadline
+SAVE_STATE = 8  # (ACTION) save the FMU state, then step
+RESTORE_STATE = 16  # (ACTION) back to the saved state (the step before this action), then step
+ACTION_FLAGS = SAVE_STATE | RESTORE_STATE
 
 MAX_REQUEST_BYTES = 64 * 1024  # a reset request larger than this is refused unread
 MAX_JSON_DEPTH = 8  # reset requests are flat: deeper nesting is refused before parsing

@@ -36,6 +36,26 @@ from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 _log = logging.getLogger(__name__)
 
 
+def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, Any]:
+    """The node's ``info`` reply; TransportError if no node of that name answers in ``timeout_s``."""
+    # A query sent before routes exist finds no queryable and returns at once: retry until the
+    # timeout, so a just-opened session or a node that is still starting is found.
+    deadline = time.monotonic() + timeout_s
+    while True:
+        remaining = deadline - time.monotonic()
+        for reply in session.get(keys.info, timeout=max(0.05, min(remaining, 1.0))):
+            if reply.ok is not None:
+                return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {keys.node!r}")
+        if remaining <= 0:
+            break
+        time.sleep(min(0.1, max(remaining, 0.0)))
+    raise TransportError(
+        f"no FMU node named {keys.node!r} answers on {keys.info} within {timeout_s:g} s; "
+        f"start one with `fmu-bridge node EXPERIMENT --name {keys.node}` and check the Zenoh endpoints "
+        "(`fmu-bridge nodes` lists the live ones)"
+    )
+
+
 class NodeClient:
     """Talks to one node: stamped actions out, the matching outputs frame back.
 
@@ -64,7 +84,7 @@ class NodeClient:
         self._deadline = 0.0
         self._frame: proto.Frame | None = None
         self.alive = True
-        self.description = self._query_info()
+        self.description = query_info(session, self.keys, timeout_s)
         self._declared = [
             session.liveliness().declare_token(self.keys.client(self.client_id)),
             session.declare_subscriber(self.keys.outputs, self._on_frame),
@@ -73,24 +93,6 @@ class NodeClient:
         self._pub = session.declare_publisher(self.keys.actions)
         self._declared.append(self._pub)
         self._n_inputs = len(self.description["input_names"])
-
-    def _query_info(self) -> dict[str, Any]:
-        # A query sent before routes exist finds no queryable and returns at once: retry until the
-        # timeout, so a just-opened session or a node that is still starting is found.
-        deadline = time.monotonic() + self.timeout_s
-        while True:
-            remaining = deadline - time.monotonic()
-            for reply in self._session.get(self.keys.info, timeout=max(0.05, min(remaining, 1.0))):
-                if reply.ok is not None:
-                    return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {self.name!r}")
-            if remaining <= 0:
-                break
-            time.sleep(min(0.1, max(remaining, 0.0)))
-        raise TransportError(
-            f"no FMU node named {self.name!r} answers on {self.keys.info} within {self.timeout_s:g} s; "
-            f"start one with `fmu-bridge node EXPERIMENT --name {self.name}` and check the Zenoh endpoints "
-            "(`fmu-bridge nodes` lists the live ones)"
-        )
 
     def _on_frame(self, sample: Any) -> None:
         try:
@@ -116,14 +118,17 @@ class NodeClient:
         else:
             self.alive = True
 
-    def send_action(self, plant: Plant, episode: int, step: int, inputs: Sequence[float]) -> None:
+    def send_action(
+        self, plant: Plant, episode: int, step: int, inputs: Sequence[float], flags: int = 0
+    ) -> None:
+        """Publish the action for ``step``; ``flags``: SAVE_STATE or RESTORE_STATE (rollback)."""
         if not self.alive:
             raise self._dead(plant)
         self._frame = None
         self._event.clear()
         self._want = (episode, step)
         self._deadline = time.monotonic() + self.timeout_s
-        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs))
+        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))
 
     def ready(self) -> bool:
         """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""

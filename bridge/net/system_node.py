@@ -10,7 +10,10 @@ reads. Both sides read the same system file, so they agree on the names; the cli
 bound inputs and outputs onto the node's lists by name and says so when they do not fit.
 
 A node answers in lockstep: ``send`` publishes the stamped inputs at once and ``receive``
-waits for the matching outputs, so Jacobi components in several nodes step in parallel.
+waits for the matching outputs, so Jacobi components in several nodes step in parallel. For
+fixed-point iteration the master saves and restores components: a node component marks its
+next action SAVE_STATE or RESTORE_STATE (``bridge.net.node_state``) and rolls its own step
+stamp back, so a repeated macro step costs no round trip more than the first.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError
 from bridge.experiment.config import Experiment, parse_experiment
-from bridge.fmu.vocab import info_from_summary
+from bridge.fmu.vocab import ModelInfo, info_from_summary
 from bridge.net import protocol as proto
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.description import Component, SystemDescription, from_experiment, split_name
@@ -183,6 +186,7 @@ class NodeComponent(Plant):
         self._out_index: list[int] = []
         self._time_s = start_time_s
         self._where = where
+        self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
@@ -207,7 +211,7 @@ class NodeComponent(Plant):
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1
-        self.sample, self.terminated = 0, False
+        self.sample, self.terminated, self._flags = 0, False, 0
         merged = {**self.component.parameters, **values}
         for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
             self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
@@ -221,12 +225,13 @@ class NodeComponent(Plant):
             self._u[self._in_index] = inputs
 
     def send(self, inputs: Sequence[float] | None) -> None:
+        flags, self._flags = self._flags, 0
         if self._all_inputs and inputs is not None:
             self._u[:] = inputs
-            self.client.send_action(self, self.episode, self.sample + 1, inputs)
+            self.client.send_action(self, self.episode, self.sample + 1, inputs, flags)
             return
         self._write(inputs)
-        self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist())
+        self.client.send_action(self, self.episode, self.sample + 1, self._u.tolist(), flags)
 
     def receive(self) -> FloatArray:
         frame = self.client.wait(self)
@@ -239,6 +244,34 @@ class NodeComponent(Plant):
             )
         self.terminated = frame.terminated
         return frame.values if self._all_outputs else frame.values[self._out_index]
+
+    # -- saved states (rollback): carried by the next action -----------------------------------------
+    @property
+    def can_save(self) -> bool:
+        """Whether the node can save and restore its FMU state (its ``info`` says so)."""
+        return bool(self.client.description.get("can_save_state", False))
+
+    @property
+    def save_refusal(self) -> str:
+        """Why the node cannot save its state ("" if it can)."""
+        if self.can_save:
+            return ""
+        return str(self.client.description.get("save_state_refusal") or "the node is too old to save states")
+
+    def save(self) -> tuple[int, bool, float, FloatArray]:
+        """The node saves its state with the next action (SAVE_STATE); this keeps the step stamp."""
+        self._flags = proto.SAVE_STATE
+        return self.sample, self.terminated, self._time_s, self._u.copy()
+
+    def restore(self, saved: tuple[int, bool, float, FloatArray]) -> None:
+        """The next action goes back to the saved state first (RESTORE_STATE), stamped as then."""
+        self.sample, self.terminated, self._time_s, u = saved
+        self._u[:] = u
+        self._flags = proto.RESTORE_STATE
+
+    def discard(self, saved: tuple[int, bool, float, FloatArray]) -> None:
+        """Nothing to free here: the node keeps one state, replaced by the next save."""
+        self._flags = 0
 
     def provenance(self) -> dict[str, str]:
         d = self.client.description
@@ -292,21 +325,41 @@ class NodeComponents:
     ) -> None:
         self._options, self._session, self._own = options, session, False
         self.prefix, self.timeout_s = prefix, timeout_s
+        self._infos: dict[str, dict[str, Any]] = {}
 
-    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
+    def _open(self) -> Any:
         if self._session is None:
             from bridge.net.transport import open_session
 
             self._session, self._own = open_session(self._options), True
+        return self._session
+
+    def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
         return NodeComponent(
             component,
             step_size_s,
             start_time_s,
-            session=self._session,
+            session=self._open(),
             prefix=self.prefix,
             timeout_s=self.timeout_s,
             where=where,
         )
+
+    def describe(self, component: Component) -> ModelInfo:
+        """The component's model as its node reports it (the FMU need not be on this machine)."""
+        return info_from_summary(self._info(component)["model"])
+
+    def checksum(self, component: Component) -> str:
+        """The SHA-256 of the FMU the component's node serves."""
+        return str(self._info(component).get("fmu_sha256", ""))
+
+    def _info(self, component: Component) -> dict[str, Any]:
+        from bridge.net.remote import query_info
+
+        node = component.node or component.name
+        if node not in self._infos:
+            self._infos[node] = query_info(self._open(), proto.Keys(self.prefix, node), self.timeout_s)
+        return self._infos[node]
 
     def close(self) -> None:
         if self._own and self._session is not None:

@@ -4,11 +4,14 @@
 
 from __future__ import annotations
 
-import hashlib
+from typing import TYPE_CHECKING
 
 from bridge.experiment.config import Experiment
 from bridge.experiment.system import is_system_file
 from bridge.fmu.vocab import ModelInfo
+
+if TYPE_CHECKING:
+    from bridge.plant.system.plant import RemoteComponents
 
 
 def is_system(experiment: Experiment) -> bool:
@@ -16,29 +19,31 @@ def is_system(experiment: Experiment) -> bool:
     return experiment.system is not None or is_system_file(experiment.model.fmu)
 
 
-def model_info_for(experiment: Experiment) -> ModelInfo:
+def model_info_for(experiment: Experiment, remote: RemoteComponents | None = None) -> ModelInfo:
     """What the experiment's plant serves (the FMU's variables, or a system's ``component.variable``
-    ones) without starting it."""
+    ones) without starting it; ``remote`` describes a system's components whose FMU is only on
+    their node's machine (``bridge.env.plants.model_info_for`` passes the network's)."""
     if is_system(experiment):
         from bridge.plant.system.plant import describe_system
 
-        return describe_system(experiment)
+        return describe_system(experiment, remote)
     from bridge.experiment.validate import resolve_fmu
     from bridge.fmu import read_model_info
 
     return read_model_info(resolve_fmu(experiment))
 
 
-def model_fingerprint(experiment: Experiment) -> tuple[str, str]:
-    """The model file and its SHA-256; for a system, its description and the hash of its FMUs' hashes."""
+def model_fingerprint(experiment: Experiment, remote: RemoteComponents | None = None) -> tuple[str, str]:
+    """The model file and its SHA-256; for a system, its description and the hash of its FMUs'
+    hashes (a node's FMU that is not here: the hash its node reports, through ``remote``)."""
     from bridge.fmu import sha256
 
     if is_system(experiment):
         from bridge.plant.system.description import from_experiment
+        from bridge.plant.system.plant import system_checksum
 
-        system = from_experiment(experiment)
-        joined = "\n".join(f"{n}:{sha256(c.fmu)}" for n, c in system.components.items())
-        return str(system.source or ""), hashlib.sha256(joined.encode()).hexdigest()
+        source = from_experiment(experiment).source
+        return str(source or ""), system_checksum(experiment, remote)
     from bridge.experiment.validate import resolve_fmu
 
     fmu = resolve_fmu(experiment)

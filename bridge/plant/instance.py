@@ -2,26 +2,37 @@
 
 What ``LocalFmuPlant`` (an experiment's FMU) and a system's ``FmuComponent`` share: writing the
 inputs, advancing ``n`` FMU steps a sample, reading the outputs, and turning FMU errors into the
-plant's :class:`StepError`. Subclasses build ``model``, ``info``, ``timing``, ``name`` and
-``fmu_path``.
+plant's :class:`StepError`, and saving and restoring the state (a system's fixed-point
+iteration rolls components back to the start of a macro step, here or in a node). Subclasses
+build ``model``, ``info``, ``timing``, ``name`` and ``fmu_path``.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from bridge.errors import BridgeError, FmuError, StepError
-from bridge.fmu import Model, sha256
+from bridge.fmu import Model, ModelState, sha256
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.native_sample import NativeSample
 
 _EMPTY = np.zeros(0)
+
+
+@dataclass(frozen=True)
+class SavedState:
+    """What :meth:`FmuInstancePlant.save` returns."""
+
+    model: ModelState
+    sample: int
+    terminated: bool
 
 
 class FmuInstancePlant(Plant):
@@ -121,6 +132,31 @@ class FmuInstancePlant(Plant):
 
     def set_values(self, values: Mapping[str, Any]) -> None:
         self.model.set(values)
+
+    # -- saved states (rollback) -------------------------------------------------------------------
+    @property
+    def can_save(self) -> bool:
+        """Whether :meth:`save` works: the FMU can get and set its state (FMI 2.0/3.0)."""
+        return self.model.can_restore
+
+    def save(self) -> SavedState:
+        """The state now: the model's, the sample index and the terminated flag."""
+        try:
+            return SavedState(self.model.save_state(), self.sample, self.terminated)
+        except FmuError as exc:
+            raise self._failed(exc) from exc
+
+    def restore(self, saved: SavedState) -> None:
+        """Back to ``saved`` (kept: restore it again, or :meth:`discard` it)."""
+        try:
+            self.model.restore_state(saved.model)
+        except FmuError as exc:
+            raise self._failed(exc) from exc
+        self.sample, self.terminated = saved.sample, saved.terminated
+
+    def discard(self, saved: SavedState) -> None:
+        """Free ``saved``."""
+        self.model.free_state(saved.model)
 
     def provenance(self) -> dict[str, str]:
         return {"fmu": str(self.fmu_path), "fmu_sha256": sha256(self.fmu_path), "node": ""}

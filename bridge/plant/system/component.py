@@ -2,7 +2,7 @@
 
 Like :class:`bridge.plant.local.LocalFmuPlant` but built from a component of a system rather than
 an experiment: a macro step of ``H`` is ``n`` FMU steps of the component's own step size ``h``
-(multi-rate, inputs held), and the state can be saved and restored (fixed-point iteration).
+(multi-rate, inputs held); its state is saved and restored as :class:`FmuInstancePlant` does.
 """
 
 from __future__ import annotations
@@ -55,20 +55,3 @@ class FmuComponent(FmuInstancePlant):
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         return {**self.component.parameters, **values}
-
-    # -- state for fixed-point iteration (the FMU's own get/set state) ------------------------------
-    @property
-    def can_save(self) -> bool:
-        return self.model.can_restore
-
-    def save(self) -> tuple[Any, int, int, bool]:
-        backend = self.model._backend  # the FMU state functions are not part of Model's API
-        return backend.get_state(), self.model.step_index, self.sample, self.terminated
-
-    def restore(self, saved: tuple[Any, int, int, bool]) -> None:
-        state, self.model.step_index, self.sample, self.terminated = saved
-        self.model._backend.set_state(state)
-        self.model.terminated = self.terminated
-
-    def discard(self, saved: tuple[Any, int, int, bool]) -> None:
-        self.model._backend.free_state(saved[0])

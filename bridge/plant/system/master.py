@@ -13,8 +13,10 @@ external inputs and all the outputs anyone reads. A macro step from ``t`` to ``t
 With ``max_iterations > 1`` each macro step is repeated, the components rolled back to ``t``,
 with the connected inputs set to the outputs at ``t + H`` of the previous pass, until those
 inputs change by at most ``tolerance`` (relative): the coupling becomes implicit, which solves
-algebraic loops. Initialisation resets the components in :func:`graph.init_order` so that
-connected values reach each component before it starts.
+algebraic loops. Components in this process save and restore their FMU state directly;
+components in nodes carry the save and the restore on their next action (no extra round trip).
+Initialisation resets the components in :func:`graph.init_order` so that connected values reach
+each component before it starts.
 """
 
 from __future__ import annotations
@@ -58,13 +60,7 @@ class Master:
         self.order, self.init_order = list(order), list(init_order)
         self.iterations = system.max_iterations
         if self.iterations > 1:
-            cannot = [n for n, p in plants.items() if not getattr(p, "can_save", False)]
-            if cannot:
-                raise ConfigError(
-                    f"system.iteration needs components that can save and restore their state "
-                    f"(rollback); {cannot} cannot (remote, or the FMU lacks canGetAndSetFMUstate)"
-                    f"{system.where}"
-                )
+            _check_rollback(system, plants)
         self.inputs = {n: np.array([0.0] * len(p.input_names)) for n, p in plants.items()}
         self.outputs = {n: np.zeros(len(p.output_names)) for n, p in plants.items()}
         self._into: dict[str, list[Link]] = {n: [] for n in plants}
@@ -104,8 +100,11 @@ class Master:
         if self.iterations <= 1:
             self._pass()
             return
-        saved = {n: p.save() for n, p in self.plants.items()}  # type: ignore[attr-defined]
+        plants = self.plants
+        saved: dict[str, Any] = {}
         try:
+            for n, p in plants.items():
+                saved[n] = p.save()  # type: ignore[attr-defined]
             for k in range(1, self.iterations + 1):
                 used = self._pass()
                 self.last_iterations = k
@@ -115,11 +114,11 @@ class Master:
                     self.unconverged_steps += 1
                     _log.debug("macro step did not converge in %d iterations", k)
                     return
-                for n, p in self.plants.items():  # back to t; the outputs stay those at t + H
+                for n, p in plants.items():  # back to t; the outputs stay those at t + H
                     p.restore(saved[n])  # type: ignore[attr-defined]
         finally:
-            for n, p in self.plants.items():
-                p.discard(saved[n])  # type: ignore[attr-defined]
+            for n, state in saved.items():
+                plants[n].discard(state)  # type: ignore[attr-defined]
 
     def _pass(self) -> dict[str, FloatArray]:
         """Step every component once; the inputs each one was given (only when iterating)."""
@@ -149,3 +148,18 @@ class Master:
         return all(
             bool(np.all(np.abs(after[n] - before[n]) <= tol * (1.0 + np.abs(after[n])))) for n in before
         )
+
+
+def _check_rollback(system: SystemDescription, plants: Mapping[str, Plant]) -> None:
+    """Iteration rolls every component back: each must save and restore its state."""
+    cannot = [p for p in plants.values() if not getattr(p, "can_save", False)]
+    if cannot:
+        why = "; ".join(f"{p.name} cannot: {getattr(p, 'save_refusal', '') or _FMU_CANNOT}" for p in cannot)
+        raise ConfigError(
+            f"system.iteration: fixed-point iteration rolls every component back to the start of the "
+            f"macro step, and {why}; remove system.iteration, or use FMUs that can save their state "
+            f"(FMI 2.0/3.0 with canGetAndSetFMUstate){system.where}"
+        )
+
+
+_FMU_CANNOT = "the FMU cannot get and set its state (FMI 1.0, or canGetAndSetFMUstate is false)"

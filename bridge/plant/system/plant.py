@@ -9,6 +9,7 @@ one), so the same seed replays the same trajectory.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any, Protocol
@@ -40,6 +41,12 @@ class RemoteComponents(Protocol):
     def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
         """The component's plant: ``step`` advances one macro step of ``step_size_s``."""
 
+    def describe(self, component: Component) -> ModelInfo:
+        """The component's model as its node reports it (its FMU need not be here)."""
+
+    def checksum(self, component: Component) -> str:
+        """The SHA-256 of the FMU the component's node serves."""
+
     def close(self) -> None:
         """Close the session the components share (if this object opened it)."""
 
@@ -61,11 +68,7 @@ class SystemPlant(Plant):
         self.plants: dict[str, Plant] = dict(plants or {})
         self._remote = remote
         try:
-            # a node's FMU need not exist here: its variables then come from the node
-            for name, component in system.components.items():
-                if component.node and not component.fmu.is_file() and name not in self.plants:
-                    self.plants[name] = self._component(component)
-            self._check(exp, system)
+            self._check(exp, system)  # a node's FMU need not be here: the node describes it
             for name, component in system.components.items():
                 if name not in self.plants:
                     self.plants[name] = self._component(component)
@@ -76,10 +79,8 @@ class SystemPlant(Plant):
         self._pending: Sequence[float] | None = None
 
     def _check(self, exp: Experiment, system: SystemDescription) -> None:
-        from bridge.fmu import read_model_info
-
         self.infos = {
-            n: self.plants[n].info if n in self.plants else read_model_info(c.fmu)
+            n: self.plants[n].info if n in self.plants else component_info(c, self._remote, system.where)
             for n, c in system.components.items()
         }
         self.warnings = check_system(system, self.infos)
@@ -239,14 +240,44 @@ class SystemPlant(Plant):
             self._remote = None
 
 
-def describe_system(experiment: Experiment) -> ModelInfo:
-    """The system of ``experiment`` as one model (``component.variable``), FMUs read, none started."""
-    from bridge.fmu import read_model_info
-
+def describe_system(experiment: Experiment, remote: RemoteComponents | None = None) -> ModelInfo:
+    """The system of ``experiment`` as one model (``component.variable``), none started: each
+    FMU read here, or described by its node (``remote``) when the component runs in a node and
+    its FMU is not on this machine."""
     system = from_experiment(experiment)
-    infos = {n: read_model_info(c.fmu) for n, c in system.components.items()}
+    infos = {n: component_info(c, remote, system.where) for n, c in system.components.items()}
     check_system(system, infos)  # connections and parameters, as the plant checks them
     return system_info(experiment, system, infos, system_timing(experiment, system))
+
+
+def component_info(component: Component, remote: RemoteComponents | None, where: str) -> ModelInfo:
+    """The component's model: its FMU's description, else (a node's component) its node's."""
+    from bridge.fmu import read_model_info
+
+    if component.node is None or component.fmu.exists():
+        return read_model_info(component.fmu)
+    if remote is None:
+        raise ConfigError(
+            f"system.components.{component.name}.fmu: {component.fmu} is not on this machine; the "
+            f"component runs in node {component.node!r}, which can describe it: use the env layer "
+            f"(bridge.env.plants.model_info_for), which asks the node{where}"
+        )
+    return remote.describe(component)
+
+
+def system_checksum(experiment: Experiment, remote: RemoteComponents | None = None) -> str:
+    """The SHA-256 over the components' FMU hashes (a node's FMU: the hash its node reports)."""
+    from bridge.fmu import sha256
+
+    system = from_experiment(experiment)
+    hashes = []
+    for name, c in system.components.items():
+        if c.node is None or c.fmu.exists():
+            hashes.append(f"{name}:{sha256(c.fmu)}")
+        else:
+            component_info(c, remote, system.where)  # a clear error without a node to ask
+            hashes.append(f"{name}:{remote.checksum(c)}")  # type: ignore[union-attr]
+    return hashlib.sha256("\n".join(hashes).encode()).hexdigest()
 
 
 def _add(names: dict[str, list[str]], end: Endpoint) -> None:
