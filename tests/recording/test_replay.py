@@ -160,7 +160,7 @@ def screenshot(binary: str, source: Path, png: Path) -> Any:
     return np.asarray(Image.open(png).convert("RGB")).astype(np.int16)
 
 
-def shot_until(binary: str, source: Path, png: Path, drawn: Any, attempts: int = 3) -> Any:
+def shot_until(binary: str, source: Path, png: Path, drawn: Any, attempts: int = 8) -> Any:
     """The one-shot CLI screenshot can fire before lazily loaded chunks are drawn (seen on a busy
     machine): take it again, a few times at most, until the data are in the picture."""
     for _ in range(attempts):
@@ -179,6 +179,7 @@ def coloured_pixels(image: Any) -> int:
 
 
 @pytest.mark.integration
+@pytest.mark.timeout(1800)  # up to 8 viewer launches on a busy machine
 def test_headless_screenshots_show_plotted_data_not_a_blank_canvas(recording: Path, tmp_path: Path) -> None:
     import rerun as rr
 
