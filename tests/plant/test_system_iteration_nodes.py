@@ -45,18 +45,6 @@ def iterated(directory: Path, name: str, nodes: dict[str, str], algorithm: str, 
 
 
 @pytest.fixture(scope="module")
-def net() -> Iterator[Loopback]:
-    from bridge.net.transport import ZenohOptions, open_session
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
-    try:
-        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
-    finally:
-        session.close()
-
-
-@pytest.fixture(scope="module")
 def served(net: Loopback, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     """Every component of the example system in its own node (one serve process)."""
     directory = tmp_path_factory.mktemp("iteration_nodes")

@@ -24,7 +24,7 @@ from bridge.errors import ConfigError, PlantDied
 from bridge.experiment.config import load_experiment
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
-from tests.conftest import Loopback, _wait_for_line, _wait_for_node, free_port
+from tests.conftest import Loopback, _wait_for_line, _wait_for_node
 
 pytestmark = pytest.mark.integration
 EXAMPLE = Path(__file__).parents[2] / "examples" / "dcmotor_system.yaml"
@@ -66,18 +66,6 @@ def serve(file: Path, net: Loopback, *components: str) -> Iterator[subprocess.Po
                 process.wait(timeout=20)
         if process.stdout is not None:
             process.stdout.close()
-
-
-@pytest.fixture(scope="module")
-def net() -> Iterator[Loopback]:
-    from bridge.net.transport import ZenohOptions, open_session
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
-    try:
-        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
-    finally:
-        session.close()
 
 
 @pytest.fixture(scope="module")

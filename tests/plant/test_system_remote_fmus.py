@@ -9,7 +9,6 @@ fixed-point iteration, and an agent trains on it.
 from __future__ import annotations
 
 import shutil
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -24,7 +23,7 @@ from bridge.models import example_fmu
 from bridge.net.system_node import NodeComponents
 from bridge.plant.factory import model_fingerprint, model_info_for
 from bridge.plant.system.plant import describe_system
-from tests.conftest import Loopback, free_port
+from tests.conftest import Loopback
 from tests.plant.test_system_nodes import NODES, remote_env, serve, system_file, trajectory
 
 pytestmark = pytest.mark.integration
@@ -40,18 +39,6 @@ def with_copies(path: Path, iteration: bool = False) -> Path:
         data["system"]["iteration"] = {"max_iterations": 6, "tolerance": 1e-13}
     path.write_text(yaml.safe_dump(data))
     return path
-
-
-@pytest.fixture(scope="module")
-def net() -> Iterator[Loopback]:
-    from bridge.net.transport import ZenohOptions, open_session
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
-    try:
-        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
-    finally:
-        session.close()
 
 
 @pytest.fixture(scope="module")
