@@ -22,6 +22,7 @@ from typing import Any
 
 from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
+from bridge.net.remote import query_info
 from bridge.net.ros2 import cdr
 from bridge.recording import meta
 from bridge.recording.writer import McapWriter
@@ -29,22 +30,6 @@ from bridge.recording.writer import McapWriter
 _log = logging.getLogger(__name__)
 TOPICS = ("outputs", "actions")
 _MAX_STAMP_NS = (1 << 31) * 1_000_000_000  # builtin_interfaces/Time holds int32 seconds
-
-
-def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, Any]:
-    """The node's info reply, retried until ``timeout_s`` (routes may still be forming)."""
-    deadline = time.monotonic() + timeout_s
-    while True:
-        remaining = deadline - time.monotonic()
-        for reply in session.get(keys.info, timeout=max(0.05, min(remaining, 1.0))):
-            if reply.ok is not None:
-                return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {keys.node!r}")
-        if remaining <= 0:
-            raise TransportError(
-                f"no FMU node named {keys.node!r} answers on {keys.info} within {timeout_s:g} s; "
-                "check the name (`fmu-bridge nodes` lists the live ones), --prefix and the Zenoh endpoints"
-            )
-        time.sleep(0.1)
 
 
 @dataclass
