@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import Model, read_model_info
+from bridge.fmu import read_model_info
+from bridge.plant.experiment_model import experiment_model
 from bridge.plant.instance import FmuInstancePlant
 
 
@@ -27,16 +28,7 @@ class LocalFmuPlant(FmuInstancePlant):
         self.info = check_experiment(exp, read_model_info(self.fmu_path))
         self.timing = t = timing(exp, self.info)
         self.name = f"FMU {self.fmu_path.name} (in-process)"
-        self.model = Model(
-            self.fmu_path,
-            step_size_s=t.step_size_s,
-            start_time_s=t.start_time_s,
-            interface=exp.model.interface,
-            reset_policy=exp.model.reset_policy,
-            tolerance=exp.model.tolerance,
-            solver=exp.model.solver,
-            solver_substeps=exp.model.solver_substeps,
-        )
+        self.model = experiment_model(exp, self.fmu_path, t)
 
     def current_inputs(self) -> list[float]:
         """The input values the FMU holds now (in ``input_names`` order)."""

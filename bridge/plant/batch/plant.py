@@ -28,6 +28,7 @@ from bridge.fmu import Model, read_model_info
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT
 from bridge.plant.batch import native as nat
+from bridge.plant.experiment_model import experiment_model
 
 _log = logging.getLogger(__name__)
 FloatArray = npt.NDArray[np.float64]
@@ -86,17 +87,8 @@ class BatchPlant:
         self._comps = np.zeros(n, dtype=np.uintp)
 
     def _open(self, i: int) -> Model:
-        exp, t = self.experiment, self.timing
-        return Model(
-            self.fmu_path,
-            step_size_s=t.step_size_s,
-            start_time_s=t.start_time_s,
-            interface=exp.model.interface,
-            reset_policy=exp.model.reset_policy,
-            tolerance=exp.model.tolerance,
-            solver=exp.model.solver,
-            solver_substeps=exp.model.solver_substeps,
-            instance_name=f"{self.info.model_name}#batch{i}",
+        return experiment_model(
+            self.experiment, self.fmu_path, self.timing, f"{self.info.model_name}#batch{i}"
         )
 
     # -- binding ----------------------------------------------------------------------------------
