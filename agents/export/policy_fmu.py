@@ -66,39 +66,27 @@ def policy_spec(parts: PolicyParts, inputs: list[str], directory: Path, step_s: 
     """The FMU's variables: one input per observation element or signal, one output per action input."""
     known = units()
     variables: list[Variable] = [TIME]
+
+    def port(name: str, causality: str, ident: str, description: str) -> Variable:
+        unit = parts.units.get(name) or None
+        return _Named(
+            vr=len(variables),
+            name=name,
+            type="Float64",
+            causality=causality,
+            variability="continuous",
+            initial=None if causality == "input" else "calculated",
+            description=description,
+            start=0.0 if causality == "input" else None,
+            unit=unit if unit in known else None,
+            interfaces=("cs",),
+            c_ident=ident,
+        )
+
     for k, name in enumerate(inputs):
-        unit = parts.units.get(name) or None
-        variables.append(
-            _Named(
-                vr=len(variables),
-                name=name,
-                type="Float64",
-                causality="input",
-                variability="continuous",
-                initial=None,
-                description=f"observation {name}",
-                start=0.0,
-                unit=unit if unit in known else None,
-                interfaces=("cs",),
-                c_ident=f"in_{k}",
-            )
-        )
+        variables.append(port(name, "input", f"in_{k}", f"observation {name}"))
     for k, name in enumerate(parts.input_names):
-        unit = parts.units.get(name) or None
-        variables.append(
-            _Named(
-                vr=len(variables),
-                name=name,
-                type="Float64",
-                causality="output",
-                variability="continuous",
-                initial="calculated",
-                description=f"action: plant input {name}",
-                unit=unit if unit in known else None,
-                interfaces=("cs",),
-                c_ident=f"out_{k}",
-            )
-        )
+        variables.append(port(name, "output", f"out_{k}", f"action: plant input {name}"))
     return Spec(
         name=directory.name,
         directory=directory,
