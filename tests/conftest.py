@@ -207,15 +207,20 @@ def node_process(
         _wait_for_node(net, name, timeout_s=10)
         yield process
     finally:
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=10)
-        if process.stdout is not None:
-            process.stdout.close()
+        stop_process(process, timeout_s=10)
+
+
+def stop_process(process: subprocess.Popen[str], timeout_s: float) -> None:
+    """SIGTERM, SIGKILL if it does not exit within ``timeout_s``, reaped, its pipe closed."""
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(timeout=timeout_s)
+    if process.stdout is not None:
+        process.stdout.close()
 
 
 def _wait_for_line(process: subprocess.Popen[str], text: str, timeout_s: float) -> None:

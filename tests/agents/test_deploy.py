@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback, node_process
 
 from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
 from agents.deploy_io import AgentNode
@@ -21,6 +20,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
+from tests.conftest import Loopback, node_process
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # training takes minutes when busy
 CARTPOLE = example_experiment("cartpole_balance")

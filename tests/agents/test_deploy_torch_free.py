@@ -25,11 +25,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback, node_process
 
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
+from tests.conftest import Loopback, node_process
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # training takes minutes when busy
 CARTPOLE = example_experiment("cartpole_balance")

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import _cache_dir, example_fmu
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
 from bridge.experiment.config import load_experiment
+from tests.conftest import _cache_dir, example_fmu
 
 pytestmark = pytest.mark.slow
 runner = CliRunner()

@@ -21,7 +21,6 @@ from typing import Any
 
 import pytest
 import yaml
-from conftest import check_with_model
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
@@ -30,6 +29,7 @@ from bridge.experiment.config import MAX_SAMPLES, Experiment, load_experiment
 from bridge.experiment.examples import example_experiment, example_names
 from bridge.experiment.validate import check_experiment
 from bridge.fmu.vocab import ModelInfo
+from tests.conftest import check_with_model
 
 MUTANTS_PER_EXAMPLE = 1000
 CLI_SAMPLE = 5  # accepted and as many rejected mutants per example also go through `fmu-bridge check`

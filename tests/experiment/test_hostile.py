@@ -12,12 +12,12 @@ from pathlib import Path
 
 import pytest
 import yaml
-from conftest import check_with_model
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import MAX_SAMPLES, load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.experiment.yaml_text import MAX_DEPTH, parse_yaml
+from tests.conftest import check_with_model
 
 CARTPOLE = example_experiment("cartpole_balance")
 MOTOR = example_experiment("dcmotor_tracking")

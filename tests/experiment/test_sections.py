@@ -10,7 +10,6 @@ from typing import Any
 
 import pytest
 import yaml
-from conftest import check_with_model
 
 from agents.evaluate import baseline_settings, metric_spec
 from agents.policies import PidSpec
@@ -20,6 +19,7 @@ from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.experiment.sections import PID_KEYS, RosSection
 from bridge.net.ros2.view import RosViewSettings, settings_from
+from tests.conftest import check_with_model
 
 MOTOR = example_experiment("dcmotor_tracking")
 CARTPOLE = example_experiment("cartpole_balance")

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import example_fmu
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 from typer.testing import CliRunner
@@ -23,6 +22,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import VariableError
 from bridge.experiment.init import q
 from bridge.fmu import Model, read_model_info
+from tests.conftest import example_fmu
 
 STEP_S = 0.1
 

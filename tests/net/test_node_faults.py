@@ -9,7 +9,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback, node_process
 
 from bridge.env import RemoteFmuEnv, RemoteVecEnv
 from bridge.env.fmu_env import FmuEnv
@@ -17,6 +16,7 @@ from bridge.errors import PlantDied, StepTimeout, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
+from tests.conftest import Loopback, node_process
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")

@@ -23,7 +23,6 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from conftest import Loopback, example_fmu, free_port, node_process
 from rosbags.highlevel import AnyReader
 from typer.testing import CliRunner
 
@@ -33,6 +32,7 @@ from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.init import starting_config
 from bridge.recording.env_recorder import RecordMcap
+from tests.conftest import Loopback, example_fmu, free_port, node_process
 
 pytestmark = pytest.mark.integration
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}

@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback, node_process
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -24,6 +23,7 @@ from bridge.experiment.config import parse_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes, list_nodes
+from tests.conftest import Loopback, node_process
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")

@@ -10,11 +10,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback, node_process
 from rosbags.typesys import Stores, get_typestore
 
 from bridge.env import RemoteFmuEnv
 from bridge.experiment.examples import example_experiment
+from tests.conftest import Loopback, node_process
 
 pytestmark = pytest.mark.integration
 JAZZY = get_typestore(Stores.ROS2_JAZZY)

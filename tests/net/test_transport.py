@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import free_port
 
 from bridge.env import RemoteFmuEnv
 from bridge.errors import TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net.transport import ZenohOptions, open_session
+from tests.conftest import free_port
 
 pytestmark = pytest.mark.integration
 CONFIGS = Path(__file__).resolve().parents[2] / "launch_scripts" / "zenoh"

@@ -8,11 +8,11 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import example_fmu
 from ssp_files import ssd_text, write_ssp
 
 from bridge.experiment.config import parse_experiment
 from bridge.plant.system.plant import SystemPlant
+from tests.conftest import example_fmu
 
 MOTOR = {"J": 0.002, "voltage": 12.0}
 LOAD = {"N": 5.0, "k": 50.0, "d": 0.5, "J": 0.05}

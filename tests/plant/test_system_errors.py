@@ -8,12 +8,12 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import example_fmu
 from ssp_files import ssd_text, write_ssp
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import parse_experiment
 from bridge.plant.system.plant import SystemPlant
+from tests.conftest import example_fmu
 
 
 def experiment(tmp_path: Path, connections: list[str], **extra: Any) -> Any:

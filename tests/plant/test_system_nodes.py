@@ -24,7 +24,7 @@ from bridge.errors import ConfigError, PlantDied
 from bridge.experiment.config import load_experiment
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
-from tests.conftest import Loopback, _wait_for_line, _wait_for_node
+from tests.conftest import Loopback, _wait_for_line, _wait_for_node, stop_process
 
 pytestmark = pytest.mark.integration
 EXAMPLE = Path(__file__).parents[2] / "examples" / "dcmotor_system.yaml"
@@ -57,15 +57,7 @@ def serve(file: Path, net: Loopback, *components: str) -> Iterator[subprocess.Po
             _wait_for_node(net, data[name]["node"], timeout_s=30)
         yield process
     finally:
-        if process.poll() is None:
-            process.terminate()
-            try:
-                process.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait(timeout=20)
-        if process.stdout is not None:
-            process.stdout.close()
+        stop_process(process, timeout_s=20)
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,6 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
-from conftest import Loopback, node_process
 from mcap.reader import make_reader
 from mcap.records import Chunk, MessageIndex
 from mcap.stream_reader import StreamReader
@@ -38,6 +37,7 @@ from bridge.recording.env_recorder import RecordMcap, record_env
 from bridge.recording.export import columns, export_csv, export_parquet
 from bridge.recording.reader import read_recording, recover
 from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
+from tests.conftest import Loopback, node_process
 
 CONTINUOUS = example_experiment("cartpole_continuous")
 DISCRETE = example_experiment("cartpole_balance")

@@ -25,7 +25,6 @@ from pathlib import Path
 
 import pytest
 import zstandard
-from conftest import Loopback, node_process
 from typer.testing import CliRunner
 
 from bridge.cli.main import _load_plugins, app
@@ -39,6 +38,7 @@ from bridge.recording.env_recorder import record_env
 from bridge.recording.export import describe, export_csv
 from bridge.recording.reader import read_recording, recover_file
 from bridge.recording.writer import McapWriter
+from tests.conftest import Loopback, node_process
 
 ROOT = Path(__file__).resolve().parents[2]
 COUNTS = ROOT / "docs" / "reliability" / "recording_fuzz.json"

@@ -15,7 +15,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from conftest import Loopback
 from typer.testing import CliRunner
 
 from bridge.cli.main import _load_plugins, app
@@ -27,6 +26,7 @@ from bridge.recording.env_recorder import RecordMcap
 from bridge.recording.export import columns
 from bridge.recording.reader import read_recording
 from bridge.recording.writer import McapWriter
+from tests.conftest import Loopback
 
 rr_chunk = pytest.importorskip(
     "rerun.chunk", reason="rerun-sdk is not installed (pip install 'fmu-bridge[viz]')"
