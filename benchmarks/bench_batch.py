@@ -21,7 +21,8 @@ Run: python benchmarks/bench_batch.py [--n 256] [--repeats 5] [--ppo-timesteps 8
    one torch thread).
 4. Model exchange vs co-simulation per sample on the same model (``Model``: write inputs, advance,
    read outputs): the native fixed-step RK4 loop with as many substeps as the CS variant's own RK4
-   (so both evaluate the equations equally often), and CVode.
+   (so both evaluate the equations equally often), and CVode; then the batch env at N envs over
+   model exchange (the native batch loop, and the per-instance Python loop) vs co-simulation.
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from common import table
 
 from bridge.env.batch import BatchVecEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.experiment.config import Experiment, load_experiment
+from bridge.experiment.config import Experiment, load_experiment, parse_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.fmu import Model
 from bridge.models import example_fmu
@@ -258,6 +259,38 @@ def me_vs_cs(repeats: int) -> list[tuple[str, ...]]:
     return rows
 
 
+def me_batch_env(n: int, repeats: int) -> list[tuple[str, ...]]:
+    """The batch env over model exchange (RK4 with the CS variant's substeps), the native batch
+    loop and the per-instance Python loop, vs the same experiment in co-simulation."""
+    import yaml
+
+    rows: list[tuple[str, ...]] = []
+    for name, substeps in (("cartpole_balance", 20), ("dcmotor_tracking", 100)):
+        path = example_experiment(name)
+
+        def variant(path: Path = path, **model: Any) -> Experiment:
+            data = yaml.safe_load(path.read_text())
+            data["model"].update(model)
+            return parse_experiment(data, source=path)
+
+        me = {"interface": "me", "solver": "rk4", "solver_substeps": substeps}
+        envs = {
+            "CS": BatchVecEnv(variant(), n),
+            "ME, native batch loop": BatchVecEnv(variant(**me), n),
+            "ME, Python loop over instances": BatchVecEnv(variant(**me), n, native=False),
+        }
+        for env in envs.values():
+            env.seed(0)
+        rng = np.random.default_rng(0)
+        policy = cartpole_policy if name.startswith("cartpole") else random_policy(rng, n)
+        rates = interleaved({key: env_loop(env, policy, n) for key, env in envs.items()}, n * 100, repeats)
+        for env in envs.values():
+            env.close()
+        rows += [(f"{name}, N={n}, batch env: {key}", f"{rate / 1e3:.0f} k") for key, rate in rates.items()]
+        rows += [(f"{name}: {key} / CS (cost)", f"{rates['CS'] / rates[key]:.2f}x") for key in list(envs)[1:]]
+    return rows
+
+
 SECTIONS = ("raw", "env", "ppo", "me")
 
 
@@ -285,6 +318,7 @@ def main() -> None:
         rows += ppo_comparison(args.ppo_timesteps, max(1, args.repeats // 2))
     if "me" in sections:
         rows += me_vs_cs(args.repeats)
+        rows += me_batch_env(args.n, args.repeats)
     print(table(rows, header))
 
 

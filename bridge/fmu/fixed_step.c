@@ -58,7 +58,8 @@ typedef struct {
     double substep;
     long long total;    /* grid points in the sample: end = origin + total * substep */
     double end;
-    double next_event;  /* the announced time event, NaN if none */
+    double next_event;  /* the time event this call stops at, NaN if none */
+    double announced;   /* the time event the FMU announced, NaN if none (fixed_step_batch) */
 } FixedCall;
 
 typedef struct {
@@ -205,4 +206,79 @@ int fixed_step_advance(const FixedSpec* s, FixedCall* call) {
         memcpy(c.za, c.zb, sizeof(double) * (size_t)nz);
     }
     return FS_END;
+}
+
+/* ---- batches: one sample of many instances of one FMU in one call ---------------------------- */
+
+#define FB_SET 16 /* + status: setting the inputs failed */
+#define FB_GET 32 /* + status: getting the outputs failed */
+
+typedef struct {
+    int major;
+    void* set_real;  /* fmi2SetReal / fmi3SetFloat64 */
+    void* get_real;  /* fmi2GetReal / fmi3GetFloat64 */
+    int n_in;
+    const unsigned int* in_vr;
+    int n_out;
+    const unsigned int* out_vr;
+    double t0;       /* start time */
+    double h;        /* FMU step */
+    int steps;       /* FMU steps per sample */
+    int substeps;    /* integration steps per FMU step */
+} FixedBatch;
+
+static bool near(double a, double b) { /* Python's math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12) */
+    double tol = 1e-12 * fmax(fabs(a), fabs(b));
+    return fabs(a - b) <= fmax(tol, 1e-12);
+}
+
+/* For every active instance i: set its inputs, integrate one sample from step k[i] exactly as
+ * fixed_step_advance does for one instance, get its outputs, k[i] += steps. codes[i]: 0 done;
+ * -1 inactive; FB_SET / FB_GET + status; else the code fixed_step_advance stopped with (an event,
+ * termination or a failure): the caller finishes that instance's sample (k[i] unchanged, the
+ * instance at calls[i]->time). Returns how many instances the caller must finish. */
+int fixed_step_batch(const FixedBatch* b, int n, const FixedSpec* const* specs, FixedCall* const* calls,
+                     const unsigned char* active, const double* inputs, double* outputs, long long* k,
+                     int* codes) {
+    int pending = 0;
+    for (int i = 0; i < n; i++) {
+        if (!active[i]) {
+            codes[i] = -1;
+            continue;
+        }
+        FixedCall* call = calls[i];
+        void* c = call->component;
+        int st = 0;
+        if (b->n_in > 0) {
+            const double* u = inputs + (size_t)i * b->n_in;
+            st = b->major == 3 ? ((fmi3SetFloat64TYPE*)b->set_real)(c, b->in_vr, b->n_in, u, b->n_in)
+                               : ((fmi2SetRealTYPE*)b->set_real)(c, b->in_vr, b->n_in, u);
+            if (st > WARNING) {
+                codes[i] = FB_SET + st;
+                pending++;
+                continue;
+            }
+        }
+        double start = b->t0 + (double)k[i] * b->h;
+        double end = b->t0 + (double)(k[i] + b->steps) * b->h;
+        call->time = call->origin = start;
+        call->end = end;
+        call->total = (long long)b->steps * b->substeps;
+        call->substep = (end - start) / (double)call->total;
+        double ev = call->announced;
+        call->next_event = (!isnan(ev) && start < ev && !near(start, ev)) ? ev : NAN;
+        int r = fixed_step_advance(specs[i], call);
+        if (r != FS_END) {
+            codes[i] = r;
+            pending++;
+            continue;
+        }
+        k[i] += b->steps;
+        double* y = outputs + (size_t)i * b->n_out;
+        st = b->major == 3 ? ((fmi3GetFloat64TYPE*)b->get_real)(c, b->out_vr, b->n_out, y, b->n_out)
+                           : ((fmi2GetRealTYPE*)b->get_real)(c, b->out_vr, b->n_out, y);
+        codes[i] = st > WARNING ? FB_GET + st : 0;
+        if (st > WARNING) pending++;
+    }
+    return pending;
 }

@@ -61,6 +61,7 @@ class FixedCall(ctypes.Structure):
         ("total", ctypes.c_longlong),
         ("end", ctypes.c_double),
         ("next_event", ctypes.c_double),
+        ("announced", ctypes.c_double),
     ]
 
 
@@ -89,6 +90,7 @@ class FixedStepper:
             )
         self._backend, self.fmu = backend, backend.fmu
         self.events = EventCalls(self.fmu, backend.major)
+        self._call = FixedCall()
         self.next_event_s = next_event_s
         self._h, self._substeps = step_size_s, substeps
         info = backend.info
@@ -97,7 +99,6 @@ class FixedStepper:
             backend.major, METHODS[method], info.number_of_states, info.number_of_event_indicators,
             needs_completed_step(info, backend.major), *self._addresses(), self._work.ctypes.data,
         )  # fmt: skip
-        self._call = FixedCall()
         self._run = native.load("fixed_step").fixed_step_advance
         self._run.argtypes = [ctypes.c_void_p, ctypes.c_void_p]
         self._run.restype = ctypes.c_int
@@ -118,6 +119,24 @@ class FixedStepper:
             found.append(address)
         return found
 
+    @property
+    def next_event_s(self) -> float | None:
+        """The time event the FMU announced (None: none); kept in the call for batches too."""
+        value = self._call.announced
+        return None if math.isnan(value) else value
+
+    @next_event_s.setter
+    def next_event_s(self, value: float | None) -> None:
+        self._call.announced = math.nan if value is None else value
+
+    @property
+    def substeps(self) -> int:
+        return self._substeps
+
+    def addresses(self) -> tuple[int, int]:
+        """The addresses of this instance's C spec and call (for ``fixed_step_batch``)."""
+        return ctypes.addressof(self._spec), ctypes.addressof(self._call)
+
     def restart(self, time_s: float) -> None:
         """Point the loop at the current instance (after instantiation, reset or restore)."""
         self._call.component = ctypes.cast(self._backend.component, ctypes.c_void_p).value
@@ -133,17 +152,24 @@ class FixedStepper:
 
     def advance(self, start_s: float, end_s: float, step: int, *, restart: bool = False) -> bool:
         """Integrate from ``start_s`` to ``end_s``; returns True if the FMU requested termination."""
-        call, run, args = self._call, self._run, self._args
+        call = self._call
         call.time = call.origin = start_s
         call.end = end_s
         call.total = total = max(1, round((end_s - start_s) / self._h)) * self._substeps
         call.substep = (end_s - start_s) / total
+        return self.finish(None, start_s, end_s, step)
+
+    def finish(self, code: int | None, start_s: float, end_s: float, step: int) -> bool:
+        """Go on with the call set up for ``start_s`` .. ``end_s`` from where the loop stopped with
+        ``code`` (None: it has not run yet) to its end; True if the FMU requested termination."""
+        call, run, args = self._call, self._run, self._args
         for _ in range(MAX_EVENTS):
-            event = self.next_event_s
-            time_s = call.time
-            due = event is not None and time_s < event and not _close(time_s, event)
-            call.next_event = event if due else math.nan
-            code = run(*args)
+            if code is None:
+                event = self.next_event_s
+                time_s = call.time
+                due = event is not None and time_s < event and not _close(time_s, event)
+                call.next_event = event if due else math.nan
+                code = run(*args)
             if code == END:
                 return False
             if code == TERMINATE:
@@ -152,6 +178,7 @@ class FixedStepper:
                 raise self._failure(code, step, call.time)
             if self.handle_event(call.time, step):
                 return True
+            code = None
         raise StepError(
             f"{self._backend.info.model_name}: more than {MAX_EVENTS} events between t={start_s:g} s and "
             f"t={end_s:g} s (step {step}, now t={call.time:g} s): the model chatters (events that keep "

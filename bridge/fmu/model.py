@@ -450,11 +450,13 @@ class Model:
         Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
         ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
         fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised.
+        In model exchange (fixed-step solvers only) :attr:`fixed_stepper` integrates.
         """
         b = self._backend
-        if self.interface != "cs" or b.major < 2 or not b.component:
+        if b.major < 2 or not b.component or (self.interface == "me" and self.fixed_stepper is None):
             raise FmuError(
-                f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 CS instance"
+                f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
+                f"(co-simulation, or model exchange with solver 'rk4' or 'euler')"
             )
 
         def address(name: str) -> int:
@@ -471,6 +473,28 @@ class Model:
             "do_step": address(f"{v}DoStep"),
             "bool_status": address("fmi2GetBooleanStatus") if b.major == 2 else 0,
         }
+
+    @property
+    def fixed_stepper(self) -> FixedStepper | None:
+        """The native fixed-step integrator of a model-exchange instance (solver 'rk4' or
+        'euler', once initialised); None otherwise."""
+        return self._me if isinstance(self._me, FixedStepper) else None
+
+    def native_me_finish(self, code: int, step_index: int, n: int) -> bool:
+        """Finish a sample of ``n`` FMU steps from ``step_index`` that a native batch loop began
+        with :attr:`fixed_stepper` and stopped with ``code`` (an event, termination or failure);
+        the model then stands after the sample. True if the FMU asked to terminate.
+
+        Raises:
+            StepError: as :meth:`advance` does.
+        """
+        stepper = self.fixed_stepper
+        assert stepper is not None  # the batch loop runs only on fixed-step instances
+        t0, h = self.start_time_s, self.step_size_s
+        self.step_index = step_index
+        terminated = stepper.finish(code, t0 + step_index * h, t0 + (step_index + n) * h, step_index)
+        self.step_index, self.terminated = step_index + n, terminated
+        return terminated
 
     @property
     def steppable(self) -> bool:

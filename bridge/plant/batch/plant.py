@@ -28,6 +28,7 @@ from bridge.fmu import Model, read_model_info
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT
 from bridge.plant.batch import native as nat
+from bridge.plant.batch.me import MeBatch
 from bridge.plant.experiment_model import experiment_model
 
 _log = logging.getLogger(__name__)
@@ -84,6 +85,7 @@ class BatchPlant:
         self.ready = np.zeros(n, dtype=bool)  # reset and not failed since: may step
         self._stepper: nat.NativeStepper | None = None
         self._spec: nat.BatchSpec | None = None
+        self._me: MeBatch | None = None  # model exchange with a fixed-step solver
         self._comps = np.zeros(n, dtype=np.uintp)
 
     def _open(self, i: int) -> Model:
@@ -102,14 +104,18 @@ class BatchPlant:
     @property
     def native(self) -> bool:
         """Whether steps go through the native stepper (known after the first reset)."""
-        return self._stepper is not None
+        return self._stepper is not None or self._me is not None
 
     def _setup_native(self) -> None:
         if self._want_native is False or self._spec is not None:
             return
         model = self.models[0]
         reason = self._native_refusal(model)
-        stepper = nat.load() if reason is None else None
+        stepper = nat.load() if reason is None and model.interface == "cs" else None
+        if reason is None and model.interface == "me":
+            self._spec = nat.BatchSpec()  # decided
+            self._setup_me(model)
+            return
         if stepper is None:
             if self._want_native:
                 raise ConfigError(f"{self.name}: native stepping is not possible: {reason or 'no compiler'}")
@@ -128,15 +134,31 @@ class BatchPlant:
         self._handles = {key: value for key, value in h.items() if key != "component"}
         self._stepper = stepper
 
+    def _setup_me(self, model: Model) -> None:
+        stepper = model.fixed_stepper
+        assert stepper is not None  # _native_refusal checked the solver
+        vrs = self.info.variables
+        self._in_vr = np.array([vrs[n].value_reference for n in self.input_names], dtype=np.uint32)
+        self._out_vr = np.array([vrs[n].value_reference for n in self.output_names], dtype=np.uint32)
+        h = model.native_handles()
+        self._handles = {key: h[key] for key in ("major", "set_real", "get_real")}
+        self._me = MeBatch(
+            h, in_vr=self._in_vr, out_vr=self._out_vr, timing=self.timing, substeps=stepper.substeps, n=self.n
+        )
+
     def _native_refusal(self, model: Model) -> str | None:
-        if model.interface != "cs" or self.info.fmi_major < 2:
+        if self.info.fmi_major < 2 or (model.interface == "me" and model.fixed_stepper is None):
             return (
-                f"it needs FMI 2.0/3.0 co-simulation, this is FMI {self.info.fmi_version} {model.interface}"
+                f"it needs FMI 2.0/3.0 co-simulation, or model exchange with solver 'rk4' or 'euler'; "
+                f"this is FMI {self.info.fmi_version} {model.interface} (solver {model.solver!r})"
             )
         names = [*self.input_names, *self.output_names]
         other = [n for n in names if self.info.variables[n].type != "Float64"]
         if other:
             return f"signals {other} are not Float64"
+        discrete = [n for n in self.input_names if self.info.variables[n].variability != "continuous"]
+        if model.interface == "me" and discrete:  # they are set in event mode, by the Python path
+            return f"model-exchange inputs {discrete} are discrete"
         return None
 
     # -- episodes ---------------------------------------------------------------------------------
@@ -157,17 +179,25 @@ class BatchPlant:
         except FmuError as exc:
             raise self._failed(i, exc, step=None) from exc
         self._setup_native()
-        if self._stepper is not None:
+        if self._me is not None:
+            self._check_library(i, model.native_handles())
+            self._me.bind(i, model)
+        elif self._stepper is not None:
             handles = model.native_handles()
-            if any(handles[key] != value for key, value in self._handles.items()):
-                raise ConfigError(f"{self.name}: instance {i} loaded another copy of the FMU's library")
+            self._check_library(i, handles)
             self._comps[i] = handles["component"]
         self.ready[i] = True
         return outputs
 
+    def _check_library(self, i: int, handles: Mapping[str, int]) -> None:
+        if any(handles[key] != value for key, value in self._handles.items()):
+            raise ConfigError(f"{self.name}: instance {i} loaded another copy of the FMU's library")
+
     def step(self, inputs: FloatArray, active: npt.NDArray[np.bool_] | None = None) -> BatchStep:
         """One sample for every ready instance (``active`` narrows it) with ``inputs[i]`` held."""
         mask = self.ready if active is None else self.ready & active
+        if self._me is not None:
+            return self._step_me(np.ascontiguousarray(inputs, dtype=np.float64), mask)
         if self._stepper is not None:
             return self._step_native(np.ascontiguousarray(inputs, dtype=np.float64), mask)
         return self._step_python(inputs, mask)
@@ -206,6 +236,24 @@ class BatchPlant:
         for i in np.flatnonzero((status > 1) & (status != nat.TERMINATED)).tolist():
             result.errors[i] = self._native_error(i, int(status[i]))
             self.ready[i] = False
+        self.sample[mask] += 1
+        self._stop(result)
+        return result
+
+    def _step_me(self, inputs: FloatArray, mask: npt.NDArray[np.bool_]) -> BatchStep:
+        me = self._me
+        assert me is not None
+        result = BatchStep(self._outputs_buf, np.zeros(self.n, dtype=bool))
+        if me.step(mask.view(np.uint8), inputs, self._outputs_buf, self.k):
+            names = (self.input_names, self.output_names)
+            for i in me.pending():  # events, termination, failures: finished as one instance would
+                model = self.models[i]
+                try:
+                    result.terminated[i] = me.finish(i, model, self.k, names)
+                    self._outputs[i].read_into(result.outputs[i])
+                except FmuError as exc:
+                    result.errors[i] = self._failed(i, exc)
+                    self.ready[i] = False
         self.sample[mask] += 1
         self._stop(result)
         return result
