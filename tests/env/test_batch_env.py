@@ -63,11 +63,19 @@ def experiment_of(
     return load_experiment(path)
 
 
+# The same in model exchange (the native batch loop over fixed-step integrators), with a track end
+# at which the FMU asks to terminate from its event iteration.
+RICH_ME = RICH.replace(
+    "model: {fmu: 'example:cartpole',",
+    "model: {fmu: 'example:cartpole', interface: me, solver: rk4, solver_substeps: 4,\n"
+    "        parameters: {track_limit: 0.3},",
+)
 CASES = [
     ("dcmotor_tracking", None, None),
     ("cartpole_balance", None, "v1"),
     ("cartpole_continuous", None, None),
     ("rich", RICH, None),
+    ("rich_me", RICH_ME, None),
 ]
 
 
