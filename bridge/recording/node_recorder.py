@@ -6,7 +6,8 @@ The recorder subscribes to ``<prefix>/<node>/outputs`` and ``/actions``, decodes
 :mod:`bridge.recording.meta`: an OUTPUTS frame at its simulation time, an ACTION frame for
 step ``k`` at ``t_k-1`` (when it takes effect), each episode shifted to start after the last.
 Episode numbers come from the frames; ERROR and REJECT frames become ``/events`` entries.
-The node's reset reply goes only to the client that asked, so step 0 is not on the wire.
+A node puts the OUTPUTS frame of its reset (step 0) on the wire too, so each episode of the
+recording begins with its outputs at the start time.
 
 A system's fixed-point iteration repeats a macro step on a node (``bridge.net.node_state``): the
 same step then travels several times, each action after the first marked RESTORE_STATE, and only
@@ -17,7 +18,7 @@ two steps of the current episode. A frame for a held (step, topic, client) repla
 frames are written in the order they first arrived, so a recording without repeats is the one
 writing every frame at once would give; they are written when a frame two steps later arrives
 (one step of slack for frames of the two topics arriving out of order), before a frame of
-another episode or an ERROR/REJECT frame, and by ``close()``.
+another episode or an ERROR/REJECT frame, when more than 64 are held, and by ``close()``.
 """
 
 from __future__ import annotations
