@@ -75,7 +75,8 @@ def record(
     frames = ", ".join(f"{n} {t}" for t, n in stats.frames.items()) or "no frames"
     console.print(
         f"wrote {path}: {frames}, {stats.episodes} episode(s), "
-        f"{stats.malformed} malformed and {stats.unplaced} unplaceable frame(s) skipped"
+        f"{stats.malformed} malformed and {stats.unplaced} unplaceable frame(s) skipped, "
+        f"{stats.repeated} repeated pass(es) of a step replaced by the last"
     )
 
 

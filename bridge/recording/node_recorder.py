@@ -6,7 +6,19 @@ The recorder subscribes to ``<prefix>/<node>/outputs`` and ``/actions``, decodes
 :mod:`bridge.recording.meta`: an OUTPUTS frame at its simulation time, an ACTION frame for
 step ``k`` at ``t_k-1`` (when it takes effect), each episode shifted to start after the last.
 Episode numbers come from the frames; ERROR and REJECT frames become ``/events`` entries.
-The node's reset reply goes only to the client that asked, so step 0 is not on the wire.
+A node puts the OUTPUTS frame of its reset (step 0) on the wire too, so each episode of the
+recording begins with its outputs at the start time.
+
+A system's fixed-point iteration repeats a macro step on a node (``bridge.net.node_state``): the
+same step then travels several times, each action after the first marked RESTORE_STATE, and only
+the last pass is the step the system took. The recorder therefore holds back frames: the latest
+OUTPUTS frame of each step and the latest ACTION frame of each step and client, of the newest
+two steps of the current episode. A frame for a held (step, topic, client) replaces the held one
+(``RecordStats.repeated``); a node's answer to a retried action is replaced the same way. Held
+frames are written in the order they first arrived, so a recording without repeats is the one
+writing every frame at once would give; they are written when a frame two steps later arrives
+(one step of slack for frames of the two topics arriving out of order), before a frame of
+another episode or an ERROR/REJECT frame, when more than 64 are held, and by ``close()``.
 """
 
 from __future__ import annotations
@@ -30,6 +42,8 @@ from bridge.recording.writer import McapWriter
 _log = logging.getLogger(__name__)
 TOPICS = ("outputs", "actions")
 _MAX_STAMP_NS = (1 << 31) * 1_000_000_000  # builtin_interfaces/Time holds int32 seconds
+_MAX_HELD = 64  # held frames beyond this (many clients acting on one step) are written at once
+_Slot = tuple[str, int, int]  # topic, step, acting client (0 for outputs)
 
 
 @dataclass
@@ -39,14 +53,26 @@ class _Episode:
 
 
 @dataclass
+class _Held:
+    """Frames of one episode not written yet, by slot in order of first arrival (a replaced
+    frame keeps its slot's place), each with its header stamp."""
+
+    episode: int
+    newest: int = 0
+    frames: dict[_Slot, tuple[int, proto.Frame]] = field(default_factory=dict)
+
+
+@dataclass
 class RecordStats:
     """Frames received per topic; malformed ones (not decodable, wrong size) and unplaced ones
-    (well-formed, but their time or step lies outside what a recording can hold) were skipped."""
+    (well-formed, but their time or step lies outside what a recording can hold) were skipped;
+    repeated ones (an earlier pass of a step a later frame replaced) were not written."""
 
     frames: dict[str, int] = field(default_factory=dict)
     malformed: int = 0
     unplaced: int = 0
     episodes: int = 0
+    repeated: int = 0
 
 
 class NodeRecorder:
@@ -78,6 +104,7 @@ class NodeRecorder:
         meta.write_run_metadata(self.writer, self._run_info())
         self.stats = RecordStats()
         self._episodes: dict[int, _Episode] = {}
+        self._held: _Held | None = None
         self._clock = meta.RecordingClock(self._sampling_ns)
         self._frames: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
         self._stop = threading.Event()
@@ -126,11 +153,12 @@ class NodeRecorder:
         return self.stats
 
     def stop(self) -> None:
-        """Make ``run()`` return (safe from signal handlers and other threads)."""
+        """Make ``run()`` return (safe from signal handlers and other threads); ``close()``
+        writes the frames still held."""
         self._stop.set()
 
     def handle(self, topic: str, payload: bytes) -> None:
-        """Decode one frame and write it."""
+        """Decode one frame and hold it (or write what it completes; see the module doc)."""
         try:
             frame = proto.decode(payload)
         except TransportError as exc:
@@ -138,32 +166,73 @@ class NodeRecorder:
             _log.debug("dropped a malformed frame on %s: %s", topic, exc)
             return
         self.stats.frames[topic] = self.stats.frames.get(topic, 0) + 1
+        if self._held is not None and self._held.episode != frame.episode:
+            self._flush()
         episode = self._episode(frame.episode)
         if frame.kind in (proto.ERROR, proto.REJECT):
+            self._flush()
             kind = "fmu_error" if frame.kind == proto.ERROR else "reject"
             event = {"event": kind, "episode": frame.episode, "step": frame.step, "message": frame.message}
             self._event(event, episode.clock.last_ns)
             return
         if frame.kind == proto.ACTION:
             stamp = self._start_ns + max(frame.step - 1, 0) * self._sampling_ns
-            self._write(meta.ACTIONS, stamp, episode, frame)
-        elif frame.kind == proto.OUTPUTS and self._write(meta.OUTPUTS, frame.sim_time_ns, episode, frame):
-            episode.last_step = max(episode.last_step, frame.step)
+            slot = (meta.ACTIONS, frame.step, frame.sim_time_ns)  # an action's last field: its client
+        else:
+            stamp, slot = frame.sim_time_ns, (meta.OUTPUTS, frame.step, 0)
+        if self._recordable(slot[0], stamp, episode, frame):
+            self._hold(slot, stamp, frame)
 
-    def _write(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> bool:
+    def _recordable(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> bool:
+        """Whether ``frame`` goes into the file (else it is counted as skipped, if it should be)."""
         layout = self._layouts.get(topic)
         if layout is None:
             return False
         if frame.values.size != len(layout.names):
             self.stats.malformed += 1
             return False
-        log = episode.clock.place(stamp_ns) if abs(stamp_ns) < _MAX_STAMP_NS else None
-        if log is None:  # a header stamp holds int32 seconds; a log time is 0 .. 2^63-1 ns
+        # a header stamp holds int32 seconds; a log time is 0 .. 2^63-1 ns
+        if abs(stamp_ns) >= _MAX_STAMP_NS or not 0 <= stamp_ns + episode.clock.offset_ns <= meta.INT64_MAX:
             self.stats.unplaced += 1
             _log.debug("skipped a frame of episode %d at %d ns: it cannot be placed", frame.episode, stamp_ns)
             return False
-        self.writer.add_message(self.channels[topic], log, layout.pack(stamp_ns, frame.values.tolist()))
         return True
+
+    def _hold(self, slot: _Slot, stamp_ns: int, frame: proto.Frame) -> None:
+        held = self._held
+        if held is None:
+            self._held = held = _Held(frame.episode)
+        if slot in held.frames:
+            self.stats.repeated += 1
+        held.frames[slot] = (stamp_ns, frame)
+        held.newest = max(held.newest, frame.step)
+        self._flush(before_step=held.newest - 1 if len(held.frames) <= _MAX_HELD else None)
+
+    def _flush(self, before_step: int | None = None) -> None:
+        """Write the held frames in order of arrival: all, or those up to the first one whose
+        step is ``before_step`` or later."""
+        held = self._held
+        if held is None:
+            return
+        episode = self._episodes[held.episode]
+        while held.frames:
+            slot = next(iter(held.frames))
+            if before_step is not None and slot[1] >= before_step:
+                return
+            stamp_ns, frame = held.frames.pop(slot)
+            self._write(slot[0], stamp_ns, episode, frame)
+        self._held = None
+
+    def _write(self, topic: str, stamp_ns: int, episode: _Episode, frame: proto.Frame) -> None:
+        log = episode.clock.place(stamp_ns)
+        if log is None:  # not after _recordable; counted all the same should that change
+            self.stats.unplaced += 1
+            return
+        self.writer.add_message(
+            self.channels[topic], log, self._layouts[topic].pack(stamp_ns, frame.values.tolist())
+        )
+        if topic == meta.OUTPUTS:
+            episode.last_step = max(episode.last_step, frame.step)
 
     def _episode(self, number: int) -> _Episode:
         found = self._episodes.get(number)
@@ -204,6 +273,7 @@ class NodeRecorder:
                 self.handle(*self._frames.get_nowait())
             except queue.Empty:
                 break
+        self._flush()
         if self._episodes:
             self._end_all()
         return self.writer.close()

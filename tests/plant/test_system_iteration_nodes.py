@@ -193,3 +193,67 @@ def test_a_real_time_or_isolated_node_says_it_cannot_save(tmp_path: Path) -> Non
         with FmuNode(exp, name="rt-motor", options=options, **kwargs) as node:  # type: ignore[arg-type]
             d = node.describe()
             assert d["can_save_state"] is False and reason in d["save_state_refusal"]
+
+
+def test_a_recording_of_an_iterated_node_holds_the_accepted_pass_of_each_step(
+    node_system: tuple[SystemPlant, Loopback], net: Loopback, tmp_path: Path
+) -> None:
+    """``record --node`` on the motor's node while the master repeats every macro step: the file
+    holds one outputs and one actions message per macro step, the outputs the system took
+    (read back by mcap)."""
+    import threading
+
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    from bridge.recording.node_recorder import NodeRecorder
+
+    plant, own = node_system
+    plant.bind(["controller.reference"], ["load.omega"])
+    recorder = NodeRecorder(
+        net.session, "proto-motor", tmp_path / "motor.mcap", prefix=own.prefix, timeout_s=30
+    )
+    thread = threading.Thread(target=recorder.run, daemon=True)
+    thread.start()
+    names = plant.plants["motor"].output_names
+    taken, iterations, macro_steps = [], [], 12
+    try:
+        plant.reset({}, [10.0])
+        taken.append(plant.master.outputs["motor"].copy())
+        for _ in range(macro_steps):
+            plant.master.step()
+            taken.append(plant.master.outputs["motor"].copy())
+            iterations.append(plant.master.last_iterations)
+        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
+        wanted = {"outputs": counters["steps"] + counters["resets"], "actions": counters["steps"]}
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and any(
+            recorder.stats.frames.get(t, 0) < n for t, n in wanted.items()
+        ):
+            time.sleep(0.05)
+    finally:
+        recorder.stop()
+        thread.join(timeout=30)
+        path = recorder.close()
+    assert min(iterations) > 1 and counters["restored"] > 0  # the node really repeated steps
+    assert recorder.stats.frames == wanted
+    assert recorder.stats.repeated == 2 * (counters["steps"] - macro_steps)
+
+    found: dict[str, list[tuple[int, dict[str, float]]]] = {"/outputs": [], "/actions": []}
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, m in reader.iter_decoded_messages(log_time_order=True):
+            if channel.topic in found:
+                stamp = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+                found[channel.topic].append((stamp, dict(zip(m.name, m.position))))
+    macro_ns = round(recorder.description["sampling_time_s"] * 1e9)
+    start_ns = round(recorder.description["start_time_s"] * 1e9)
+    outputs, actions = found["/outputs"], found["/actions"]
+    # each reset of the initialisation puts its step 0 on the wire; the last one starts the run
+    assert len(outputs) == counters["resets"] + macro_steps and len(actions) == macro_steps
+    assert [s for s, _ in outputs[-len(taken) :]] == [start_ns + k * macro_ns for k in range(len(taken))]
+    assert [s for s, _ in actions] == [start_ns + k * macro_ns for k in range(macro_steps)]
+    for (_, recorded), expected in zip(outputs[-len(taken) :], taken):
+        assert set(names) <= set(recorded)
+        np.testing.assert_allclose([recorded[n] for n in names], expected, rtol=0, atol=1e-12)
+    assert np.ptp([recorded["omega"] for _, recorded in outputs]) > 1.0  # the motor really turned
