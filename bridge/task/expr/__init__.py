@@ -109,8 +109,9 @@ def compile_expression(text: str, names: Sequence[str], *, where: str = "reward.
 
 def expression_names(text: str) -> tuple[str, ...]:
     """Every variable name ``text`` spells (``x``, ``cart.x``, ``pos[1]``, ``der(x)``), in order
-    and unchecked, including the parts of longer names (``cart.x[1]`` gives ``cart.x`` too);
-    ``()`` when the text does not parse (:func:`compile_expression` words that error).
+    and unchecked, with the parts of longer names (``cart.x[1]`` gives ``cart.x`` and ``cart``)
+    and the names of functions called; ``()`` when the text does not parse
+    (:func:`compile_expression` words that error).
 
     For resolving names against a partial model: a node serving one component of a system
     knows only that component's variables and takes the others' names as written."""
