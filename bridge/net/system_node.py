@@ -7,7 +7,8 @@ experiment names, so ``system serve`` gives it a generated single-FMU experiment
 macro step, actions = the component's connected inputs and the task inputs on it (in that
 order), observations = every output of the FMU and then any other variable of it the task
 reads. Both sides read the same system file, so they agree on the names; the client maps its
-bound inputs and outputs onto the node's lists by name and says so when they do not fit.
+bound inputs and outputs onto the node's lists by name and says so when they do not fit. The
+serving machine reads only the FMUs of the components it serves.
 
 A node answers in lockstep: ``send`` publishes the stamped inputs at once and ``receive``
 waits for the matching outputs, so Jacobi components in several nodes step in parallel. For
@@ -46,9 +47,14 @@ def component_signals(
     Reads this component's FMU only: the task's names on it are resolved against its variables
     (a typo there is the usual ConfigError); names on other components are taken as written (the
     client checks them against what their nodes or files describe)."""
+    return _signals(experiment, system, name, served_info(system, name))
+
+
+def _signals(
+    experiment: Experiment, system: SystemDescription, name: str, info: ModelInfo
+) -> tuple[list[str], list[str]]:
     from bridge.task.core import task_signal_names
 
-    info = served_info(system, name)
     task = task_signal_names(experiment, _known_names(experiment, system, name, info))
     ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
     ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
@@ -62,6 +68,11 @@ def served_info(system: SystemDescription, name: str) -> ModelInfo:
     """The model of component ``name``, served on this machine: its FMU must be here."""
     from bridge.fmu import read_model_info
 
+    _check_here(system, name)
+    return read_model_info(system.components[name].fmu)
+
+
+def _check_here(system: SystemDescription, name: str) -> None:
     fmu = system.components[name].fmu
     if not fmu.is_file():
         raise ConfigError(
@@ -69,7 +80,6 @@ def served_info(system: SystemDescription, name: str) -> ModelInfo:
             f"{name!r}; copy the FMU here, or serve here only the components whose FMUs are here "
             f"(`fmu-bridge system serve SYSTEM.yaml --component NAME`, repeatable){system.where}"
         )
-    return read_model_info(fmu)
 
 
 def _known_names(experiment: Experiment, system: SystemDescription, name: str, info: ModelInfo) -> set[str]:
@@ -100,7 +110,8 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
     component = system.components[name]
     t = system_timing(experiment, system)
     n = steps_per_macro(component, t.step_size_s, None, system.where)
-    ins, outs = component_signals(experiment, system, name)
+    info = served_info(system, name)
+    ins, outs = _signals(experiment, system, name, info)
     if not ins:
         raise ConfigError(
             f"system.components.{name}.node: a component served by a node needs at least one input "
@@ -118,7 +129,7 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
         },
-        "actions": {"inputs": ins, **_input_bounds(system, name, ins)},
+        "actions": {"inputs": ins, **_input_bounds(info, ins)},
         "observations": {"outputs": outs, "scale": "none"},
         "reward": {"terms": [{"alive": 0.0}]},
     }
@@ -128,8 +139,8 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
 _WIDE = 1e15  # no declared bound: anything a connected component can produce
 
 
-def _input_bounds(system: SystemDescription, name: str, inputs: Sequence[str]) -> dict[str, dict[str, float]]:
-    variables = served_info(system, name).variables
+def _input_bounds(info: ModelInfo, inputs: Sequence[str]) -> dict[str, dict[str, float]]:
+    variables = info.variables
     low = {n: -_WIDE if variables[n].min is None else variables[n].min for n in inputs}
     high = {n: _WIDE if variables[n].max is None else variables[n].max for n in inputs}
     return {"low": low, "high": high}  # type: ignore[dict-item]
@@ -167,8 +178,15 @@ def served_experiments(experiment: Experiment, names: Sequence[str] = ()) -> dic
             f"system serve: {unknown} is not served by a node; components with node: {served}; "
             f"set system.components.NAME.node in the file{system.where}"
         )
+    nodes = [system.components[n].node or n for n in chosen]
+    twice = sorted({n for n in nodes if nodes.count(n) > 1})
+    if twice:
+        raise ConfigError(
+            f"system serve: node names {twice} are given to more than one component of {chosen}; "
+            f"give each served component its own system.components.NAME.node{system.where}"
+        )
     for name in chosen:  # every missing FMU is named before anything else is checked
-        served_info(system, name)
+        _check_here(system, name)
     return {system.components[n].node or n: component_experiment(experiment, system, n) for n in chosen}
 
 

@@ -180,3 +180,13 @@ def test_the_command_names_the_missing_fmu_without_a_traceback(sites: tuple[Path
     assert "gearload.fmu" in output and "--component NAME" in output
     assert "Traceback" not in output and "Zenoh" not in output
     assert done.stderr.lstrip().startswith("error: system.components.load.fmu: ")
+
+
+def test_two_served_components_on_one_node_name_are_refused(sites: tuple[Path, Path]) -> None:
+    motor_site, _ = sites
+    data = yaml.safe_load(motor_site.read_text())
+    data["system"]["components"]["load"]["node"] = "motor-node"
+    twice = motor_site.parent / "twice.yaml"
+    twice.write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r"node names \['motor-node'\] are given to more than one"):
+        serve_components(load_experiment(twice))
