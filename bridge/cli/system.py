@@ -179,19 +179,21 @@ def serve_system(  # noqa: PLR0917 (typer options)
 
     Each component runs in an FmuNode named by its node: key, with the inputs and outputs the
     system connects (see docs/systems.md). Run it once per machine with --component to spread
-    the components; the system's env then drives them over Zenoh."""
+    the components: each machine needs only the FMUs of the components it serves. The system's
+    env then drives them over Zenoh."""
     import signal
     import threading
 
-    from bridge.net.system_node import serve_components
+    from bridge.net.system_node import served_experiments, start_nodes
     from bridge.net.transport import ZenohOptions, open_session, session_mode
 
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
     stop = threading.Event()
+    served = served_experiments(as_experiment(experiment), component or ())  # before the network
     session = open_session(options)
     try:
-        nodes = serve_components(as_experiment(experiment), component or (), prefix=prefix, session=session)
+        nodes = start_nodes(served, prefix=prefix, session=session)
         try:
             signal.signal(signal.SIGTERM, lambda *_: stop.set())
             for n in nodes:

@@ -7,7 +7,8 @@ experiment names, so ``system serve`` gives it a generated single-FMU experiment
 macro step, actions = the component's connected inputs and the task inputs on it (in that
 order), observations = every output of the FMU and then any other variable of it the task
 reads. Both sides read the same system file, so they agree on the names; the client maps its
-bound inputs and outputs onto the node's lists by name and says so when they do not fit.
+bound inputs and outputs onto the node's lists by name and says so when they do not fit. The
+serving machine reads only the FMUs of the components it serves.
 
 A node answers in lockstep: ``send`` publishes the stamped inputs at once and ``receive``
 waits for the matching outputs, so Jacobi components in several nodes step in parallel. For
@@ -41,19 +42,57 @@ SERVE_HINT = "`fmu-bridge system serve SYSTEM.yaml` starts the component nodes"
 def component_signals(
     experiment: Experiment, system: SystemDescription, name: str
 ) -> tuple[list[str], list[str]]:
-    """The input and output names the node of component ``name`` serves (see the module doc)."""
-    from bridge.fmu import read_model_info
-    from bridge.plant.system.plant import describe_system, system_timing
-    from bridge.task.core import Task
+    """The input and output names the node of component ``name`` serves (see the module doc).
 
-    task = Task(experiment, describe_system(experiment).variables, system_timing(experiment, system))
+    Reads this component's FMU only: the task's names on it are resolved against its variables
+    (a typo there is the usual ConfigError); names on other components are taken as written (the
+    client checks them against what their nodes or files describe)."""
+    return _signals(experiment, system, name, served_info(system, name))
+
+
+def _signals(
+    experiment: Experiment, system: SystemDescription, name: str, info: ModelInfo
+) -> tuple[list[str], list[str]]:
+    from bridge.task.core import task_signal_names
+
+    task = task_signal_names(experiment, _known_names(experiment, system, name, info))
     ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
-    ins += [e.variable for e in _ends(task.input_names, system, "actions") if e.component == name]
-    info = read_model_info(system.components[name].fmu)
+    ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
     outs = [v.name for v in info.by_causality("output")]
     outs += [c.source.variable for c in system.connections if c.source.component == name]
-    outs += [e.variable for e in _ends(task.output_names, system, "observations") if e.component == name]
+    outs += [e.variable for e in _ends(task.outputs, system, "observations") if e.component == name]
     return list(dict.fromkeys(ins)), list(dict.fromkeys(outs))
+
+
+def served_info(system: SystemDescription, name: str) -> ModelInfo:
+    """The model of component ``name``, served on this machine: its FMU must be here."""
+    from bridge.fmu import read_model_info
+
+    _check_here(system, name)
+    return read_model_info(system.components[name].fmu)
+
+
+def _check_here(system: SystemDescription, name: str) -> None:
+    fmu = system.components[name].fmu
+    if not fmu.is_file():
+        raise ConfigError(
+            f"system.components.{name}.fmu: {fmu} is not on this machine, which is to serve component "
+            f"{name!r}; copy the FMU here, or serve here only the components whose FMUs are here "
+            f"(`fmu-bridge system serve SYSTEM.yaml --component NAME`, repeatable){system.where}"
+        )
+
+
+def _known_names(experiment: Experiment, system: SystemDescription, name: str, info: ModelInfo) -> set[str]:
+    """The variables of component ``name`` (``name.variable``, array elements included), and the
+    names the reward expression spells on other components, whose FMUs need not be here."""
+    from bridge.experiment.validate import with_elements
+    from bridge.plant.system.plant import system_info, system_timing
+    from bridge.task.expr import expression_names
+
+    own = system_info(experiment, system, {name: info}, system_timing(experiment, system)).variables
+    others = system.components.keys() - {name}
+    spelled = [n.partition(".") for n in expression_names(experiment.reward.expression or "")]
+    return set(with_elements(own)) | {"".join(p) for p in spelled if p[1] and p[0] in others}
 
 
 def _ends(names: Sequence[str], system: SystemDescription, key: str) -> list[Any]:
@@ -71,7 +110,8 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
     component = system.components[name]
     t = system_timing(experiment, system)
     n = steps_per_macro(component, t.step_size_s, None, system.where)
-    ins, outs = component_signals(experiment, system, name)
+    info = served_info(system, name)
+    ins, outs = _signals(experiment, system, name, info)
     if not ins:
         raise ConfigError(
             f"system.components.{name}.node: a component served by a node needs at least one input "
@@ -89,7 +129,7 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
         },
-        "actions": {"inputs": ins, **_input_bounds(component, ins)},
+        "actions": {"inputs": ins, **_input_bounds(info, ins)},
         "observations": {"outputs": outs, "scale": "none"},
         "reward": {"terms": [{"alive": 0.0}]},
     }
@@ -99,10 +139,8 @@ def component_experiment(experiment: Experiment, system: SystemDescription, name
 _WIDE = 1e15  # no declared bound: anything a connected component can produce
 
 
-def _input_bounds(component: Component, inputs: Sequence[str]) -> dict[str, dict[str, float]]:
-    from bridge.fmu import read_model_info
-
-    variables = read_model_info(component.fmu).variables
+def _input_bounds(info: ModelInfo, inputs: Sequence[str]) -> dict[str, dict[str, float]]:
+    variables = info.variables
     low = {n: -_WIDE if variables[n].min is None else variables[n].min for n in inputs}
     high = {n: _WIDE if variables[n].max is None else variables[n].max for n in inputs}
     return {"low": low, "high": high}  # type: ignore[dict-item]
@@ -117,10 +155,16 @@ def serve_components(
     session: Any = None,
 ) -> list[FmuNode]:
     """Start an :class:`FmuNode` for each component with ``node:`` (or those in ``names``), in this
-    process; the caller closes them. Each node opens its own session unless ``session`` is given."""
-    from bridge.net.node import FmuNode
+    process; the caller closes them. Each node opens its own session unless ``session`` is given.
+    Only the served components' FMUs need be on this machine."""
+    served = served_experiments(experiment, names)
+    return start_nodes(served, options=options, prefix=prefix, session=session)
 
-    system = from_experiment(experiment)
+
+def served_experiments(experiment: Experiment, names: Sequence[str] = ()) -> dict[str, Experiment]:
+    """The experiment of each component to serve here (those with ``node:``, or those in
+    ``names``) by node name, all checked before any node starts. Reads only their FMUs."""
+    system = from_experiment(experiment, check_files=False)
     served = [n for n, c in system.components.items() if c.node is not None]
     chosen = list(names) or served
     unknown = [n for n in chosen if n not in served]
@@ -134,11 +178,31 @@ def serve_components(
             f"system serve: {unknown} is not served by a node; components with node: {served}; "
             f"set system.components.NAME.node in the file{system.where}"
         )
+    nodes = [system.components[n].node or n for n in chosen]
+    twice = sorted({n for n in nodes if nodes.count(n) > 1})
+    if twice:
+        raise ConfigError(
+            f"system serve: node names {twice} are given to more than one component of {chosen}; "
+            f"give each served component its own system.components.NAME.node{system.where}"
+        )
+    for name in chosen:  # every missing FMU is named before anything else is checked
+        _check_here(system, name)
+    return {system.components[n].node or n: component_experiment(experiment, system, n) for n in chosen}
+
+
+def start_nodes(
+    experiments: Mapping[str, Experiment],
+    *,
+    options: ZenohOptions | None = None,
+    prefix: str = "fmu_bridge",
+    session: Any = None,
+) -> list[FmuNode]:
+    """An :class:`FmuNode` per ``{node name: experiment}``; none is left running if one fails."""
+    from bridge.net.node import FmuNode
+
     nodes: list[FmuNode] = []
     try:
-        for name in chosen:
-            exp = component_experiment(experiment, system, name)
-            node = system.components[name].node or name
+        for node, exp in experiments.items():
             nodes.append(FmuNode(exp, name=node, options=options, prefix=prefix, session=session))
     except BaseException:
         for started in nodes:

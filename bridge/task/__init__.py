@@ -6,6 +6,6 @@ experiment and the model vocabulary (``bridge.fmu.vocab``); never the FMU runtim
 the network or recording.
 """
 
-from bridge.task.core import Task, load_callable
+from bridge.task.core import SignalNames, Task, load_callable, task_signal_names
 
-__all__ = ["Task", "load_callable"]
+__all__ = ["SignalNames", "Task", "load_callable", "task_signal_names"]

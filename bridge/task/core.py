@@ -13,9 +13,9 @@ step use outputs and references at ``t_{j+1}``.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -85,6 +85,38 @@ class EpisodeTables:
     observation_noise: FloatArray  # one column per noisy observed output
 
 
+class SignalNames(NamedTuple):
+    """The signals a task exchanges with its model, in the order the task lays them out."""
+
+    inputs: tuple[str, ...]  # the action inputs, then the scenario-driven inputs
+    outputs: tuple[str, ...]  # the model variables the task reads (not inputs, not references)
+    references: tuple[str, ...]  # the scenario references the task reads
+
+
+def task_signal_names(exp: Experiment, variables: Collection[str]) -> SignalNames:
+    """The inputs, outputs and references of :class:`Task` for ``exp`` over a model with
+    ``variables`` (names, array elements included). Names the experiment reads are taken as
+    written; only ``reward.expression`` is resolved against ``variables`` and the references
+    (an unknown name there is a ConfigError)."""
+    from bridge.task.rewards import reward_signal_names
+
+    refs_known = known_references(exp)
+    obs = exp.observations
+    wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
+    wanted += reward_signal_names(exp.reward, set(variables) | refs_known)
+    wanted += list(exp.termination.bounds)
+    inputs = tuple(exp.actions.inputs) + tuple(scenario_inputs(exp))
+    outputs: list[str] = []
+    references: list[str] = []
+    for name in wanted:
+        if name in refs_known and name not in variables:
+            if name not in references:
+                references.append(name)
+        elif name not in inputs and name not in outputs:
+            outputs.append(name)
+    return SignalNames(inputs, tuple(outputs), tuple(references))
+
+
 class Task:
     """The task side of an experiment (one instance per env; holds per-episode state)."""
 
@@ -94,8 +126,7 @@ class Task:
         self.episode_duration_s = exp.model.episode_duration
         self._variables = variables = with_elements(variables)  # array elements are scalar signals
         self.action_inputs = tuple(exp.actions.inputs)
-        self.input_names = self.action_inputs + tuple(scenario_inputs(exp))
-        self.reference_names, self.output_names = self._signal_sets(exp, variables)
+        self.input_names, self.output_names, self.reference_names = task_signal_names(exp, variables)
         self.signal_names = self.output_names + self.input_names + self.reference_names
         self._index = {name: i for i, name in enumerate(self.signal_names)}
         self._signals: list[float] = [0.0] * len(self.signal_names)
@@ -109,29 +140,6 @@ class Task:
         self.episode: EpisodeSpec | None = None
         self._refs = np.zeros((1, len(self.reference_names)))
         self._profile_inputs = np.zeros((1, len(self.input_names) - len(self.action_inputs)))
-
-    # -- layout ------------------------------------------------------------------------------------
-    @staticmethod
-    def _signal_sets(
-        exp: Experiment, variables: Mapping[str, Variable]
-    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
-        from bridge.task.rewards import reward_signal_names
-
-        refs_known = known_references(exp)
-        obs = exp.observations
-        wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
-        wanted += reward_signal_names(exp.reward, set(variables) | refs_known)
-        wanted += list(exp.termination.bounds)
-        inputs = set(exp.actions.inputs) | set(scenario_inputs(exp))
-        outputs: list[str] = []
-        references: list[str] = []
-        for name in wanted:
-            if name in refs_known and name not in variables:
-                if name not in references:
-                    references.append(name)
-            elif name not in inputs and name not in outputs:
-                outputs.append(name)
-        return tuple(references), tuple(outputs)
 
     def sample_times(self, duration_s: float | None = None) -> FloatArray:
         """Times t_j of the samples of an episode (j = 0..N)."""

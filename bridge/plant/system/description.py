@@ -98,9 +98,13 @@ def split_name(name: str, components: dict[str, Component], key: str, where: str
     return Endpoint(component, variable)
 
 
-def from_experiment(experiment: Experiment) -> SystemDescription:
+def from_experiment(experiment: Experiment, *, check_files: bool = True) -> SystemDescription:
     """The system of ``experiment``: its ``system:`` section, or the SSP that ``model.fmu`` names
-    (merged with a ``system:`` section's algorithm, extra connections and parameters)."""
+    (merged with a ``system:`` section's algorithm, extra connections and parameters).
+
+    A component's FMU file must exist unless the component runs in a node (its FMU may be only
+    on the node's machine), or ``check_files`` is False (a machine serving some components
+    needs only their FMUs: ``bridge.net.system_node`` checks those)."""
     section = experiment.system or SystemSection()
     where = f" [{experiment.source}]" if experiment.source else ""
     base: SystemDescription | None = None
@@ -114,7 +118,7 @@ def from_experiment(experiment: Experiment) -> SystemDescription:
         if not spec.fmu and old is None:
             raise ConfigError(f"system.components.{name}.fmu: give the component's FMU{where}")
         fmu = (
-            _component_fmu(spec.fmu, experiment, name, spec.node)
+            _component_fmu(spec.fmu, experiment, name, must_exist=check_files and spec.node is None)
             if spec.fmu
             else (old.fmu if old else Path())
         )
@@ -140,15 +144,14 @@ def from_experiment(experiment: Experiment) -> SystemDescription:
     )
 
 
-def _component_fmu(spec: str, experiment: Experiment, name: str, node: str | None = None) -> Path:
+def _component_fmu(spec: str, experiment: Experiment, name: str, *, must_exist: bool) -> Path:
     if spec.startswith("example:"):
         from bridge.models import example_fmu
 
         parts = spec.split(":")[1:]
         version = parts[1] if len(parts) > 1 and parts[1] else "2.0"
         return example_fmu(parts[0], version, parts[2] if len(parts) > 2 else "cs")
-    # a component served by a node may have its FMU only on the node's machine
-    return _path(spec, experiment, f"system.components.{name}.fmu", must_exist=node is None)
+    return _path(spec, experiment, f"system.components.{name}.fmu", must_exist=must_exist)
 
 
 def _path(spec: str, experiment: Experiment, key: str, *, must_exist: bool = True) -> Path:

@@ -14,6 +14,7 @@ What is allowed lives in :mod:`~bridge.task.expr.tables`; :mod:`~bridge.task.exp
 
 from __future__ import annotations
 
+import ast
 import math
 from collections.abc import Sequence
 
@@ -22,7 +23,8 @@ import numpy.typing as npt
 
 from bridge.errors import BridgeError
 from bridge.task.expr.closures import Code, EvalError, lift
-from bridge.task.expr.compiler import Compiler
+from bridge.task.expr.compiler import Compiler, one_line
+from bridge.task.expr.nodes import dotted_name
 from bridge.task.expr.tables import ALLOWED, CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_LENGTH
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
     "MAX_LENGTH",
     "Expression",
     "compile_expression",
+    "expression_names",
 ]
 
 
@@ -102,3 +105,22 @@ def compile_expression(text: str, names: Sequence[str], *, where: str = "reward.
     compiler = Compiler(text, names, where)
     code = lift(compiler.compile())
     return Expression(text, compiler.used, code, len(names), where)
+
+
+def expression_names(text: str) -> tuple[str, ...]:
+    """Every variable name ``text`` spells (``x``, ``cart.x``, ``pos[1]``, ``der(x)``), in order
+    and unchecked, with the parts of longer names (``cart.x[1]`` gives ``cart.x`` and ``cart``)
+    and the names of functions called; ``()`` when the text does not parse
+    (:func:`compile_expression` words that error).
+
+    For resolving names against a partial model: a node serving one component of a system
+    knows only that component's variables and takes the others' names as written."""
+    source = one_line(text)[1]
+    if len(source) > MAX_LENGTH:
+        return ()
+    try:
+        tree = ast.parse(source, mode="eval")
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return ()
+    spelled = (dotted_name(node) for node in ast.walk(tree) if isinstance(node, ast.expr))
+    return tuple(dict.fromkeys(name for name in spelled if name is not None))

@@ -36,9 +36,7 @@ class Compiler:
         for i, name in enumerate(names):
             self.index.setdefault(name, i)
         self.used: dict[str, int] = {}
-        # YAML block scalars bring newlines and indentation; one line keeps columns simple.
-        self.display = text.replace("\r", " ").replace("\n", " ")
-        self.source = self.display.lstrip()
+        self.display, self.source = one_line(text)
         self.lead = len(self.display) - len(self.source)
         self.source_bytes = self.source.encode("utf-8", "surrogatepass")
 
@@ -151,6 +149,13 @@ class Compiler:
                 f"in {self.text!r}\n{self.caret(column)}"
             )
         raise self.unknown(name, node)
+
+
+def one_line(text: str) -> tuple[str, str]:
+    """(``text`` on one line, the same without leading blanks: what is parsed). YAML block scalars
+    bring newlines and indentation; one line keeps columns simple."""
+    display = text.replace("\r", " ").replace("\n", " ")
+    return display, display.lstrip()
 
 
 def _depth(root: ast.AST) -> int:

@@ -33,22 +33,22 @@ def _constants(parts: list[Compiled]) -> list[float] | None:
     return values if len(values) == len(parts) else None
 
 
-def _dotted(node: ast.expr) -> str | None:
+def dotted_name(node: ast.expr) -> str | None:
     """The FMU-style variable name a node spells (``a.b``, ``v[1]``, ``der(x)``), if any."""
     if isinstance(node, ast.Name):
         return node.id
     if isinstance(node, ast.Attribute):
-        base = _dotted(node.value)
+        base = dotted_name(node.value)
         return None if base is None else f"{base}.{node.attr}"
     if isinstance(node, ast.Subscript):
-        base = _dotted(node.value)
+        base = dotted_name(node.value)
         items = node.slice.elts if isinstance(node.slice, ast.Tuple) else [node.slice]
         indices = [str(i.value) for i in items if isinstance(i, ast.Constant) and type(i.value) is int]
         if base is None or len(indices) != len(items):
             return None
         return f"{base}[{','.join(indices)}]"
     if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and len(node.args) == 1:
-        inner = _dotted(node.args[0])
+        inner = dotted_name(node.args[0])
         return None if inner is None or node.keywords else f"{node.func.id}({inner})"
     return None
 
@@ -71,7 +71,7 @@ def _name(c: Compiler, node: ast.Name) -> Compiled:
 
 
 def _path(c: Compiler, node: ast.Attribute | ast.Subscript) -> Compiled:
-    dotted = _dotted(node)
+    dotted = dotted_name(node)
     if dotted is None:
         offset = node.value.end_col_offset or node.col_offset
         raise c.reject(CONSTRUCTS[type(node)], offset)
@@ -188,7 +188,7 @@ def _ifexp(c: Compiler, node: ast.IfExp) -> Compiled:
 
 
 def _call(c: Compiler, node: ast.Call) -> Compiled:
-    dotted = _dotted(node)
+    dotted = dotted_name(node)
     if dotted is not None and dotted in c.index:
         return c.name(dotted, node)
     name = _function_name(c, node)
