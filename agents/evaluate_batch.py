@@ -27,8 +27,17 @@ def run_cell_batch(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], None]
     experiment = load_experiment(cell.experiment, version=cell.version)
     spec = metric_spec(experiment)
     traces: list[Trace] = []
-    for start in range(0, len(cell.seeds), CHUNK):
-        traces += run_batch(experiment, cell, cell.seeds[start : start + CHUNK])
+    engines: dict[int, BatchEnv] = {}  # one per chunk size: the FMU instances serve every chunk
+    try:
+        for start in range(0, len(cell.seeds), CHUNK):
+            seeds = cell.seeds[start : start + CHUNK]
+            engine = engines.get(len(seeds))
+            if engine is None:
+                engine = engines[len(seeds)] = BatchEnv(experiment, len(seeds), autoreset=False)
+            traces += _run(engine, _policies(cell, experiment, len(seeds)), seeds, cell.scenario)
+    finally:
+        for engine in engines.values():
+            engine.close()
     rows = [
         {
             "agent": cell.agent_name,

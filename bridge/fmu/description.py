@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import zipfile
 from dataclasses import replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
@@ -44,12 +45,33 @@ _TYPE_ALIASES = {"Real": "Float64", "Integer": "Int32"}
 
 
 def read_model_info(path: str | Path) -> ModelInfo:
-    """Read an FMU's model description.
+    """Read an FMU's model description (parsed once per file version: a batch of N instances, or
+    a scenario grid, reads it once; an FMU rewritten in place is read again).
 
     Raises:
         FmuLoadError: the file is missing, not a zip archive, or has no valid modelDescription.xml.
     """
     fmu_path = Path(path).expanduser().resolve()
+    try:
+        stat = fmu_path.stat()
+    except OSError:
+        return _model_info(fmu_path, None)  # missing: the uncached read says so
+    version = (stat.st_mtime_ns, stat.st_size, stat.st_ino, stat.st_ctime_ns)
+    return _model_info(fmu_path, version if fmu_path.is_file() else None)
+
+
+def _model_info(fmu_path: Path, version: tuple[int, ...] | None) -> ModelInfo:
+    if version is None:  # a missing file or an extracted directory: read it every time
+        return _parse_model_info(fmu_path)
+    return _cached_model_info(fmu_path, version)
+
+
+@lru_cache(maxsize=64)
+def _cached_model_info(fmu_path: Path, version: tuple[int, ...]) -> ModelInfo:
+    return _parse_model_info(fmu_path)
+
+
+def _parse_model_info(fmu_path: Path) -> ModelInfo:
     md, problems = _read_description(fmu_path)
     interfaces: list[Interface] = []
     identifiers: dict[str, str] = {}

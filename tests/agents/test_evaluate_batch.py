@@ -12,11 +12,16 @@ from bridge.errors import ConfigError
 from bridge.experiment.examples import example_experiment
 
 
-def test_batch_evaluation_equals_the_episode_by_episode_evaluation() -> None:
+@pytest.mark.parametrize("chunk", [1024, 2], ids=["one-batch", "chunks-of-2"])
+def test_batch_evaluation_equals_the_episode_by_episode_evaluation(
+    chunk: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # chunks of 2 over 5 episodes: the batch's FMU instances serve chunk after chunk (2, 2, then 1)
+    monkeypatch.setattr("agents.evaluate_batch.CHUNK", chunk)
     path = Path(example_experiment("dcmotor_tracking"))
-    batch = evaluate(["pid", "random"], path, episodes=3, batch=True)
-    single = evaluate(["pid", "random"], path, episodes=3)
-    assert len(batch.rows) == len(single.rows) == 2 * 2 * 3  # agents x evaluation scenarios x episodes
+    batch = evaluate(["pid", "random"], path, episodes=5, batch=True)
+    single = evaluate(["pid", "random"], path, episodes=5)
+    assert len(batch.rows) == len(single.rows) == 2 * 2 * 5  # agents x evaluation scenarios x episodes
     for b, s in zip(batch.rows, single.rows):
         assert b.keys() == s.keys()
         for key, value in s.items():
