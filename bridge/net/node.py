@@ -262,7 +262,7 @@ class FmuNode:
         client = frame.sim_time_ns
         if not self.lease.allows(client):
             return self._reject(frame, "not_holder", self.lease.refusal(client))
-        values = frame.values.tolist()
+        values = list(frame.floats)
         reason = self.rules.inputs(values)
         if reason is not None:
             return self._reject(frame, "out_of_range", reason)

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import json
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -121,8 +122,14 @@ class Frame:
     step: int
     sim_time_ns: int
     flags: int = 0
-    values: npt.NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    floats: tuple[float, ...] = ()
     message: str = ""
+
+    @property
+    def values(self) -> npt.NDArray[np.float64]:
+        """The carried values as a new float64 array (``floats`` as a tuple costs no numpy call:
+        a node's hot path uses that)."""
+        return np.array(self.floats, dtype=np.float64)
 
     @property
     def terminated(self) -> bool:
@@ -132,13 +139,12 @@ class Frame:
 def encode_values(
     kind: int, episode: int, step: int, sim_time_ns: int, values: Any, *, flags: int = 0
 ) -> bytes:
-    """A frame carrying float64 values (OUTPUTS or ACTION)."""
+    """A frame carrying float64 values (OUTPUTS or ACTION): an array, or a sequence of numbers."""
+    header = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
+    if isinstance(values, (list, tuple)):  # a client's inputs: no numpy call on the hot path
+        return header + COUNT.pack(len(values)) + _float64s(len(values)).pack(*values)
     array = np.ascontiguousarray(values, dtype="<f8")
-    return (
-        HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
-        + COUNT.pack(array.size)
-        + array.tobytes()
-    )
+    return header + COUNT.pack(array.size) + array.tobytes()
 
 
 def encode_message(
@@ -168,8 +174,13 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
         raise TransportError(f"values frame announces {count} values but carries {body} bytes")
     if expected_values is not None and count != expected_values:
         raise TransportError(f"expected {expected_values} values, got {count}")
-    values = np.frombuffer(payload, dtype="<f8", count=count, offset=HEADER.size + COUNT.size)
-    return Frame(kind, episode, step, sim_time_ns, flags, values=values.astype(np.float64))
+    floats = _float64s(count).unpack_from(payload, HEADER.size + COUNT.size)
+    return Frame(kind, episode, step, sim_time_ns, flags, floats=floats)
+
+
+@lru_cache(maxsize=64)
+def _float64s(count: int) -> struct.Struct:
+    return struct.Struct(f"<{count}d")
 
 
 def encode_json(data: dict[str, Any]) -> bytes:

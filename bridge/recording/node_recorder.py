@@ -188,7 +188,7 @@ class NodeRecorder:
         layout = self._layouts.get(topic)
         if layout is None:
             return False
-        if frame.values.size != len(layout.names):
+        if len(frame.floats) != len(layout.names):
             self.stats.malformed += 1
             return False
         # a header stamp holds int32 seconds; a log time is 0 .. 2^63-1 ns
@@ -229,7 +229,7 @@ class NodeRecorder:
             self.stats.unplaced += 1
             return
         self.writer.add_message(
-            self.channels[topic], log, self._layouts[topic].pack(stamp_ns, frame.values.tolist())
+            self.channels[topic], log, self._layouts[topic].pack(stamp_ns, list(frame.floats))
         )
         if topic == meta.OUTPUTS:
             episode.last_step = max(episode.last_step, frame.step)
