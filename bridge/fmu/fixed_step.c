@@ -18,6 +18,7 @@
  * instance at every call, so resets, restored states and event re-initialisation need no restart.
  */
 #include <math.h>
+#include <pthread.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <string.h>
@@ -212,6 +213,7 @@ int fixed_step_advance(const FixedSpec* s, FixedCall* call) {
 
 #define FB_SET 16 /* + status: setting the inputs failed */
 #define FB_GET 32 /* + status: getting the outputs failed */
+#define FB_MAX_THREADS 64
 
 typedef struct {
     int major;
@@ -232,53 +234,88 @@ static bool near(double a, double b) { /* Python's math.isclose(a, b, rel_tol=1e
     return fabs(a - b) <= fmax(tol, 1e-12);
 }
 
+/* One instance's sample (see fixed_step_batch). */
+static int batch_one(const FixedBatch* b, const FixedSpec* spec, FixedCall* call, const double* u, double* y,
+                     long long* k) {
+    void* c = call->component;
+    int st;
+    if (b->n_in > 0) {
+        st = b->major == 3 ? ((fmi3SetFloat64TYPE*)b->set_real)(c, b->in_vr, b->n_in, u, b->n_in)
+                           : ((fmi2SetRealTYPE*)b->set_real)(c, b->in_vr, b->n_in, u);
+        if (st > WARNING) return FB_SET + st;
+    }
+    double start = b->t0 + (double)(*k) * b->h;
+    double end = b->t0 + (double)(*k + b->steps) * b->h;
+    call->time = call->origin = start;
+    call->end = end;
+    call->total = (long long)b->steps * b->substeps;
+    call->substep = (end - start) / (double)call->total;
+    double ev = call->announced;
+    call->next_event = (!isnan(ev) && start < ev && !near(start, ev)) ? ev : NAN;
+    int r = fixed_step_advance(spec, call);
+    if (r != FS_END) return r;
+    *k += b->steps;
+    st = b->major == 3 ? ((fmi3GetFloat64TYPE*)b->get_real)(c, b->out_vr, b->n_out, y, b->n_out)
+                       : ((fmi2GetRealTYPE*)b->get_real)(c, b->out_vr, b->n_out, y);
+    return st > WARNING ? FB_GET + st : 0;
+}
+
+typedef struct {
+    const FixedBatch* b;
+    const FixedSpec* const* specs;
+    FixedCall* const* calls;
+    const unsigned char* active;
+    const double* inputs;
+    double* outputs;
+    long long* k;
+    int* codes;
+    int first;
+    int last;
+} FixedSlice;
+
+static void* run_fixed_slice(void* arg) {
+    const FixedSlice* s = (const FixedSlice*)arg;
+    const FixedBatch* b = s->b;
+    for (int i = s->first; i < s->last; i++) {
+        s->codes[i] = s->active[i] ? batch_one(b, s->specs[i], s->calls[i], s->inputs + (size_t)i * b->n_in,
+                                               s->outputs + (size_t)i * b->n_out, s->k + i)
+                                   : -1;
+    }
+    return NULL;
+}
+
 /* For every active instance i: set its inputs, integrate one sample from step k[i] exactly as
- * fixed_step_advance does for one instance, get its outputs, k[i] += steps. codes[i]: 0 done;
- * -1 inactive; FB_SET / FB_GET + status; else the code fixed_step_advance stopped with (an event,
- * termination or a failure): the caller finishes that instance's sample (k[i] unchanged, the
- * instance at calls[i]->time). Returns how many instances the caller must finish. */
+ * fixed_step_advance does for one instance, get its outputs, k[i] += steps; over `threads`
+ * threads (each instance has its own work array). codes[i]: 0 done; -1 inactive; FB_SET /
+ * FB_GET + status; else the code fixed_step_advance stopped with (an event, termination or a
+ * failure): the caller finishes that instance's sample (k[i] unchanged, the instance at
+ * calls[i]->time). Returns how many instances the caller must finish. */
 int fixed_step_batch(const FixedBatch* b, int n, const FixedSpec* const* specs, FixedCall* const* calls,
                      const unsigned char* active, const double* inputs, double* outputs, long long* k,
-                     int* codes) {
+                     int* codes, int threads) {
+    if (threads > FB_MAX_THREADS) threads = FB_MAX_THREADS;
+    if (threads > n) threads = n;
+    if (threads < 1) threads = 1;
+    FixedSlice slices[FB_MAX_THREADS];
+    pthread_t ids[FB_MAX_THREADS];
+    bool started[FB_MAX_THREADS];
+    for (int t = 0; t < threads; t++) {
+        FixedSlice s = {b, specs, calls, active, inputs, outputs, k, codes, (int)((long long)n * t / threads),
+                        (int)((long long)n * (t + 1) / threads)};
+        slices[t] = s;
+        started[t] = false;
+    }
+    for (int t = 1; t < threads; t++) {
+        started[t] = pthread_create(&ids[t], NULL, run_fixed_slice, &slices[t]) == 0;
+        if (!started[t]) run_fixed_slice(&slices[t]); /* no thread available: do the slice here */
+    }
+    run_fixed_slice(&slices[0]);
+    for (int t = 1; t < threads; t++) {
+        if (started[t]) pthread_join(ids[t], NULL);
+    }
     int pending = 0;
     for (int i = 0; i < n; i++) {
-        if (!active[i]) {
-            codes[i] = -1;
-            continue;
-        }
-        FixedCall* call = calls[i];
-        void* c = call->component;
-        int st = 0;
-        if (b->n_in > 0) {
-            const double* u = inputs + (size_t)i * b->n_in;
-            st = b->major == 3 ? ((fmi3SetFloat64TYPE*)b->set_real)(c, b->in_vr, b->n_in, u, b->n_in)
-                               : ((fmi2SetRealTYPE*)b->set_real)(c, b->in_vr, b->n_in, u);
-            if (st > WARNING) {
-                codes[i] = FB_SET + st;
-                pending++;
-                continue;
-            }
-        }
-        double start = b->t0 + (double)k[i] * b->h;
-        double end = b->t0 + (double)(k[i] + b->steps) * b->h;
-        call->time = call->origin = start;
-        call->end = end;
-        call->total = (long long)b->steps * b->substeps;
-        call->substep = (end - start) / (double)call->total;
-        double ev = call->announced;
-        call->next_event = (!isnan(ev) && start < ev && !near(start, ev)) ? ev : NAN;
-        int r = fixed_step_advance(specs[i], call);
-        if (r != FS_END) {
-            codes[i] = r;
-            pending++;
-            continue;
-        }
-        k[i] += b->steps;
-        double* y = outputs + (size_t)i * b->n_out;
-        st = b->major == 3 ? ((fmi3GetFloat64TYPE*)b->get_real)(c, b->out_vr, b->n_out, y, b->n_out)
-                           : ((fmi2GetRealTYPE*)b->get_real)(c, b->out_vr, b->n_out, y);
-        codes[i] = st > WARNING ? FB_GET + st : 0;
-        if (st > WARNING) pending++;
+        if (codes[i] > 0) pending++;
     }
     return pending;
 }

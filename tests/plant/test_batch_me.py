@@ -44,9 +44,9 @@ def experiment(tmp_path: Path, name: str, version: str) -> Path:
     return path
 
 
-def open_plant(path: Path, n: int, native: bool) -> BatchPlant:
+def open_plant(path: Path, n: int, native: bool, threads: int = 1) -> BatchPlant:
     exp = load_experiment(path)
-    plant = BatchPlant(exp, n, native=native)
+    plant = BatchPlant(exp, n, native=native, threads=threads)
     plant.bind(list(exp.actions.inputs), list(exp.observations.outputs))
     return plant
 
@@ -69,13 +69,14 @@ def episode(plant: BatchPlant, values: list[dict[str, float]], inputs: np.ndarra
 
 def both_paths(path: Path, values: list[dict[str, float]], inputs: np.ndarray) -> dict[str, Any]:
     runs = {}
-    for native in (True, False):
-        with open_plant(path, len(values), native) as plant:
-            runs[native] = episode(plant, values, inputs)
+    for native, threads in ((True, 1), (True, 2), (False, 1)):  # two threads: two slices in C
+        with open_plant(path, len(values), native, threads) as plant:
+            runs[native, threads] = episode(plant, values, inputs)
             assert plant.native is native
-    for key in runs[True]:
-        np.testing.assert_array_equal(runs[True][key], runs[False][key], err_msg=key)
-    return runs[True]
+    for run in (runs[True, 2], runs[False, 1]):
+        for key in runs[True, 1]:
+            np.testing.assert_array_equal(runs[True, 1][key], run[key], err_msg=key)
+    return runs[True, 1]
 
 
 @pytest.mark.parametrize("version", ["2.0", "3.0"])

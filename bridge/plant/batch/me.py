@@ -78,7 +78,7 @@ class MeBatch:
         self.codes = np.zeros(n, dtype=np.int32)
         p = ctypes.c_void_p
         self._fn = native.load("fixed_step").fixed_step_batch
-        self._fn.argtypes = [p, ctypes.c_int, p, p, p, p, p, p, p]
+        self._fn.argtypes = [p, ctypes.c_int, p, p, p, p, p, p, p, ctypes.c_int]
         self._fn.restype = ctypes.c_int
 
     def bind(self, i: int, model: Model) -> None:
@@ -93,10 +93,13 @@ class MeBatch:
         inputs: npt.NDArray[np.float64],
         outputs: npt.NDArray[np.float64],
         k: npt.NDArray[np.int64],
+        threads: int = 1,
     ) -> int:
-        """One sample of every active instance; how many the caller must :meth:`finish`."""
+        """One sample of every active instance over ``threads`` native threads; how many the
+        caller must :meth:`finish`."""
         arrays = (self.specs, self.calls, active, inputs, outputs, k, self.codes)
-        return int(self._fn(ctypes.addressof(self.spec), len(self.specs), *(a.ctypes.data for a in arrays)))
+        pointers = (a.ctypes.data for a in arrays)
+        return int(self._fn(ctypes.addressof(self.spec), len(self.specs), *pointers, threads))
 
     def pending(self) -> list[int]:
         """The instances the last :meth:`step` left for :meth:`finish`."""

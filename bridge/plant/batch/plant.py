@@ -244,7 +244,7 @@ class BatchPlant:
         me = self._me
         assert me is not None
         result = BatchStep(self._outputs_buf, np.zeros(self.n, dtype=bool))
-        if me.step(mask.view(np.uint8), inputs, self._outputs_buf, self.k):
+        if me.step(mask.view(np.uint8), inputs, self._outputs_buf, self.k, threads=self.threads):
             names = (self.input_names, self.output_names)
             for i in me.pending():  # events, termination, failures: finished as one instance would
                 model = self.models[i]
