@@ -557,6 +557,29 @@ def test_recover_refuses_to_overwrite_and_to_write_over_its_input(
     assert result.exit_code == 0 and "messages" in result.output
 
 
+def test_recover_leaves_out_payloads_the_readers_skip(tmp_path: Path) -> None:
+    """A message whose payload is not valid CDR for its type (a flipped bit where no CRC checks
+    it) is skipped by the reader; recover leaves it out too, so what it writes reads clean."""
+    from bridge.recording import meta
+    from bridge.recording.reader import recover_file
+
+    path = tmp_path / "damaged.mcap"
+    layout = cdr.JointStateLayout.of(["x", "v"])
+    with McapWriter(path) as writer:
+        channels = meta.open_channels(writer, [meta.OUTPUTS], {meta.OUTPUTS: ["x", "v"]})
+        writer.add_message(channels[meta.OUTPUTS], 0, layout.pack(0, [1.0, 2.0]))
+        writer.add_message(channels[meta.OUTPUTS], 1, b"\x00\x01\x00\x00\xff\xff\xff\x7f")
+        writer.add_message(channels[meta.OUTPUTS], 2, layout.pack(2, [3.0, 4.0]))
+    damaged = read_recording(path)
+    assert damaged.problem_count == 1 and "not valid" in damaged.problems[0]
+    result = recover_file(path, tmp_path / "recovered.mcap")
+    assert result.messages == 2
+    assert any("left out 1 message(s) of /outputs that are not valid" in p for p in result.problems)
+    again = read_recording(result.path)
+    assert again.complete and not again.problem_count, again.problems
+    np.testing.assert_array_equal(again.series[meta.OUTPUTS].values, [[1.0, 2.0], [3.0, 4.0]])
+
+
 # -- cost -----------------------------------------------------------------------------------------------
 @pytest.mark.slow
 def test_recording_keeps_at_least_seven_tenths_of_the_step_rate(tmp_path: Path) -> None:
