@@ -38,6 +38,15 @@ class EventCalls:
             needed, terminate, _, _, defined, next_time = update()
         return bool(terminate), (float(next_time) if defined else None)
 
+    def handle(self) -> tuple[bool, float | None]:
+        """An event during integration: event mode, the discrete-state iteration, and back to
+        continuous time unless the FMU asks to terminate; returns what :meth:`iterate` does."""
+        self.enter_event_mode()
+        terminate, next_time = self.iterate()
+        if not terminate:
+            self.enter_continuous_time_mode()
+        return terminate, next_time
+
     def completed_step(self) -> tuple[bool, bool]:
         """completedIntegratorStep: (event mode needed, termination requested)."""
         result = self._fmu.completedIntegratorStep()

@@ -143,12 +143,8 @@ class FixedStepper:
 
     def handle_event(self, time_s: float, step: int) -> bool:
         """Event mode, discrete iteration, back to continuous time; True if termination requested."""
-        self.events.enter_event_mode()
-        terminate, self.next_event_s = self.events.iterate()
-        if terminate:
-            return True
-        self.events.enter_continuous_time_mode()
-        return False
+        terminate, self.next_event_s = self.events.handle()
+        return terminate
 
     def advance(self, start_s: float, end_s: float, step: int, *, restart: bool = False) -> bool:
         """Integrate from ``start_s`` to ``end_s``; returns True if the FMU requested termination."""

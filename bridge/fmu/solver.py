@@ -89,13 +89,10 @@ class MeStepper:
 
     def handle_event(self, time_s: float, step: int) -> bool:
         """Event mode, discrete iteration, back to continuous time; True if termination requested."""
-        self.events.enter_event_mode()
-        terminate, self.next_event_s = self.events.iterate()
-        if terminate:
-            return True
-        self.events.enter_continuous_time_mode()
-        self._solver.reset(time_s)
-        return False
+        terminate, self.next_event_s = self.events.handle()
+        if not terminate:
+            self._solver.reset(time_s)
+        return terminate
 
     def advance(self, start_s: float, end_s: float, step: int, *, restart: bool) -> bool:
         """Integrate from ``start_s`` to ``end_s``; returns True if the FMU requested termination."""
