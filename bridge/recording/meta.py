@@ -101,12 +101,16 @@ class EpisodeClock:
     offset_ns: int
     last_ns: int  # the latest log time written in the episode
 
-    def place(self, sim_time_ns: int) -> int | None:
+    def log_time(self, sim_time_ns: int) -> int | None:
         """The log time of ``sim_time_ns``, or None if it falls outside ``0 .. 2^63-1``."""
         log = sim_time_ns + self.offset_ns
-        if not 0 <= log <= INT64_MAX:
-            return None
-        self.last_ns = max(self.last_ns, log)
+        return log if 0 <= log <= INT64_MAX else None
+
+    def place(self, sim_time_ns: int) -> int | None:
+        """:meth:`log_time`, counted as written in the episode."""
+        log = self.log_time(sim_time_ns)
+        if log is not None:
+            self.last_ns = max(self.last_ns, log)
         return log
 
 

@@ -192,7 +192,7 @@ class NodeRecorder:
             self.stats.malformed += 1
             return False
         # a header stamp holds int32 seconds; a log time is 0 .. 2^63-1 ns
-        if abs(stamp_ns) >= _MAX_STAMP_NS or not 0 <= stamp_ns + episode.clock.offset_ns <= meta.INT64_MAX:
+        if abs(stamp_ns) >= _MAX_STAMP_NS or episode.clock.log_time(stamp_ns) is None:
             self.stats.unplaced += 1
             _log.debug("skipped a frame of episode %d at %d ns: it cannot be placed", frame.episode, stamp_ns)
             return False
