@@ -76,6 +76,9 @@ class MeBatch:
         self.specs = np.zeros(n, dtype=np.uintp)
         self.calls = np.zeros(n, dtype=np.uintp)
         self.codes = np.zeros(n, dtype=np.int32)
+        # the arrays this object owns keep their addresses: look them up once
+        self._own = (ctypes.addressof(self.spec), n, self.specs.ctypes.data, self.calls.ctypes.data)
+        self._codes = self.codes.ctypes.data
         p = ctypes.c_void_p
         self._fn = native.load("fixed_step").fixed_step_batch
         self._fn.argtypes = [p, ctypes.c_int, p, p, p, p, p, p, p, ctypes.c_int]
@@ -97,9 +100,9 @@ class MeBatch:
     ) -> int:
         """One sample of every active instance over ``threads`` native threads; how many the
         caller must :meth:`finish`."""
-        arrays = (self.specs, self.calls, active, inputs, outputs, k, self.codes)
-        pointers = (a.ctypes.data for a in arrays)
-        return int(self._fn(ctypes.addressof(self.spec), len(self.specs), *pointers, threads))
+        spec, n, specs, calls = self._own
+        data = [a.ctypes.data for a in (active, inputs, outputs, k)]
+        return int(self._fn(spec, n, specs, calls, *data, self._codes, threads))
 
     def pending(self) -> list[int]:
         """The instances the last :meth:`step` left for :meth:`finish`."""
