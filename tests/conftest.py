@@ -163,9 +163,10 @@ class Loopback:
         return ZenohOptions(connect=(self.endpoint,))
 
 
-@pytest.fixture
-def loopback() -> Iterator[Loopback]:
-    """A Zenoh router session on a free 127.0.0.1 port: nodes and CLI sessions connect to it."""
+@contextlib.contextmanager
+def router_on_loopback() -> Iterator[Loopback]:
+    """A Zenoh router session on a free 127.0.0.1 port and a key prefix of its own: nodes and
+    CLI sessions connect to it."""
     from bridge.net.transport import ZenohOptions, open_session
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -174,6 +175,13 @@ def loopback() -> Iterator[Loopback]:
         yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
     finally:
         session.close()  # type: ignore[attr-defined]
+
+
+@pytest.fixture
+def loopback() -> Iterator[Loopback]:
+    """A router on loopback for one test (:func:`router_on_loopback`)."""
+    with router_on_loopback() as net:
+        yield net
 
 
 @contextlib.contextmanager

@@ -169,7 +169,7 @@ def test_agent_run_command_as_a_subprocess(balancer: Path, loopback: Loopback) -
 
 
 def test_closed_loop_launcher_runs_node_agent_and_recorder(balancer: Path, tmp_path: Path) -> None:
-    from conftest import free_port
+    from tests.conftest import free_port
 
     script = Path(__file__).resolve().parents[2] / "launch_scripts" / "closed_loop.py"
     recording = tmp_path / "loop.mcap"

@@ -383,7 +383,7 @@ def test_launch_script_starts_nodes_and_trains(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from conftest import free_port
+    from tests.conftest import free_port
 
     script = Path(__file__).resolve().parents[2] / "launch_scripts" / "train_remote.py"
     result = subprocess.run(

@@ -2,22 +2,15 @@
 
 from __future__ import annotations
 
-import uuid
 from collections.abc import Iterator
 
 import pytest
 
-from tests.conftest import Loopback, free_port
+from tests.conftest import Loopback, router_on_loopback
 
 
 @pytest.fixture(scope="module")
 def net() -> Iterator[Loopback]:
     """A router session on 127.0.0.1 (a free port) and a key prefix unique to the module."""
-    from bridge.net.transport import ZenohOptions, open_session
-
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    session = open_session(ZenohOptions(mode="router", listen=(endpoint,)))
-    try:
-        yield Loopback(endpoint, f"test_{uuid.uuid4().hex[:10]}", session)
-    finally:
-        session.close()
+    with router_on_loopback() as loopback:
+        yield loopback
