@@ -87,12 +87,16 @@ class NodeClient:
         self.description = query_info(session, self.keys, timeout_s)
         self._declared = [
             session.liveliness().declare_token(self.keys.client(self.client_id)),
-            session.declare_subscriber(self.keys.outputs, self._on_frame),
+            self._subscribe_frames(),
             session.liveliness().declare_subscriber(self.keys.alive, self._on_liveliness, history=True),
         ]
         self._pub = session.declare_publisher(self.keys.actions)
         self._declared.append(self._pub)
         self._n_inputs = len(self.description["input_names"])
+
+    def _subscribe_frames(self) -> Any:
+        """The node's outputs frames, each handed to ``_on_frame`` on Zenoh's thread."""
+        return self._session.declare_subscriber(self.keys.outputs, self._on_frame)
 
     def _on_frame(self, sample: Any) -> None:
         try:
@@ -115,8 +119,12 @@ class NodeClient:
         if sample.kind == zenoh.SampleKind.DELETE:
             self.alive = False
             self._wake()  # wake a waiting step at once
+            self._lost()
         else:
             self.alive = True
+
+    def _lost(self) -> None:
+        """The node's liveliness token ended (``_wake`` has woken a waiting step)."""
 
     def send_action(
         self, plant: Plant, episode: int, step: int, inputs: Sequence[float], flags: int = 0
@@ -136,11 +144,12 @@ class NodeClient:
 
     def wait(self, plant: Plant) -> proto.Frame:
         """The outputs frame for the last action; raises if the node died, rejected it or timed out."""
-        if not self._event.wait(max(0.0, self._deadline - time.monotonic())):
+        if not self._answered():
             raise plant.failure(
                 StepTimeout,
                 f"no answer within {self.timeout_s:g} s",
-                "the node may be overloaded, hung or unreachable",
+                f"no outputs for step {self._want[1]} within {self.timeout_s:g} s",
+                "the node may be overloaded, hung or unreachable; "
                 f"timeout_s sets the limit [{self.keys.base}]",
             )
         frame = self._frame
@@ -151,6 +160,10 @@ class NodeClient:
                 f"{plant.name} rejected step {self._want[1]} of episode {self._want[0]}: {frame.message}"
             )
         return frame
+
+    def _answered(self) -> bool:
+        """Block until the answer arrives or the node dies (True), or until the deadline (False)."""
+        return self._event.wait(max(0.0, self._deadline - time.monotonic()))
 
     def _dead(self, plant: Plant, step: int | None = -1) -> PlantDied:
         fields: dict[str, Any] = {} if step == -1 else {"step": step}

@@ -234,12 +234,12 @@ class NodeComponent(Plant):
         timeout_s: float,
         where: str = "",
     ) -> None:
-        from bridge.net.remote import NodeClient
+        from bridge.net.channel import ChannelClient
 
         self.component = component
         node = component.node or component.name
         self.name = f"component {component.name!r} (node {node!r})"
-        self.client = NodeClient(session, node, prefix=prefix, timeout_s=timeout_s)
+        self.client = ChannelClient(session, node, prefix=prefix, timeout_s=timeout_s)
         d = self.client.description
         self.info = info_from_summary(d["model"])
         self.timing = _check_timing(self.name, d, macro_step_s, start_time_s, where)

@@ -35,6 +35,10 @@ class Watchdog:
     def end(self) -> None:
         self._busy = None
 
+    def rearm(self) -> None:
+        """Report the next overdue call too (``on_hung`` is called once until then)."""
+        self.fired = False
+
     @property
     def busy_s(self) -> float:
         """How long the current call has been running (0 when idle)."""

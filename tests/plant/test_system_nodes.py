@@ -11,17 +11,22 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
 import uuid
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+import gymnasium
 import numpy as np
 import pytest
 import yaml
 
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import ConfigError, PlantDied
+from bridge.errors import ConfigError, PlantDied, StepTimeout
 from bridge.experiment.config import load_experiment
+from bridge.net import protocol as proto
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import Loopback, _wait_for_line, _wait_for_node, stop_process
@@ -68,7 +73,7 @@ def served(net: Loopback, tmp_path_factory: pytest.TempPathFactory) -> Iterator[
         yield directory
 
 
-def trajectory(env: FmuEnv, seed: int, steps: int = 25) -> np.ndarray:
+def trajectory(env: Any, seed: int, steps: int = 25) -> np.ndarray:
     obs, info = env.reset(seed=seed)
     rows = [np.append(obs, info["time_s"])]
     for i in range(steps):
@@ -142,3 +147,68 @@ def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:
     file = system_file(tmp_path, "none", {"motor": "m"})
     with pytest.raises(ConfigError, match=r"\['load'\] is not served by a node"):
         serve_components(load_experiment(file), ["load"])
+
+
+# -- the master's answers channel (bridge.net.channel): overdue, dead, flooded -------------------------
+def test_a_stopped_node_times_out_and_the_next_episode_steps_again(net: Loopback, tmp_path: Path) -> None:
+    file = system_file(tmp_path, "stopped", {"load": "stopped-load"})
+    own = Loopback(net.endpoint, f"test_{uuid.uuid4().hex[:10]}", net.session)
+    remote = NodeComponents(session=own.session, prefix=own.prefix, timeout_s=5.0)
+    here = system_file(tmp_path, "stopped_here", {})
+    with serve(file, own, "load") as process, FmuEnv(here) as local:
+        env = FmuEnv(file, plant=SystemPlant(load_experiment(file), remote=remote))
+        try:
+            env.reset(seed=1)
+            env.step(env.action_space.sample())
+            process.send_signal(signal.SIGSTOP)
+            try:
+                start = time.monotonic()
+                with pytest.raises(
+                    StepTimeout,
+                    match=r"component 'load' \(node 'stopped-load'\) did not answer .*"
+                    r"no outputs for step 11 within 5 s; the",
+                ):
+                    env.step(env.action_space.sample())
+                assert 4.9 < time.monotonic() - start < 60  # the watchdog ended the wait, not before
+            finally:
+                process.send_signal(signal.SIGCONT)
+            # the channel the watchdog closed is opened again: the next episode is the in-process one
+            np.testing.assert_array_equal(trajectory(env, 4), trajectory(local, 4))
+        finally:
+            env.close()
+
+
+def test_a_node_killed_during_a_step_is_reported_before_the_timeout(net: Loopback, tmp_path: Path) -> None:
+    file = system_file(tmp_path, "killed", {"motor": "killed-motor"})
+    own = Loopback(net.endpoint, f"test_{uuid.uuid4().hex[:10]}", net.session)
+    with serve(file, own, "motor") as process, remote_env(file, own) as env:  # timeout 60 s
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        process.send_signal(signal.SIGSTOP)  # the next step waits for an answer that never comes
+        killer = threading.Timer(1.0, process.send_signal, (signal.SIGKILL,))
+        killer.start()
+        start = time.monotonic()
+        with pytest.raises(PlantDied, match=r"component 'motor' \(node 'killed-motor'\) died"):
+            env.step(env.action_space.sample())
+        assert time.monotonic() - start < 30  # the death ended the wait, not the 60 s timeout
+        killer.join()
+
+
+def test_stray_frames_on_a_nodes_outputs_key_do_not_disturb_a_step(served: Path, net: Loopback) -> None:
+    here = system_file(served, "here_stray", {})
+    there = system_file(served, "there_stray", {"load": NODES["load"]})
+    publisher = net.session.declare_publisher(proto.Keys(net.prefix, NODES["load"]).outputs)  # type: ignore[attr-defined]
+    stray = [b"", b"\x00" * 7, b"not a frame" * 30]
+    stray += [proto.encode_values(proto.OUTPUTS, e, s, 0, [9.0, 9.0]) for e in (0, 99) for s in range(40)]
+
+    class Flooded(gymnasium.Wrapper):  # type: ignore[type-arg]
+        def step(self, action: Any) -> Any:
+            for payload in stray:  # more than the channel holds: the oldest are dropped
+                publisher.put(payload)
+            return self.env.step(action)
+
+    try:
+        with FmuEnv(here) as local, remote_env(there, net) as distributed:
+            np.testing.assert_array_equal(trajectory(Flooded(distributed), 5), trajectory(local, 5))
+    finally:
+        publisher.undeclare()
