@@ -94,11 +94,14 @@ class ChannelClient(NodeClient):
     def _lost(self) -> None:
         self._channel.close()
 
-    def send_action(self, plant: Plant, episode: int, step: int, inputs: Any, flags: int = 0) -> None:
+    def _arm(self) -> None:
+        self._frame = None
         if not self._channel.is_open:
             self._channel.open()
             self._overdue = False
             self._watchdog.rearm()
+
+    def send_action(self, plant: Plant, episode: int, step: int, inputs: Any, flags: int = 0) -> None:
         super().send_action(plant, episode, step, inputs, flags)
         self._watchdog.begin("step")
 

@@ -325,7 +325,7 @@ class FmuNode:
 
     def _advance(self, inputs: list[float] | None) -> None:
         plant = self.plant
-        self.watchdog.begin(f"step {self.step + 1} of episode {self.episode}")
+        self.watchdog.begin("step %d of episode %d", self.step + 1, self.episode)
         try:
             outputs = plant.step(inputs)
         except PlantError as exc:
@@ -446,7 +446,7 @@ class FmuNode:
             raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned")
         try:
             self.saved.clear()  # a state of the last episode (and of this FMU instance) is no use
-            self.watchdog.begin(f"the reset of episode {episode}")
+            self.watchdog.begin("the reset of episode %d", episode)
             try:
                 outputs = self.plant.reset(values, inputs)
             finally:

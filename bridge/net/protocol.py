@@ -113,7 +113,7 @@ class Keys:
         return f"{self.base}/clients/{client_id:016x}" if client_id else f"{self.base}/clients/*"
 
 
-@dataclass
+@dataclass(slots=True)
 class Frame:
     """One decoded message."""
 

@@ -123,6 +123,11 @@ class NodeClient:
         else:
             self.alive = True
 
+    def _arm(self) -> None:
+        """Forget the last answer before the next action is sent."""
+        self._frame = None
+        self._event.clear()
+
     def _lost(self) -> None:
         """The node's liveliness token ended (``_wake`` has woken a waiting step)."""
 
@@ -132,8 +137,7 @@ class NodeClient:
         """Publish the action for ``step``; ``flags``: SAVE_STATE or RESTORE_STATE (rollback)."""
         if not self.alive:
             raise self._dead(plant)
-        self._frame = None
-        self._event.clear()
+        self._arm()
         self._want = (episode, step)
         self._deadline = time.monotonic() + self.timeout_s
         self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))

@@ -24,13 +24,14 @@ class Watchdog:
         self.deadline_s = deadline_s
         self.fired = False
         self._on_hung = on_hung
-        self._busy: tuple[str, float] | None = None
+        self._busy: tuple[str, tuple[object, ...], float] | None = None
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"watchdog-{name}", daemon=True)
         self._thread.start()
 
-    def begin(self, what: str) -> None:
-        self._busy = (what, time.monotonic())
+    def begin(self, what: str, *args: object) -> None:
+        """A call starts; ``what % args`` names it in the report (formatted only if it is late)."""
+        self._busy = (what, args, time.monotonic())
 
     def end(self) -> None:
         self._busy = None
@@ -43,7 +44,7 @@ class Watchdog:
     def busy_s(self) -> float:
         """How long the current call has been running (0 when idle)."""
         busy = self._busy
-        return time.monotonic() - busy[1] if busy is not None else 0.0
+        return time.monotonic() - busy[2] if busy is not None else 0.0
 
     def _run(self) -> None:
         period = min(0.25, self.deadline_s / 4)
@@ -51,11 +52,12 @@ class Watchdog:
             busy = self._busy
             if busy is None or self.fired:
                 continue
-            elapsed = time.monotonic() - busy[1]
+            what, args, start = busy
+            elapsed = time.monotonic() - start
             if elapsed > self.deadline_s:
                 self.fired = True
                 try:
-                    self._on_hung(busy[0], elapsed)
+                    self._on_hung(what % args if args else what, elapsed)
                 except Exception:  # the watchdog must outlive whatever it reports
                     _log.exception("the hung-call handler failed")
 

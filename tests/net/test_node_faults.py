@@ -99,6 +99,7 @@ def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
                 assert info(loopback, "stuck")["health"] == "ok"
             else:
                 assert described["health"] == "hung" and "restart the node" in described["health_detail"]
+                assert "has not returned from step 2 of episode 1 for" in described["health_detail"]
                 tokens = [
                     str(r.ok.key_expr)
                     for r in loopback.session.liveliness().get(  # type: ignore[attr-defined]
