@@ -116,6 +116,7 @@ class FmuNode:
         self.input_names, self.output_names = task.input_names, task.output_names
         plant.bind(self.input_names, self.output_names)
         self.rules = RequestRules(exp, self.info.variables, self.input_names)
+        self._plain = proto.PlainFrames(len(self.input_names), len(self.output_names))
         self.lease = Lease(name)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
@@ -240,8 +241,17 @@ class FmuNode:
 
     # -- actions (run on Zenoh's threads) ------------------------------------------------------------
     def _on_action(self, sample: Any) -> None:
+        payload = sample.payload.to_bytes()
         try:
-            payload = sample.payload.to_bytes()
+            fields = self._plain.read(payload)
+            if fields is None or not self._plain_step(fields, payload):
+                self._any_action(payload)
+        except Exception:  # never let a handler die: count it, log it, keep serving
+            self.counters["internal_errors"] += 1
+            _log.exception("node %s: an action could not be handled", self.name)
+
+    def _any_action(self, payload: bytes) -> None:
+        try:
             frame = proto.decode(payload, expected_values=len(self.input_names))
             if frame.kind != proto.ACTION:
                 raise TransportError(f"a {proto.KIND_NAMES[frame.kind]} frame on the actions key")
@@ -252,11 +262,29 @@ class FmuNode:
         except TransportError as exc:
             self._malformed(str(exc))
             return
+        self._accept(frame, payload)
+
+    def _plain_step(self, fields: tuple[Any, ...], payload: bytes) -> bool:
+        """The next step of this episode from its holder, no flags, inputs in range: step at once.
+
+        Exactly the case in which ``_accept`` would end in ``_advance``, checked with fewer calls
+        (the step's own cost on a busy machine); False leaves every other case to ``_accept``."""
+        episode, step, client = fields[3], fields[4], fields[5]
+        if episode != self.episode or step != self.step + 1 or self._ended or self.mode != "lockstep":
+            return False
+        values = list(fields[7:])
+        if self.health == "hung" or not self.lease.allows(client) or self.rules.inputs(values) is not None:
+            return False
+        if not self._lock.acquire(blocking=False):
+            return False
         try:
-            self._accept(frame, payload)
-        except Exception:  # never let a handler die: count it, log it, keep serving
-            self.counters["internal_errors"] += 1
-            _log.exception("node %s: an action could not be handled", self.name)
+            if episode != self.episode or step != self.step + 1 or self._ended:  # changed meanwhile
+                return False
+            self._last_action = (client, payload[proto.HEADER.size :])
+            self._advance(values)
+        finally:
+            self._lock.release()
+        return True
 
     def _accept(self, frame: proto.Frame, payload: bytes) -> None:
         client = frame.sim_time_ns
@@ -340,12 +368,11 @@ class FmuNode:
         flags = proto.TERMINATED if plant.terminated else 0
         self._ended = plant.terminated
         time_ns = round(plant.time_s * 1e9)
-        self._last_frame = proto.encode_values(
-            proto.OUTPUTS, self.episode, self.step, time_ns, outputs, flags=flags
-        )
+        values = outputs.tolist()
+        self._last_frame = self._plain.outputs(self.episode, self.step, time_ns, values, flags)
         self._pub.put(self._last_frame)
         if self._ros is not None:
-            self._ros.publish(time_ns, outputs.tolist())
+            self._ros.publish(time_ns, values)
 
     def _fail(self, exc: PlantError) -> None:
         hung = isinstance(exc, StepTimeout)

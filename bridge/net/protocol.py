@@ -178,6 +178,36 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
     return Frame(kind, episode, step, sim_time_ns, flags, floats=floats)
 
 
+class PlainFrames:
+    """The frames of a plain lockstep step, each read or written with one ``struct`` call.
+
+    A node's hot path: an ACTION without flags carrying ``n_inputs`` values, and the OUTPUTS frame
+    of ``n_outputs`` values it answers with, byte for byte what :func:`decode` accepts and
+    :func:`encode_values` writes. Anything else is for :func:`decode` (``read`` returns None)."""
+
+    def __init__(self, n_inputs: int, n_outputs: int) -> None:
+        self._action = struct.Struct(f"<BBHIqqI{n_inputs}d")
+        self._outputs = struct.Struct(f"<BBHIqqI{n_outputs}d")
+        self._n_inputs, self._n_outputs = n_inputs, n_outputs
+
+    def read(self, payload: bytes) -> tuple[Any, ...] | None:
+        """``(version, kind, flags, episode, step, client, count, *values)`` of a plain action."""
+        if len(payload) != self._action.size:
+            return None
+        fields = self._action.unpack(payload)
+        if fields[:3] != (VERSION, ACTION, 0) or fields[5] < 0 or fields[6] != self._n_inputs:
+            return None
+        return fields
+
+    def outputs(
+        self, episode: int, step: int, sim_time_ns: int, values: list[float], flags: int = 0
+    ) -> bytes:
+        """The OUTPUTS frame of ``values`` (a list of ``n_outputs`` floats)."""
+        return self._outputs.pack(
+            VERSION, OUTPUTS, flags, episode, step, sim_time_ns, self._n_outputs, *values
+        )
+
+
 @lru_cache(maxsize=64)
 def _float64s(count: int) -> struct.Struct:
     return struct.Struct(f"<{count}d")

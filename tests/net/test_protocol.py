@@ -56,3 +56,42 @@ def test_an_array_of_another_shape_or_type_is_sent_as_float64_in_c_order() -> No
 def test_malformed_frames_are_refused_with_the_reason(payload: bytes, message: str) -> None:
     with pytest.raises(TransportError, match=message):
         proto.decode(payload, expected_values=1)
+
+
+# -- PlainFrames: a node's one-call reading and writing of a plain step ------------------------------
+@pytest.mark.parametrize("n", [0, 1, 3, len(SPECIAL)])
+def test_plain_frames_read_and_write_what_decode_and_encode_do(n: int) -> None:
+    plain = proto.PlainFrames(n, n)
+    action = proto.encode_values(proto.ACTION, 7, 42, 12345, SPECIAL[:n])
+    fields = plain.read(action)
+    frame = proto.decode(action, expected_values=n)
+    assert fields is not None and fields[3:6] == (frame.episode, frame.step, frame.sim_time_ns)
+    assert bits(fields[7:]) == bits(frame.floats)
+    outputs = plain.outputs(7, 42, 99, list(SPECIAL[:n]), proto.TERMINATED)
+    assert outputs == proto.encode_values(
+        proto.OUTPUTS, 7, 42, 99, np.array(SPECIAL[:n]), flags=proto.TERMINATED
+    )
+
+
+def _action(flags: int = 0, client: int = 5, values: tuple[float, ...] = (1.0, 2.0)) -> bytes:
+    return proto.encode_values(proto.ACTION, 1, 1, client, list(values), flags=flags)
+
+
+@pytest.mark.parametrize(
+    "payload",
+    [
+        _action(flags=proto.SAVE_STATE),  # flags: the full path saves or restores states
+        _action(flags=0x40),  # unknown flags: the full path says they are malformed
+        _action(client=-3),  # a negative client id
+        _action(values=(1.0,)),  # another value count
+        _action(values=(1.0, 2.0, 3.0)),
+        _action()[:-1],  # cut short
+        _action() + b"\x00",  # one byte too many
+        b"\x02" + _action()[1:],  # another protocol version
+        bytes([1, proto.OUTPUTS]) + _action()[2:],  # not an action
+        b"",
+    ],
+)
+def test_plain_frames_leave_every_other_payload_to_the_full_decoder(payload: bytes) -> None:
+    assert proto.PlainFrames(2, 3).read(payload) is None
+    assert proto.PlainFrames(2, 3).read(_action()) is not None  # the same codec takes the plain one
