@@ -116,7 +116,8 @@ class FmuNode:
         self.input_names, self.output_names = task.input_names, task.output_names
         plant.bind(self.input_names, self.output_names)
         self.rules = RequestRules(exp, self.info.variables, self.input_names)
-        self._plain = proto.PlainFrames(len(self.input_names), len(self.output_names))
+        self._actions = proto.PlainFrames(proto.ACTION, len(self.input_names))
+        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(self.output_names))
         self.lease = Lease(name)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
@@ -243,7 +244,7 @@ class FmuNode:
     def _on_action(self, sample: Any) -> None:
         payload = sample.payload.to_bytes()
         try:
-            fields = self._plain.read(payload)
+            fields = self._actions.read(payload)
             if fields is None or not self._plain_step(fields, payload):
                 self._any_action(payload)
         except Exception:  # never let a handler die: count it, log it, keep serving
@@ -269,8 +270,10 @@ class FmuNode:
 
         Exactly the case in which ``_accept`` would end in ``_advance``, checked with fewer calls
         (the step's own cost on a busy machine); False leaves every other case to ``_accept``."""
-        episode, step, client = fields[3], fields[4], fields[5]
-        if episode != self.episode or step != self.step + 1 or self._ended or self.mode != "lockstep":
+        flags, episode, step, client = fields[2:6]
+        if flags or client < 0 or episode != self.episode or step != self.step + 1 or self._ended:
+            return False
+        if self.mode != "lockstep":
             return False
         values = list(fields[7:])
         if self.health == "hung" or not self.lease.allows(client) or self.rules.inputs(values) is not None:
@@ -369,7 +372,7 @@ class FmuNode:
         self._ended = plant.terminated
         time_ns = round(plant.time_s * 1e9)
         values = outputs.tolist()
-        self._last_frame = self._plain.outputs(self.episode, self.step, time_ns, values, flags)
+        self._last_frame = self._outputs.write(self.episode, self.step, time_ns, values, flags)
         self._pub.put(self._last_frame)
         if self._ros is not None:
             self._ros.publish(time_ns, values)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -179,33 +180,29 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
 
 
 class PlainFrames:
-    """The frames of a plain lockstep step, each read or written with one ``struct`` call.
+    """Values frames of one kind and count, each read or written with one ``struct`` call.
 
-    A node's hot path: an ACTION without flags carrying ``n_inputs`` values, and the OUTPUTS frame
-    of ``n_outputs`` values it answers with, byte for byte what :func:`decode` accepts and
-    :func:`encode_values` writes. Anything else is for :func:`decode` (``read`` returns None)."""
+    The hot paths of a lockstep step (a node reading actions and writing outputs, a client the
+    other way round): byte for byte what :func:`decode` accepts and :func:`encode_values` writes.
+    ``read`` returns None for any other payload, which is then :func:`decode`'s to refuse."""
 
-    def __init__(self, n_inputs: int, n_outputs: int) -> None:
-        self._action = struct.Struct(f"<BBHIqqI{n_inputs}d")
-        self._outputs = struct.Struct(f"<BBHIqqI{n_outputs}d")
-        self._n_inputs, self._n_outputs = n_inputs, n_outputs
+    def __init__(self, kind: int, count: int) -> None:
+        self._struct = struct.Struct(f"<BBHIqqI{count}d")
+        self._kind, self._count = kind, count
 
     def read(self, payload: bytes) -> tuple[Any, ...] | None:
-        """``(version, kind, flags, episode, step, client, count, *values)`` of a plain action."""
-        if len(payload) != self._action.size:
+        """``(version, kind, flags, episode, step, stamp, count, *values)``, the stamp being the
+        simulation time (outputs) or the client id (actions); None if not such a frame."""
+        if len(payload) != self._struct.size:
             return None
-        fields = self._action.unpack(payload)
-        if fields[:3] != (VERSION, ACTION, 0) or fields[5] < 0 or fields[6] != self._n_inputs:
+        fields = self._struct.unpack(payload)
+        if fields[0] != VERSION or fields[1] != self._kind or fields[6] != self._count:
             return None
         return fields
 
-    def outputs(
-        self, episode: int, step: int, sim_time_ns: int, values: list[float], flags: int = 0
-    ) -> bytes:
-        """The OUTPUTS frame of ``values`` (a list of ``n_outputs`` floats)."""
-        return self._outputs.pack(
-            VERSION, OUTPUTS, flags, episode, step, sim_time_ns, self._n_outputs, *values
-        )
+    def write(self, episode: int, step: int, stamp: int, values: Sequence[float], flags: int = 0) -> bytes:
+        """The frame of ``values`` (``count`` of them)."""
+        return self._struct.pack(VERSION, self._kind, flags, episode, step, stamp, self._count, *values)
 
 
 @lru_cache(maxsize=64)

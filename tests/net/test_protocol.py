@@ -58,40 +58,38 @@ def test_malformed_frames_are_refused_with_the_reason(payload: bytes, message: s
         proto.decode(payload, expected_values=1)
 
 
-# -- PlainFrames: a node's one-call reading and writing of a plain step ------------------------------
+# -- PlainFrames: the one-call reading and writing of a lockstep step's frames -------------------------
+@pytest.mark.parametrize("kind", [proto.ACTION, proto.OUTPUTS])
 @pytest.mark.parametrize("n", [0, 1, 3, len(SPECIAL)])
-def test_plain_frames_read_and_write_what_decode_and_encode_do(n: int) -> None:
-    plain = proto.PlainFrames(n, n)
-    action = proto.encode_values(proto.ACTION, 7, 42, 12345, SPECIAL[:n])
-    fields = plain.read(action)
-    frame = proto.decode(action, expected_values=n)
-    assert fields is not None and fields[3:6] == (frame.episode, frame.step, frame.sim_time_ns)
-    assert bits(fields[7:]) == bits(frame.floats)
-    outputs = plain.outputs(7, 42, 99, list(SPECIAL[:n]), proto.TERMINATED)
-    assert outputs == proto.encode_values(
-        proto.OUTPUTS, 7, 42, 99, np.array(SPECIAL[:n]), flags=proto.TERMINATED
-    )
+def test_plain_frames_read_and_write_what_decode_and_encode_do(kind: int, n: int) -> None:
+    plain = proto.PlainFrames(kind, n)
+    for flags in (0, proto.TERMINATED, proto.SAVE_STATE):
+        written = plain.write(7, 42, 12345, SPECIAL[:n], flags)
+        assert written == proto.encode_values(kind, 7, 42, 12345, np.array(SPECIAL[:n]), flags=flags)
+        fields, frame = plain.read(written), proto.decode(written, expected_values=n)
+        assert fields is not None and fields[1:6] == (kind, flags, 7, 42, 12345)
+        assert bits(fields[7:]) == bits(frame.floats) == bits(SPECIAL[:n])
 
 
-def _action(flags: int = 0, client: int = 5, values: tuple[float, ...] = (1.0, 2.0)) -> bytes:
-    return proto.encode_values(proto.ACTION, 1, 1, client, list(values), flags=flags)
+def _action(client: int = 5, values: tuple[float, ...] = (1.0, 2.0)) -> bytes:
+    return proto.encode_values(proto.ACTION, 1, 1, client, list(values))
 
 
 @pytest.mark.parametrize(
     "payload",
     [
-        _action(flags=proto.SAVE_STATE),  # flags: the full path saves or restores states
-        _action(flags=0x40),  # unknown flags: the full path says they are malformed
-        _action(client=-3),  # a negative client id
         _action(values=(1.0,)),  # another value count
         _action(values=(1.0, 2.0, 3.0)),
         _action()[:-1],  # cut short
         _action() + b"\x00",  # one byte too many
         b"\x02" + _action()[1:],  # another protocol version
-        bytes([1, proto.OUTPUTS]) + _action()[2:],  # not an action
+        bytes([1, proto.OUTPUTS]) + _action()[2:],  # another kind
+        proto.encode_message(proto.REJECT, 1, 1, 0, "x" * 20),  # a message of the same length
         b"",
     ],
 )
 def test_plain_frames_leave_every_other_payload_to_the_full_decoder(payload: bytes) -> None:
-    assert proto.PlainFrames(2, 3).read(payload) is None
-    assert proto.PlainFrames(2, 3).read(_action()) is not None  # the same codec takes the plain one
+    plain = proto.PlainFrames(proto.ACTION, 2)
+    assert plain.read(payload) is None
+    assert plain.read(_action(client=-3)) is not None  # the same codec takes a plain one (the node
+    # itself refuses negative client ids and flags, through the full path)

@@ -155,7 +155,7 @@ def test_a_restore_the_node_cannot_serve_is_rejected_with_the_reason(
     assert plant.master.last_iterations > 1
 
 
-def test_unknown_action_flags_are_malformed_and_never_stepped(
+def test_unknown_action_flags_and_negative_client_ids_are_malformed_and_never_stepped(
     node_system: tuple[SystemPlant, Loopback], net: Loopback
 ) -> None:
     plant, own = node_system
@@ -167,14 +167,16 @@ def test_unknown_action_flags_are_malformed_and_never_stepped(
     net.session.put(keys.actions, action)  # type: ignore[attr-defined]
     both = proto.encode_values(proto.ACTION, 1, 1, holder, [1.0, 0.0], flags=proto.ACTION_FLAGS)
     net.session.put(keys.actions, both)  # type: ignore[attr-defined]
+    negative = proto.encode_values(proto.ACTION, 1, 1, -holder, [1.0, 0.0])  # a plain step but the id
+    net.session.put(keys.actions, negative)  # type: ignore[attr-defined]
     deadline = time.monotonic() + 30
     counters: dict[str, int] = {}
     while time.monotonic() < deadline:
         counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
-        if counters.get("malformed") and counters.get("rejected_state"):
+        if counters.get("malformed") == 2 and counters.get("rejected_state"):
             break
         time.sleep(0.05)
-    assert counters.get("malformed") == 1 and counters.get("rejected_state") == 1, counters
+    assert counters.get("malformed") == 2 and counters.get("rejected_state") == 1, counters
     assert "steps" not in counters
     plant.step([10.0])  # and the holder steps on
 
