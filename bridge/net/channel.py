@@ -107,11 +107,10 @@ class ChannelClient(NodeClient):
         self._watchdog.begin("step")
 
     def _answered(self) -> bool:
-        want = self._want
         try:
             while (payload := self._channel.recv()) is not None:
                 frame = self._read(payload)
-                if frame is not None and (frame.episode, frame.step) == want:
+                if frame is not None and self._answers(frame):
                     self._frame = frame
                     return True
         finally:

@@ -417,7 +417,11 @@ class FmuNode:
         self.counters[f"rejected_{reason}"] += 1
         if _log.isEnabledFor(logging.INFO):
             _log.info("node %s rejected an action (%s): %s", self.name, reason, detail)
-        self._pub.put(proto.encode_message(proto.REJECT, frame.episode, frame.step, 0, f"{reason}: {detail}"))
+        # stamped with the refused client's id: no other client takes it for its own answer
+        reject = proto.encode_message(
+            proto.REJECT, frame.episode, frame.step, frame.sim_time_ns, f"{reason}: {detail}"
+        )
+        self._pub.put(reject)
 
     def _malformed(self, reason: str) -> None:
         self.counters["malformed"] += 1

@@ -20,7 +20,9 @@ step, sim_time_ns) then either ``n`` float64 values (``<I`` count + ``n*8`` byte
 ERROR/REJECT, a UTF-8 message. One frame per sample: outputs of a step travel together with
 the step index and simulation time, so consumers can lock step, detect loss and record. An
 ACTION has no simulation time: its last header field carries the sender's client id (0:
-anonymous), which the node checks against the holder of its lease. Its flags may ask the node
+anonymous), which the node checks against the holder of its lease; a REJECT carries the id of
+the client whose action it refuses, so that no other client takes it for its own answer. An
+ACTION's flags may ask the node
 to save its FMU state before stepping (SAVE_STATE) or to go back to that saved state and step
 again from there (RESTORE_STATE): a system's fixed-point iteration repeats a macro step this way
 without a round trip of its own (``bridge.net.node_state``).

@@ -104,9 +104,15 @@ class NodeClient:
             frame = proto.decode(sample.payload.to_bytes())
         except TransportError:
             return
-        if (frame.episode, frame.step) == self._want:
+        if self._answers(frame):
             self._frame = frame
             self._wake()
+
+    def _answers(self, frame: proto.Frame) -> bool:
+        """Whether ``frame`` answers the last action: its step, and not another client's reject."""
+        if (frame.episode, frame.step) != self._want:
+            return False
+        return frame.kind != proto.REJECT or frame.sim_time_ns in (0, self.client_id)
 
     def _wake(self) -> None:
         self._event.set()

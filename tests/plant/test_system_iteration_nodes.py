@@ -181,6 +181,31 @@ def test_unknown_action_flags_and_negative_client_ids_are_malformed_and_never_st
     plant.step([10.0])  # and the holder steps on
 
 
+def test_another_clients_reject_of_the_same_step_is_not_the_holders_answer(
+    node_system: tuple[SystemPlant, Loopback], net: Loopback
+) -> None:
+    plant, own = node_system
+    plant.bind(["controller.reference"], ["load.omega"])
+    plant.reset({}, [10.0])
+    motor = plant.plants["motor"]
+    keys = proto.Keys(own.prefix, "proto-motor")
+    intruder = motor.client.client_id ^ 2  # type: ignore[attr-defined]  # another client's id
+    # the holder's next action is this step of this episode: another client sends it first
+    action = proto.encode_values(proto.ACTION, motor.episode, motor.sample + 1, intruder, [1.0, 0.0])
+    net.session.put(keys.actions, action)  # type: ignore[attr-defined]
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
+        if counters.get("rejected_not_holder"):
+            break
+        time.sleep(0.05)
+    assert counters.get("rejected_not_holder") == 1, counters
+    # the reject (same episode and step) now waits in the holder's channel: it is not its answer
+    for _ in range(3):
+        plant.step([10.0])
+    assert motor.sample > 1
+
+
 def test_a_real_time_or_isolated_node_says_it_cannot_save(tmp_path: Path) -> None:
     from bridge.net.node import FmuNode
     from bridge.net.system_node import component_experiment
