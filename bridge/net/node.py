@@ -117,7 +117,6 @@ class FmuNode:
         plant.bind(self.input_names, self.output_names)
         self.rules = RequestRules(exp, self.info.variables, self.input_names)
         self._actions = proto.PlainFrames(proto.ACTION, len(self.input_names))
-        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(self.output_names))
         self.lease = Lease(name)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
@@ -271,9 +270,9 @@ class FmuNode:
         Exactly the case in which ``_accept`` would end in ``_advance``, checked with fewer calls
         (the step's own cost on a busy machine); False leaves every other case to ``_accept``."""
         flags, episode, step, client = fields[2:6]
-        if flags or client < 0 or episode != self.episode or step != self.step + 1 or self._ended:
+        if flags or client < 0 or self.mode != "lockstep":
             return False
-        if self.mode != "lockstep":
+        if episode != self.episode or step != self.step + 1 or self._ended:
             return False
         values = list(fields[7:])
         if self.health == "hung" or not self.lease.allows(client) or self.rules.inputs(values) is not None:
@@ -372,7 +371,9 @@ class FmuNode:
         self._ended = plant.terminated
         time_ns = round(plant.time_s * 1e9)
         values = outputs.tolist()
-        self._last_frame = self._outputs.write(self.episode, self.step, time_ns, values, flags)
+        self._last_frame = proto.encode_values(
+            proto.OUTPUTS, self.episode, self.step, time_ns, values, flags=flags
+        )
         self._pub.put(self._last_frame)
         if self._ros is not None:
             self._ros.publish(time_ns, values)

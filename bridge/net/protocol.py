@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import json
 import struct
-from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
@@ -143,10 +142,11 @@ def encode_values(
     kind: int, episode: int, step: int, sim_time_ns: int, values: Any, *, flags: int = 0
 ) -> bytes:
     """A frame carrying float64 values (OUTPUTS or ACTION): an array, or a sequence of numbers."""
-    header = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
-    if isinstance(values, (list, tuple)):  # a client's inputs: no numpy call on the hot path
-        return header + COUNT.pack(len(values)) + _float64s(len(values)).pack(*values)
+    if isinstance(values, (list, tuple)):  # the hot path of nodes and clients: one struct call
+        n = len(values)
+        return _values_frame(n).pack(VERSION, kind, flags, episode, step, sim_time_ns, n, *values)
     array = np.ascontiguousarray(values, dtype="<f8")
+    header = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
     return header + COUNT.pack(array.size) + array.tobytes()
 
 
@@ -182,14 +182,14 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
 
 
 class PlainFrames:
-    """Values frames of one kind and count, each read or written with one ``struct`` call.
+    """Values frames of one kind and count, read with one ``struct`` call and no :class:`Frame`.
 
-    The hot paths of a lockstep step (a node reading actions and writing outputs, a client the
-    other way round): byte for byte what :func:`decode` accepts and :func:`encode_values` writes.
-    ``read`` returns None for any other payload, which is then :func:`decode`'s to refuse."""
+    The hot paths of a lockstep step (a node reading actions, a client reading outputs): exactly
+    the frames :func:`decode` accepts with that kind and count. ``read`` returns None for any other
+    payload, which is then :func:`decode`'s to refuse."""
 
     def __init__(self, kind: int, count: int) -> None:
-        self._struct = struct.Struct(f"<BBHIqqI{count}d")
+        self._struct = _values_frame(count)
         self._kind, self._count = kind, count
 
     def read(self, payload: bytes) -> tuple[Any, ...] | None:
@@ -202,14 +202,16 @@ class PlainFrames:
             return None
         return fields
 
-    def write(self, episode: int, step: int, stamp: int, values: Sequence[float], flags: int = 0) -> bytes:
-        """The frame of ``values`` (``count`` of them)."""
-        return self._struct.pack(VERSION, self._kind, flags, episode, step, stamp, self._count, *values)
-
 
 @lru_cache(maxsize=64)
 def _float64s(count: int) -> struct.Struct:
     return struct.Struct(f"<{count}d")
+
+
+@lru_cache(maxsize=64)
+def _values_frame(count: int) -> struct.Struct:
+    """A whole values frame of ``count`` values: header, count, values."""
+    return struct.Struct(f"<BBHIqqI{count}d")
 
 
 def encode_json(data: dict[str, Any]) -> bytes:

@@ -92,8 +92,6 @@ class NodeClient:
         ]
         self._pub = session.declare_publisher(self.keys.actions)
         self._declared.append(self._pub)
-        self._n_inputs = len(self.description["input_names"])
-        self._actions = proto.PlainFrames(proto.ACTION, self._n_inputs)
 
     def _subscribe_frames(self) -> Any:
         """The node's outputs frames, each handed to ``_on_frame`` on Zenoh's thread."""
@@ -147,11 +145,7 @@ class NodeClient:
         self._arm()
         self._want = (episode, step)
         self._deadline = time.monotonic() + self.timeout_s
-        if len(inputs) == self._n_inputs:
-            action = self._actions.write(episode, step, self.client_id, inputs, flags)
-        else:  # the node refuses it, with the reason
-            action = proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags)
-        self._pub.put(action)
+        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))
 
     def ready(self) -> bool:
         """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""

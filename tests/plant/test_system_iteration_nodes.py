@@ -11,8 +11,9 @@ from __future__ import annotations
 import time
 import uuid
 import zipfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -137,6 +138,18 @@ def node_system(net: Loopback, tmp_path: Path) -> Iterator[tuple[SystemPlant, Lo
             node.close()
 
 
+def counters_once(net: Loopback, own: Loopback, ready: Callable[[dict[str, int]], Any]) -> dict[str, int]:
+    """The node's counters once ``ready`` says so (or as they are after 30 s)."""
+    deadline = time.monotonic() + 30
+    while True:
+        counters: dict[str, int] = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0][
+            "counters"
+        ]
+        if ready(counters) or time.monotonic() > deadline:
+            return counters
+        time.sleep(0.05)
+
+
 def test_a_restore_the_node_cannot_serve_is_rejected_with_the_reason(
     node_system: tuple[SystemPlant, Loopback],
 ) -> None:
@@ -169,13 +182,7 @@ def test_unknown_action_flags_and_negative_client_ids_are_malformed_and_never_st
     net.session.put(keys.actions, both)  # type: ignore[attr-defined]
     negative = proto.encode_values(proto.ACTION, 1, 1, -holder, [1.0, 0.0])  # a plain step but the id
     net.session.put(keys.actions, negative)  # type: ignore[attr-defined]
-    deadline = time.monotonic() + 30
-    counters: dict[str, int] = {}
-    while time.monotonic() < deadline:
-        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
-        if counters.get("malformed") == 2 and counters.get("rejected_state"):
-            break
-        time.sleep(0.05)
+    counters = counters_once(net, own, lambda c: c.get("malformed") == 2 and c.get("rejected_state"))
     assert counters.get("malformed") == 2 and counters.get("rejected_state") == 1, counters
     assert "steps" not in counters
     plant.step([10.0])  # and the holder steps on
@@ -193,12 +200,7 @@ def test_another_clients_reject_of_the_same_step_is_not_the_holders_answer(
     # the holder's next action is this step of this episode: another client sends it first
     action = proto.encode_values(proto.ACTION, motor.episode, motor.sample + 1, intruder, [1.0, 0.0])
     net.session.put(keys.actions, action)  # type: ignore[attr-defined]
-    deadline = time.monotonic() + 30
-    while time.monotonic() < deadline:
-        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
-        if counters.get("rejected_not_holder"):
-            break
-        time.sleep(0.05)
+    counters = counters_once(net, own, lambda c: c.get("rejected_not_holder"))
     assert counters.get("rejected_not_holder") == 1, counters
     # the reject (same episode and step) now waits in the holder's channel: it is not its answer
     for _ in range(3):
