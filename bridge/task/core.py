@@ -282,26 +282,10 @@ class Task:
 
     # -- termination -------------------------------------------------------------------------------
     def _build_termination(self) -> None:
-        """``termination_reason(signals)`` as one generated conditional over the bounds.
+        """``termination_reason(signals)`` as one generated conditional over the bounds."""
+        from bridge.task.codegen import termination
 
-        Built from indices and the validated float bounds only (a code template, no user text).
-        """
-        checks = []
-        for name, (lo, hi) in self.experiment.termination.bounds.items():
-            i = self._index[name]
-            # "not (lo <= x <= hi)" so that a NaN signal also counts as outside its bounds
-            if lo is not None and hi is not None:
-                checks.append((f"not ({float(lo)!r} <= s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
-            elif lo is not None:
-                checks.append((f"not (s[{i}] >= {float(lo)!r})", f"bounds:{name}"))
-            elif hi is not None:
-                checks.append((f"not (s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
-        body = "None"
-        for condition, reason in reversed(checks):
-            body = f"({reason!r} if {condition} else {body})"
-        self.termination_reason: Callable[[list[float]], str | None] = eval(
-            f"lambda s: {body}", {"__builtins__": {}}
-        )
+        self.termination_reason = termination(self.experiment.termination.bounds, self._index)
 
     # -- episode life cycle --------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
