@@ -70,12 +70,15 @@ def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
         loader.dispose()
 
 
-def _check_depth(text: str, file: Path | str) -> bool:
+def _check_depth(text: str, file: Path | str, loader_class: Any = _Loader) -> bool:
     """Raise if collections nest more than MAX_DEPTH deep; whether ``text`` has aliases.
 
-    A YAML syntax error is left for the composer to report.
+    A YAML syntax error is left for the composer to report. libyaml scans a flow collection's
+    tokens ahead to its own nesting limit (1000 levels in newer releases) before the first event,
+    so a deeper file fails there with libyaml's wording; it is scanned again with PyYAML's own
+    (iterative, 1024-character lookahead) loader, so the limit and its message are always ours.
     """
-    loader = _Loader(text)
+    loader = loader_class(text)
     depth, aliases = 0, False
     try:
         while loader.check_event():
@@ -93,6 +96,8 @@ def _check_depth(text: str, file: Path | str) -> bool:
             elif isinstance(event, AliasEvent):
                 aliases = True
     except yaml.YAMLError:
+        if loader_class is not yaml.SafeLoader:
+            return _check_depth(text, file, yaml.SafeLoader)
         return True
     finally:
         loader.dispose()
