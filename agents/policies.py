@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import importlib
 import json
+import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.errors import ConfigError
 from bridge.task.core import Task
+
+_log = logging.getLogger(__name__)
 
 ALGOS = ("PPO", "SAC", "TD3", "A2C", "DQN")
 
@@ -185,6 +188,7 @@ class Sb3Policy:
         model_file = _model_file(path)
         self.name = name or (run_dir.name if path.is_dir() else path.stem)
         self.run = _run_info(run_dir)
+        _check_status(self.run, run_dir)
         algo = self.run.get("algo")
         self.model = load_model(model_file, algo)
         self._obs_rms = None
@@ -232,6 +236,29 @@ def _model_file(path: Path) -> Path:
         f"{path} holds no model: expected best_model.zip or model.zip (a run directory from "
         "`fmu-bridge train`) or a .zip saved by stable-baselines3"
     )
+
+
+def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
+    """Refuse a run whose training failed; say so for one interrupted or never finished."""
+    status = run.get("status")
+    if status == "failed":
+        raise ConfigError(
+            f"the training of run {run_dir.name} failed ({run.get('error', 'no error recorded')}), so "
+            "its model is not a trained agent; fix the cause and train again, or continue it with "
+            f"`fmu-bridge train --resume` [{run_dir}]"
+        )
+    if status == "interrupted":
+        _log.warning(
+            "run %s was interrupted after %s timesteps: its model is only partly trained",
+            run_dir.name,
+            run.get("timesteps", "?"),
+        )
+    elif status == "running":
+        _log.warning(
+            "run %s says its training is still running (or its process was killed): the model may be "
+            "untrained or partly trained",
+            run_dir.name,
+        )
 
 
 def _run_info(run_dir: Path) -> dict[str, Any]:

@@ -8,10 +8,12 @@ TensorBoard logs. ``--resume RUN`` continues a run's step count.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import shutil
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -168,20 +170,72 @@ def train(
     progress: bool = True,
 ) -> TrainResult:
     """Train an agent; returns where everything went."""
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import VecNormalize
-
     if resume is not None:
         return _resume(resume, overrides or {}, progress)
     if experiment_path is None:
         raise ConfigError("train: give an experiment file, or resume= a run directory")
     experiment = load_experiment(experiment_path, version=version)
+    refuse_untrainable(experiment)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
     residual = _residual(experiment, settings)
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    with _marked(run_dir, info):
+        return _train_in(
+            run_dir,
+            info,
+            settings=settings,
+            experiment=experiment,
+            experiment_path=experiment_path,
+            residual=residual,
+            progress=progress,
+        )
+
+
+def refuse_untrainable(experiment: Experiment) -> None:
+    """A ConfigError (exit 2) for an experiment no agent can learn from: nothing to act on."""
+    where = f" [{experiment.source}]" if experiment.source else ""
+    if not experiment.actions.inputs:
+        raise ConfigError(
+            "train: the experiment has no actions (actions.inputs is empty), so there is nothing for "
+            "an agent to learn; add an FMU input or a tunable parameter to actions.inputs (see "
+            "`fmu-bridge inspect` for the FMU's inputs), or use `fmu-bridge simulate` to run an "
+            f"observation-only experiment{where}"
+        )
+    # an empty observation is refused by the experiment's own validation (observations: ...)
+
+
+@contextlib.contextmanager
+def _marked(run_dir: Path, info: dict[str, Any]) -> Iterator[None]:
+    """run.json says ``failed`` (with the error) or ``interrupted`` when training does not finish."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        info["status"] = "interrupted"
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        raise
+    except BaseException as exc:
+        info["status"] = "failed"
+        info["error"] = f"{type(exc).__name__}: {exc}"
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        raise
+
+
+def _train_in(
+    run_dir: Path,
+    info: dict[str, Any],
+    *,
+    settings: TrainingSettings,
+    experiment: Experiment,
+    experiment_path: Path,
+    residual: dict[str, Any] | None,
+    progress: bool,
+) -> TrainResult:
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import VecNormalize
+
     # the variables the Task was built from: a deployed agent needs them, not the FMU
     (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
@@ -236,6 +290,10 @@ def _learn(
     except KeyboardInterrupt:
         info["status"] = "interrupted"
         _log.warning("training interrupted: saving the model so far")
+    except BaseException as exc:
+        info["status"] = "failed"
+        info["error"] = f"{type(exc).__name__}: {exc}"
+        raise
     finally:
         wall = time.perf_counter() - start
         info["wall_time_s"] = info.get("wall_time_s", 0.0) + wall
