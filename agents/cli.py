@@ -207,6 +207,14 @@ def train_cmd(
         str | None,
         typer.Option(help="Residual RL over an evaluation baseline: BASELINE:SCALE (e.g. pid:0.1)."),
     ] = None,
+    fmu: Annotated[
+        str,
+        typer.Option(
+            "--fmu",
+            help="How the run folder's experiment names the FMU: absolute (its absolute path) or copy "
+            "(a copy in the run folder, so the run outlives the original).",
+        ),
+    ] = "absolute",
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
 
@@ -235,7 +243,13 @@ def train_cmd(
             "zenoh_mode": zenoh_mode,
         }
     result = train(
-        experiment, overrides=overrides, run_dir=run_dir, resume=resume, version=version, progress=progress
+        experiment,
+        overrides=overrides,
+        run_dir=run_dir,
+        resume=resume,
+        version=version,
+        progress=progress,
+        fmu=fmu,
     )
     console.print(
         f"trained {result.timesteps:,} steps in {result.wall_time_s:.1f} s "

@@ -146,7 +146,12 @@ def build_eval_env(
 
 
 def prepare_run_dir(
-    settings: TrainingSettings, experiment: Experiment, path: Path, run_dir: Path | None
+    settings: TrainingSettings,
+    experiment: Experiment,
+    path: Path,
+    run_dir: Path | None,
+    *,
+    fmu: str = "absolute",
 ) -> Path:
     if run_dir is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -156,8 +161,89 @@ def prepare_run_dir(
             f"run directory {run_dir} exists and is not empty; choose another --run-dir or --resume it"
         )
     run_dir.mkdir(parents=True, exist_ok=True)
-    shutil.copy(path, run_dir / "experiment.yaml")
+    write_run_experiment(path, run_dir, fmu=fmu)
     return run_dir
+
+
+_PATH_KEYS = ("fmu", "file")  # model.fmu, system.components.*.fmu, csv profiles' file
+
+
+def write_run_experiment(path: Path, run_dir: Path, *, fmu: str = "absolute") -> Path:
+    """The run folder's copy of the experiment at ``path``, self-contained: every relative file it
+    names (the FMU, system components, csv profiles) is rewritten as an absolute path, so the run
+    resumes, evaluates and deploys from any folder. With ``fmu="copy"`` the model's FMU is copied
+    into the run folder and named by its file name instead (the run then outlives the original).
+
+    The text is kept (comments and all) with only those values replaced; where a value cannot be
+    replaced in place, the data is written out without the comments.
+    """
+    if fmu not in ("absolute", "copy"):
+        raise ConfigError(f"--fmu {fmu!r}: expected absolute or copy")
+    import yaml
+
+    text = path.read_text()
+    data = yaml.safe_load(text)
+    base = path.resolve().parent
+    replace: dict[str, str] = {}
+    for spec in _relative_paths(data):
+        replace[spec] = str((base / Path(spec).expanduser()).resolve())
+    model = data.get("model") if isinstance(data, dict) else None
+    model_fmu = model.get("fmu") if isinstance(model, dict) else None
+    if fmu == "copy" and isinstance(model_fmu, str) and not model_fmu.startswith("example:"):
+        source = Path(replace.get(model_fmu, model_fmu)).expanduser()
+        if not source.is_file():
+            raise ConfigError(
+                f"--fmu copy: model.fmu {model_fmu!r} is not a file (looked at {source}) [{path}]"
+            )
+        shutil.copy(source, run_dir / source.name)
+        replace[model_fmu] = source.name
+    for spec, new in replace.items():
+        text = _with_value(text, spec, new)
+    if yaml.safe_load(text) != _substituted(data, replace):
+        header = f"# {path.name} with its file paths made absolute (comments were not kept)\n"
+        text = header + yaml.safe_dump(_substituted(data, replace), sort_keys=False)
+    target = run_dir / "experiment.yaml"
+    target.write_text(text)
+    return target
+
+
+def _with_value(text: str, spec: str, new: str) -> str:
+    """``text`` with the YAML value ``spec`` of a path key (plain or quoted) replaced by ``new``."""
+    import re
+
+    keys = "|".join(_PATH_KEYS)
+    pattern = rf"(?m)((?:^|[\s{{,])(?:{keys}):\s*)(['\"]?){re.escape(spec)}\2(?=\s*(?:[,}}#]|$))"
+    replacement = json.dumps(new)
+    return re.sub(pattern, lambda m: m.group(1) + replacement, text)
+
+
+def _relative_paths(data: Any) -> list[str]:
+    found: list[str] = []
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if key in _PATH_KEYS and isinstance(value, str) and _is_relative_file(value):
+                found.append(value)
+            else:
+                found += _relative_paths(value)
+    elif isinstance(data, list):
+        for item in data:
+            found += _relative_paths(item)
+    return found
+
+
+def _is_relative_file(spec: str) -> bool:
+    return not spec.startswith("example:") and not Path(spec).expanduser().is_absolute()
+
+
+def _substituted(data: Any, replace: dict[str, str]) -> Any:
+    if isinstance(data, dict):
+        return {
+            k: replace.get(v, v) if k in _PATH_KEYS and isinstance(v, str) else _substituted(v, replace)
+            for k, v in data.items()
+        }
+    if isinstance(data, list):
+        return [_substituted(item, replace) for item in data]
+    return data
 
 
 def train(
@@ -168,8 +254,10 @@ def train(
     resume: Path | None = None,
     version: str | None = None,
     progress: bool = True,
+    fmu: str = "absolute",
 ) -> TrainResult:
-    """Train an agent; returns where everything went."""
+    """Train an agent; returns where everything went. The run folder's experiment names its files
+    by absolute path, or (``fmu="copy"``) holds a copy of the FMU (see :func:`write_run_experiment`)."""
     if resume is not None:
         return _resume(resume, overrides or {}, progress)
     if experiment_path is None:
@@ -178,7 +266,7 @@ def train(
     refuse_untrainable(experiment)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
     residual = _residual(experiment, settings)
-    run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
+    run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir, fmu=fmu)
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
     with _marked(run_dir, info):
