@@ -75,6 +75,26 @@ class ActionMapping:
     noise_columns: list[int] = field(default_factory=list)
 
 
+class ExactAction(np.ndarray[Any, np.dtype[np.float64]]):
+    """A continuous action that also carries the physical input values it stands for.
+
+    Every env and wrapper sees an ordinary float64 action in [-1, 1]; :meth:`Task.action_to_inputs`
+    applies ``physical`` instead of mapping the action back, so a value the user gave in physical
+    units (``--policy constant:0.9``) reaches the FMU exactly (the mapping ``centre + half * a``
+    cannot give every float, its bounds among them). Fixed policies use it; agents do not.
+    """
+
+    physical: list[float] | None
+
+    def __new__(cls, action: Any, physical: list[float]) -> ExactAction:
+        obj = np.asarray(action, dtype=np.float64).view(cls)
+        obj.physical = [float(v) for v in physical]
+        return obj
+
+    def __array_finalize__(self, obj: Any) -> None:
+        self.physical = getattr(obj, "physical", None)
+
+
 @dataclass(frozen=True)
 class EpisodeTables:
     """The current episode's per-sample tables, one row per sample ``0..n``."""
@@ -192,6 +212,8 @@ class Task:
                 if v - v != 0.0:
                     raise self._bad_action(action, sample)
                 u[i] = centre[i] + half[i] * (-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
+            if type(action) is ExactAction and action.physical is not None and len(action.physical) == n:
+                u[:n] = action.physical
         elif self._kind == "discrete":
             u[:n] = self._discrete_row(action, sample)
         else:
