@@ -297,20 +297,23 @@ def evaluate_cmd(
     import time
 
     from agents.evaluate import evaluate
+    from agents.progress import episode_bar
     from agents.report import headline_columns, summary, write
 
     out = out or Path("runs") / f"eval-{time.strftime('%Y%m%d-%H%M%S')}"
-    result = evaluate(
-        agents,
-        config,
-        version=version,
-        scenarios=scenarios,
-        episodes=episodes,
-        workers=workers,
-        seed=seed,
-        record_dir=Path("recordings") / out.name if record and not batch else None,
-        batch=batch,
-    )
+    with episode_bar() as progress:
+        result = evaluate(
+            agents,
+            config,
+            version=version,
+            scenarios=scenarios,
+            episodes=episodes,
+            workers=workers,
+            seed=seed,
+            record_dir=Path("recordings") / out.name if record and not batch else None,
+            batch=batch,
+            progress=progress,
+        )
     from bridge.experiment.config import load_experiment
 
     paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))

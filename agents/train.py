@@ -367,12 +367,20 @@ def _learn(
     progress: bool,
     reset: bool,
 ) -> TrainResult:
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from agents.progress import announce, train_progress
+
     start = time.perf_counter()
     info["status"] = "running"
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    really = announce(model, timesteps)
+    if progress:
+        bar = train_progress(really)
+        callbacks = CallbackList([callbacks, bar]) if callbacks is not None else bar
     try:
         model.learn(
-            total_timesteps=timesteps, callback=callbacks, progress_bar=progress, reset_num_timesteps=reset
+            total_timesteps=timesteps, callback=callbacks, progress_bar=False, reset_num_timesteps=reset
         )
         info["status"] = "done"
     except KeyboardInterrupt:
