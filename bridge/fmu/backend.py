@@ -18,11 +18,9 @@ from fmpy import fmi1, fmi2, fmi3
 
 from bridge.errors import FmuError, FmuLoadError
 from bridge.fmu import logs
+from bridge.fmu.abi import DISCARD, WARNING
 from bridge.fmu.description import Interface, ModelInfo
 from bridge.fmu.events import fmi1_iterate
-
-OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
-STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 
 # FMI-3 type name -> (FMI 1/2 function suffix, FMI 3 function suffix, ctypes type per version)
 _V12 = {

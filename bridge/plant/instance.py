@@ -19,9 +19,9 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError, StepError
 from bridge.fmu import Model, ModelState, sha256
+from bridge.fmu.sample import NativeSample
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
-from bridge.plant.native_sample import NativeSample
 
 _EMPTY = np.zeros(0)
 
@@ -70,7 +70,7 @@ class FmuInstancePlant(Plant):
 
     @property
     def native_stepping(self) -> bool:
-        """True once samples run as one native call (``bridge.plant.native_sample``)."""
+        """True once samples run as one native call (``bridge.fmu.sample``)."""
         return self._native is not None
 
     @property
