@@ -139,6 +139,12 @@ class FmuInstancePlant(Plant):
         """Whether :meth:`save` works: the FMU can get and set its state (FMI 2.0/3.0)."""
         return self.model.can_restore
 
+    @property
+    def save_refusal(self) -> str:
+        if self.can_save:
+            return ""
+        return "the FMU cannot get and set its state (FMI 1.0, or canGetAndSetFMUstate is false)"
+
     def save(self) -> SavedState:
         """The state now: the model's, the sample index and the terminated flag."""
         try:
