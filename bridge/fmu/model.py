@@ -105,6 +105,7 @@ class Model:
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
         self._me: MeStepper | FixedStepper | None = None
+        self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
@@ -282,8 +283,8 @@ class Model:
         if not self._initialized:
             self.initialize(values)
             return
-        checked = self._check_init_values(values or {})
-        key = _freeze(checked)
+        checked = self._check_init_values(values) if values else {}
+        key = _freeze(checked) if checked else ()
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
         if snapshot is not None and self.reset_policy in ("auto", "restore"):
             self._snapshots.move_to_end(key)
@@ -470,10 +471,13 @@ class Model:
 
         Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
         ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
-        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised.
+        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised; the
+        same dict while the instance is the same (a reset by restore or fmi reset keeps it).
         In model exchange (fixed-step solvers only) :attr:`_fixed_stepper` integrates.
         """
-        b = self._backend
+        b, cached = self._backend, self._handles
+        if cached is not None and cached[0] is b.component:  # the same instance: the same addresses
+            return cached[1]
         if b.major < 2 or not b.component or (self.interface == "me" and self._fixed_stepper is None):
             raise FmuError(
                 f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
@@ -481,7 +485,7 @@ class Model:
             )
         v, functions = f"fmi{b.major}", b.functions
         real = "Real" if b.major == 2 else "Float64"
-        return {
+        handles = {
             "component": pointer_value(b.component),
             "major": b.major,
             "set_real": address(functions.get(f"{v}Set{real}")),
@@ -489,6 +493,8 @@ class Model:
             "do_step": address(functions.get(f"{v}DoStep")),
             "bool_status": address(functions.get("fmi2GetBooleanStatus")) if b.major == 2 else 0,
         }
+        self._handles = (b.component, handles)
+        return handles
 
     @property
     def _fixed_stepper(self) -> FixedStepper | None:

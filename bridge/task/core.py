@@ -22,11 +22,12 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
-from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
+from bridge.experiment.config import Experiment, known_references, scenario_inputs
 from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
-from bridge.task.rewards import build_reward
-from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
+from bridge.task.observe import ObservationBuilder
+from bridge.task.rewards import build_reward, reward_signal_names
+from bridge.task.scenario import EpisodeSpec, ScenarioSampler, noise_table
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -48,14 +49,6 @@ def load_callable(path: str, key: str) -> Callable[..., Any]:
     if not callable(fn):
         raise ConfigError(f"{key}: {module_name} has no callable {attr!r}")
     return fn  # type: ignore[no-any-return]
-
-
-def _noise_table(
-    entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int
-) -> list[list[float]]:
-    if not entries:
-        return []
-    return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -98,8 +91,6 @@ def task_signal_names(exp: Experiment, variables: Collection[str]) -> SignalName
     ``variables`` (names, array elements included). Names the experiment reads are taken as
     written; only ``reward.expression`` is resolved against ``variables`` and the references
     (an unknown name there is a ConfigError)."""
-    from bridge.task.rewards import reward_signal_names
-
     refs_known = known_references(exp)
     obs = exp.observations
     wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
@@ -134,7 +125,8 @@ class Task:
         self.sampler = ScenarioSampler(exp, self.sample_times)
         self._build_actions()
         self._build_observations()
-        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs)
+        user = load_callable(exp.reward.callable, "reward.callable") if exp.reward.callable else None
+        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs, user)
         self._build_termination()
         self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
         self.episode: EpisodeSpec | None = None
@@ -275,8 +267,6 @@ class Task:
 
     # -- observations ------------------------------------------------------------------------------
     def _build_observations(self) -> None:
-        from bridge.task.observe import ObservationBuilder
-
         self.observer = ObservationBuilder(self, self.experiment.observations, self._variables)
         self.observation_space = self.observer.space
 
@@ -329,7 +319,7 @@ class Task:
         self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
         self._previous_inputs[:] = self._inputs
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
-        self._action_noise_table = _noise_table(self._action_noise, rng, n + 1)
+        self._action_noise_table = noise_table(self._action_noise, rng, n + 1)
         self.observer.new_episode(rng, n + 1)
         return spec
 
