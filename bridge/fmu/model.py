@@ -290,8 +290,9 @@ class Model:
             self._snapshots.move_to_end(key)
             state, next_event_s = snapshot
             self._backend.set_state(state)
-            self._restart()
+            self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
             if self._me is not None:
+                self._me.restart(self.start_time_s)
                 self._me.next_event_s = next_event_s
             return
         policy = self.reset_policy

@@ -48,7 +48,7 @@ class NativeSample:
         self._u: int | None = None
         self._y: int | None = None
         self._component = ctypes.c_void_p(0)
-        self._bound: tuple[dict[str, int], object] | None = None  # the handles and clock bound
+        self._bound: tuple[object, object] | None = None  # the instance and the clock bound
         self.refresh()
 
     @classmethod
@@ -70,11 +70,11 @@ class NativeSample:
         """Re-read the instance's function and component addresses (after a reset); nothing to
         do where the reset kept the instance (restore, fmi reset): a reset stays cheap."""
         model = self._model
-        h = model._native_handles()
         bound = self._bound
-        if bound is not None and bound[0] is h and bound[1] is model._clock:
+        if bound is not None and bound[0] is model._backend.component and bound[1] is model._clock:
             return
-        self._bound = (h, model._clock)
+        h = model._native_handles()
+        self._bound = (model._backend.component, model._clock)
         spec = self._spec
         spec.major, spec.set_real, spec.get_real = h["major"], h["set_real"], h["get_real"]
         spec.do_step, spec.bool_status = h["do_step"], h["bool_status"]

@@ -130,7 +130,9 @@ class Task:
         self._build_termination()
         self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
         self.episode: EpisodeSpec | None = None
+        self._action_starts = [self._start(name) for name in self.action_inputs]  # the FMU's starts
         self._refs = np.zeros((1, len(self.reference_names)))
+        self._no_columns = np.zeros((0, 0))
         self._profile_inputs = np.zeros((1, len(self.input_names) - len(self.action_inputs)))
 
     def sample_times(self, duration_s: float | None = None) -> FloatArray:
@@ -301,10 +303,12 @@ class Task:
             spec = self._episode_hook(spec, rng) or spec
         self.episode = spec
         n = spec.n_samples
+        if len(self._no_columns) != n + 1:  # kept between episodes of one length: a reset stays cheap
+            self._no_columns = np.zeros((n + 1, 0))
         self._refs = (
             np.column_stack([spec.references[r] for r in self.reference_names])
             if self.reference_names
-            else np.zeros((n + 1, 0))
+            else self._no_columns
         )
         profile_names = self.input_names[len(self.action_inputs) :]
         self._profile_inputs = (
@@ -312,11 +316,14 @@ class Task:
                 [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
             )
             if profile_names
-            else np.zeros((n + 1, 0))
+            else self._no_columns
         )
         self._has_refs = bool(self.reference_names)
         self._inputs[len(self.action_inputs) :] = self._profile_inputs[0].tolist() if profile_names else []
-        self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        if spec.values:
+            self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        else:  # no parameters or start values this episode: the inputs start at their FMU starts
+            self._inputs[: len(self.action_inputs)] = self._action_starts
         self._previous_inputs[:] = self._inputs
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
         self._action_noise_table = noise_table(self._action_noise, rng, n + 1)

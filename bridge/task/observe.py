@@ -148,6 +148,8 @@ class ObservationBuilder:
         self, signals: list[float], inputs: list[float], rng: np.random.Generator
     ) -> npt.NDArray[np.float32]:
         first = self._single(signals, inputs, rng)
+        if self._section.history == 1:  # as observe() does: no history to keep
+            return np.array(first, dtype=np.float32)
         self._history = deque([first] * self._section.history, maxlen=self._section.history)
         return self._stack()
 
