@@ -86,7 +86,8 @@ def raw_stepping(model: str, n: int, repeats: int) -> list[tuple[str, ...]]:
     plant.bind([RAW[model][0]], [RAW[model][1]])
     for i in range(n):
         plant.reset(i, {}, [0.0])
-    stepper, spec = plant._stepper, plant._spec
+    batch = plant.batch
+    stepper, spec = batch._stepper, batch._spec
     assert stepper is not None and spec is not None
     inputs = np.random.default_rng(0).uniform(-1, 1, size=(n, 1))
     outputs, status, active = np.zeros((n, 1)), np.zeros(n, dtype=np.int32), np.ones(n, dtype=np.uint8)
@@ -94,8 +95,8 @@ def raw_stepping(model: str, n: int, repeats: int) -> list[tuple[str, ...]]:
     def native(samples: int) -> None:
         for _ in range(samples // n):
             stepper.step(
-                spec, comps=plant._comps, active=active, inputs=inputs, outputs=outputs,
-                k=plant.k, status=status,
+                spec, comps=batch._comps, active=active, inputs=inputs, outputs=outputs,
+                k=batch.clock, status=status,
             )  # fmt: skip
 
     def plant_step(samples: int) -> None:
@@ -103,7 +104,7 @@ def raw_stepping(model: str, n: int, repeats: int) -> list[tuple[str, ...]]:
             plant.step(inputs)
 
     def do_steps(samples: int) -> None:
-        stepper.do_steps(spec, plant._comps, plant.k, samples // n)
+        stepper.do_steps(spec, batch._comps, batch.clock, samples // n)
 
     rates = interleaved(
         {"native call": native, "BatchPlant.step": plant_step, "doStep only": do_steps}, n * 4000, repeats
@@ -161,10 +162,10 @@ def env_comparison(name: str, n: int, repeats: int) -> list[tuple[str, ...]]:
     rng = np.random.default_rng(0)
     policy = cartpole_policy if name.startswith("cartpole") else random_policy(rng, n)
     batch_loop, dummy_loop = env_loop(batch, policy, n), env_loop(dummy, policy, n)
-    plant = batch.engine.plant
+    plant = batch.engine.plant.batch
     stepper, spec = plant._stepper, plant._spec
     assert stepper is not None and spec is not None
-    k = plant.k.copy()
+    k = plant.clock.copy()
 
     def floor(samples: int) -> None:
         stepper.do_steps(spec, plant._comps, k, samples // n)

@@ -9,6 +9,14 @@ slows neither's figure); ``--wall-clock`` times them with the wall clock instead
 ``--isolated`` adds the same env over ``IsolatedFmuPlant`` (the FMU in a child process behind a
 deadline) to the interleaved loops, to state what isolation costs per step.
 
+Then resets, timed one call at a time from outside (wall clock, medians): ``env.reset()`` after a
+finished episode and back to back, on the FMI 2.0 co-simulation cart-pole (one input, four
+outputs) with reset policy ``restore`` and no randomisation (every reset restores the snapshot
+taken after initialisation). After an episode is the case training meets: the reset's code and
+data are no longer in the caches the steps used, so what a reset touches counts, not only what
+it computes. Target: <= 30 us. Last, ``env.reset(seed=...)`` of the chosen experiment with its
+per-episode randomisation (each reset initialises the FMU anew).
+
 Both loops are driven by the same balancing controller, so episodes run their full 500 samples
 and resets weigh the same in both. The env does everything an RL step needs (action mapping,
 observation processing, reward, termination, info); the raw loop sets the input, steps and
@@ -19,7 +27,9 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 from common import RawFmpyLoop, fmt_us, interleaved, table
@@ -31,6 +41,13 @@ from bridge.models import example_fmu
 from bridge.plant.isolated import IsolatedFmuPlant
 
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
+RESTORE_EXPERIMENT = """\
+model: {fmu: 'example:cartpole', step_size: 0.02, sampling_time: 0.02, episode_duration: EPISODE_S,
+        reset_policy: restore}
+actions: {inputs: [force], low: {force: -10}, high: {force: 10}}
+observations: {outputs: [x, x_dot, theta, theta_dot], scale: none}
+reward: {terms: [{alive: 1.0}]}
+"""
 GAINS = (1.0, 1.5, 30.0, 5.0)  # a stabilising state feedback for the cart-pole
 
 
@@ -39,7 +56,7 @@ def push(y: list[float]) -> float:
     return max(-10.0, min(10.0, sum(g * v for g, v in zip(GAINS, y))))
 
 
-def main() -> None:
+def parse_args() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--repeats", type=int, default=7)
@@ -53,7 +70,13 @@ def main() -> None:
     parser.add_argument(
         "--wall-clock", action="store_true", help="time with the wall clock instead of this thread's CPU time"
     )
-    args = parser.parse_args()
+    parser.add_argument("--reset-episodes", type=int, default=400, help="resets timed after episodes")
+    parser.add_argument("--reset-samples", type=int, default=500, help="samples of those episodes")
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = parse_args()
 
     env = FmuEnv(example_experiment(args.experiment))
     discrete = env.action_space.shape == ()
@@ -106,6 +129,12 @@ def main() -> None:
         print(f"isolated plant: +{extra_us:.1f} us per step over the in-process plant")
         isolated.close()
 
+    after, back_to_back = reset_costs(args.reset_episodes, args.reset_samples)
+    print(
+        f"env.reset() with reset policy restore (cart-pole FMI 2.0 CS, no randomisation), "
+        f"{args.reset_episodes} resets of each kind: after a finished {args.reset_samples}-sample "
+        f"episode {after:.1f} us (median; target <= 30 us), back to back {back_to_back:.1f} us"
+    )
     samples = []
     for _ in range(5):
         start = time.perf_counter()
@@ -118,6 +147,31 @@ def main() -> None:
     )
     env.close()
     raw.close()
+
+
+def reset_costs(episodes: int, samples: int) -> tuple[float, float]:
+    """Median wall-clock us of ``env.reset()`` after a finished episode and right after a reset."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "restore.yaml"
+        path.write_text(RESTORE_EXPERIMENT.replace("EPISODE_S", repr(samples * 0.02)))
+        env = FmuEnv(load_experiment(path))
+    action = np.zeros(1, dtype=np.float32)
+    after, back_to_back = [], []
+    env.reset(seed=0)
+    clock = time.perf_counter
+    for _ in range(episodes):
+        done = False
+        while not done:
+            _, _, terminated, truncated, _ = env.step(action)
+            done = terminated or truncated
+        start = clock()
+        env.reset()
+        after.append(clock() - start)
+        start = clock()
+        env.reset()
+        back_to_back.append(clock() - start)
+    env.close()
+    return statistics.median(after) * 1e6, statistics.median(back_to_back) * 1e6
 
 
 if __name__ == "__main__":

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import shutil
 import subprocess
 import sys
@@ -63,3 +64,47 @@ def test_bridge_never_imports_torch_sb3_or_agents() -> None:
     )
     result = _run(sys.executable, "-c", code)
     assert result.stdout.strip() == "[]", result.stdout + result.stderr
+
+
+_STATUS_NAMES = {"OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING", "STATUS_NAMES"}
+
+
+def fmi_leaks(source: str) -> list[str]:
+    """What in ``source`` belongs to ``bridge.fmu``: ctypes imports, and constants named like FMI
+    statuses (``_WARNING = 1``, ``STATUS_NAMES = (...)``) holding FMI status values."""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Import | ast.ImportFrom):
+            modules = [a.name for a in node.names] if isinstance(node, ast.Import) else [node.module or ""]
+            found += [f"line {node.lineno}: imports {m}" for m in modules if m.split(".")[0] == "ctypes"]
+        elif isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant | ast.Tuple):
+            names = [t.id for t in node.targets if isinstance(t, ast.Name)]
+            if any(n.lstrip("_").upper() == n.lstrip("_") and n.lstrip("_") in _STATUS_NAMES for n in names):
+                values = node.value.elts if isinstance(node.value, ast.Tuple) else [node.value]
+                if all(isinstance(v, ast.Constant) and v.value in (0, 1, 2, 3, 4, 5) for v in values) or (
+                    "STATUS_NAMES" in names
+                ):
+                    found.append(f"line {node.lineno}: defines {', '.join(names)}")
+    return found
+
+
+def test_the_fmi_leak_check_catches_ctypes_and_status_codes() -> None:
+    assert fmi_leaks("import ctypes\nfrom ctypes import c_int\n_WARNING = 1\n") == [
+        "line 1: imports ctypes",
+        "line 2: imports ctypes",
+        "line 3: defines _WARNING",
+    ]
+    assert fmi_leaks("import logging\nlevel = logging.WARNING\nTERMINATED = 1 << 0\n") == []
+
+
+def test_only_bridge_fmu_speaks_ctypes_and_fmi_statuses() -> None:
+    """bridge.fmu owns every FMU call: above it, outcomes are booleans and exceptions (the
+    import contract in pyproject.toml says the same for lint-imports)."""
+    leaks = {
+        str(path.relative_to(ROOT)): found
+        for package in ("bridge", "agents")
+        for path in sorted((ROOT / package).rglob("*.py"))
+        if "fmu" not in path.relative_to(ROOT / package).parts[:1] or package == "agents"
+        if (found := fmi_leaks(path.read_text()))
+    }
+    assert leaks == {}, f"move these into bridge/fmu (abi.py holds the status codes): {leaks}"

@@ -17,10 +17,19 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.markup import escape
 
 from bridge import __version__
+from bridge.cli.options import (
+    ConnectOpt,
+    ListenOpt,
+    PrefixOpt,
+    ZenohConfigOpt,
+    ZenohModeOpt,
+    console,
+    err_console,
+)
+from bridge.cli.options import zenoh_options as _zenoh_options
 from bridge.errors import BridgeError
 
 app = typer.Typer(
@@ -30,8 +39,6 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     add_completion=False,
 )
-console = Console()
-err_console = Console(stderr=True)
 
 
 @app.callback()
@@ -258,36 +265,6 @@ def scenarios(
     from bridge.cli.check import scenario_report
 
     scenario_report(experiment, sample=sample, seed=seed, console=console)
-
-
-ZenohConfigOpt = Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config file.")]
-ListenOpt = Annotated[
-    list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447.")
-]
-ConnectOpt = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")]
-ZenohModeOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--zenoh-mode",
-        help="client (all traffic through the router) or peer; default: client when only "
-        "--connect is given (a router), else peer.",
-    ),
-]
-PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
-
-
-def _zenoh_options(
-    config: Path | None,
-    listen: list[str] | None,
-    connect: list[str] | None,
-    mode: str | None = None,
-    zenoh_mode: str | None = None,
-) -> Any:
-    from bridge.net.transport import ZenohOptions, session_mode
-
-    listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
-    chosen = mode or session_mode(zenoh_mode, listen_t, connect_t, config)
-    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t)
 
 
 @app.command()

@@ -17,16 +17,16 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from bridge.cli.main import (
+from bridge.cli.options import (
     ConnectOpt,
     ListenOpt,
     PrefixOpt,
     ZenohConfigOpt,
     ZenohModeOpt,
-    _zenoh_options,
     console,
     err_console,
 )
+from bridge.cli.options import zenoh_options as _zenoh_options
 from bridge.errors import BridgeError
 
 RecordingArg = Annotated[Path, typer.Argument(help="An MCAP recording (.mcap, or an unfinished .mcap.part).")]

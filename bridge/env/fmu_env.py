@@ -93,8 +93,8 @@ class FmuEnv(gym.Env[ObsType, Any]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[ObsType, dict[str, Any]]:
-        super().reset(seed=seed)
-        if seed is not None:
+        if seed is not None:  # gymnasium's reset only seeds np_random
+            super().reset(seed=seed)
             self.task.sampler.restart()
         spec = self.task.new_episode(self.np_random, (options or {}).get("scenario"))
         self._done = True

@@ -238,7 +238,7 @@ class RemoteVecEnv(PlantVecEnv):
         env = RemoteFmuEnv(
             self.experiment, name, session=self._session, prefix=self._prefix, timeout_s=self._timeout_s
         )
-        env.plant.client.notify = self._any_answer  # type: ignore[attr-defined]
+        env.plant.notify_answers(self._any_answer)
         return env
 
     def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
@@ -249,16 +249,13 @@ class RemoteVecEnv(PlantVecEnv):
         waiting = list(pending)
         while waiting:
             self._any_answer.clear()
-            ready = [i for i in waiting if self._client(i).ready()]
+            ready = [i for i in waiting if self.envs[i].plant.answer_ready()]
             if not ready:
                 self._any_answer.wait(0.05)
                 continue
             for i in ready:
                 waiting.remove(i)
                 yield i
-
-    def _client(self, index: int) -> Any:
-        return self.envs[index].plant.client  # type: ignore[attr-defined]
 
     def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
         if isinstance(error, PlantDied | StepTimeout) and self.replace_dead:

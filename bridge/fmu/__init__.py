@@ -1,7 +1,11 @@
 """FMUs: the model vocabulary (``vocab``, no FMPy) and the FMU runtime (the only FMPy importer).
 
-FMI names (camelCase, value references, status codes) stop here; everything above speaks
-in variable names, numpy arrays and seconds. ``bridge.fmu.vocab`` (variables, model info, their
+Every call into an FMU is made here: ``Model`` (one instance, its clock, resets and states),
+``ModelBatch`` (N instances stepped in one native call), the one-call native sample
+(``sample``) and the C helpers (``batch.c``, ``fixed_step.c``) with their ctypes mirrors and the
+FMI status codes in one module (``abi``). FMI names (camelCase, value references, status codes)
+and ctypes stop here; everything above speaks in variable names, numpy arrays and seconds
+(pyproject.toml's import contracts enforce it). ``bridge.fmu.vocab`` (variables, model info, their
 JSON form) imports nothing heavy, so the task, the remote plant and the deployed agent use it
 without loading FMPy; the names below load the runtime on first use.
 """
@@ -15,12 +19,15 @@ from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
 
 if TYPE_CHECKING:
     from bridge.fmu.archive import sha256
+    from bridge.fmu.batch import BatchOutcome, ModelBatch
     from bridge.fmu.description import read_model_info
     from bridge.fmu.model import RESET_POLICIES, Model, ModelState, ResetPolicy
     from bridge.fmu.signals import SignalGroup
 
 _RUNTIME = {
     "sha256": "bridge.fmu.archive",
+    "BatchOutcome": "bridge.fmu.batch",
+    "ModelBatch": "bridge.fmu.batch",
     "read_model_info": "bridge.fmu.description",
     "RESET_POLICIES": "bridge.fmu.model",
     "Model": "bridge.fmu.model",
@@ -31,8 +38,10 @@ _RUNTIME = {
 
 __all__ = [
     "RESET_POLICIES",
+    "BatchOutcome",
     "DefaultExperiment",
     "Model",
+    "ModelBatch",
     "ModelInfo",
     "ModelState",
     "ResetPolicy",

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from bridge.errors import FmuError, VariableError
-from bridge.fmu.backend import STATUS_NAMES, WARNING, Backend
+from bridge.fmu.abi import STATUS_NAMES, WARNING
+from bridge.fmu.backend import Backend
 from bridge.fmu.description import Variable
 from bridge.fmu.values import from_c
 

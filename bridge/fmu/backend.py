@@ -18,11 +18,9 @@ from fmpy import fmi1, fmi2, fmi3
 
 from bridge.errors import FmuError, FmuLoadError
 from bridge.fmu import logs
+from bridge.fmu.abi import DISCARD, WARNING, status_name
 from bridge.fmu.description import Interface, ModelInfo
 from bridge.fmu.events import fmi1_iterate
-
-OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
-STATUS_NAMES = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 
 # FMI-3 type name -> (FMI 1/2 function suffix, FMI 3 function suffix, ctypes type per version)
 _V12 = {
@@ -61,6 +59,7 @@ class Backend:
         self.instance_name = name
         self.log = logs.LogBuffer(name)
         self.component: Any = None
+        self._set_state_fn: Callable[[Any, Any], int] | None = None
         self.fmu = self._load(unzip_dir)
         self.functions: dict[str, Any] = self.fmu._functions
 
@@ -145,6 +144,18 @@ class Backend:
 
     def free_state(self, state: ctypes.c_void_p) -> None:
         pass
+
+    def _raw_set_state(self, name: str, state: ctypes.c_void_p) -> None:
+        """``name`` (fmi2SetFMUstate / fmi3SetFMUState) called directly, as the step calls are:
+        a restore is a reset's hot path, and FMPy's checked wrapper costs several Python frames."""
+        fn = self._set_state_fn
+        if fn is None:
+            fn = self._set_state_fn = rebind(self.functions[name], ctypes.c_void_p, ctypes.c_void_p)
+        status = fn(self.component, state)
+        if status > WARNING:
+            raise FmuError(
+                f"{self.info.model_name}: {name} returned {status_name(status)}", log=self.log.recent()
+            )
 
     def unload(self) -> None:
         self.fmu.freeLibrary()
@@ -338,7 +349,7 @@ class Fmi2Backend(Backend):
         return state
 
     def set_state(self, state: ctypes.c_void_p) -> None:
-        self.call("fmi2SetFMUstate", lambda: self.fmu.fmi2SetFMUstate(self.component, state))
+        self._raw_set_state("fmi2SetFMUstate", state)
 
     def free_state(self, state: ctypes.c_void_p) -> None:
         if self.component and state:
@@ -431,7 +442,7 @@ class Fmi3Backend(Backend):
         return state
 
     def set_state(self, state: ctypes.c_void_p) -> None:
-        self.call("fmi3SetFMUState", lambda: self.fmu.fmi3SetFMUState(self.component, state))
+        self._raw_set_state("fmi3SetFMUState", state)
 
     def free_state(self, state: ctypes.c_void_p) -> None:
         if self.component and state:

@@ -22,11 +22,11 @@ import numpy as np
 
 from bridge.errors import ConfigError, StepError
 from bridge.fmu import native
-from bridge.fmu.backend import STATUS_NAMES, Backend
+from bridge.fmu.abi import END, FAILED, STATUS_NAMES, TERMINATE, FixedCall, FixedSpec
+from bridge.fmu.backend import Backend
 from bridge.fmu.events import EventCalls, needs_completed_step
 
 METHODS: Final = {"euler": 0, "rk4": 1}
-END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE, FAILED = 0, 1, 2, 3, 4, 64
 MAX_EVENTS: Final = 100_000  # per sample: more means the model chatters
 _FUNCTIONS: Final = {
     2: ("SetTime", "SetContinuousStates", "GetContinuousStates", "GetDerivatives",
@@ -34,35 +34,6 @@ _FUNCTIONS: Final = {
     3: ("SetTime", "SetContinuousStates", "GetContinuousStates", "GetContinuousStateDerivatives",
         "GetEventIndicators", "CompletedIntegratorStep"),
 }  # fmt: skip
-
-
-class FixedSpec(ctypes.Structure):
-    """The C ``FixedSpec``: FMI version, method, sizes, function addresses, work array."""
-
-    _fields_ = [
-        ("major", ctypes.c_int),
-        ("method", ctypes.c_int),
-        ("nx", ctypes.c_int),
-        ("nz", ctypes.c_int),
-        ("completed", ctypes.c_int),
-        *((name, ctypes.c_void_p) for name in ("set_time", "set_x", "get_x", "get_dx", "get_z", "step")),
-        ("work", ctypes.c_void_p),
-    ]
-
-
-class FixedCall(ctypes.Structure):
-    """The C ``FixedCall``: one call's instance, times and announced time event (NaN: none)."""
-
-    _fields_ = [
-        ("component", ctypes.c_void_p),
-        ("time", ctypes.c_double),
-        ("origin", ctypes.c_double),
-        ("substep", ctypes.c_double),
-        ("total", ctypes.c_longlong),
-        ("end", ctypes.c_double),
-        ("next_event", ctypes.c_double),
-        ("announced", ctypes.c_double),
-    ]
 
 
 def _close(a: float, b: float) -> bool:

@@ -1,7 +1,9 @@
 """``Model``: one FMU instance with typed variable access, integer-indexed stepping and resets.
 
 Time is an integer: after ``k`` FMU steps of size ``h`` the model is at ``t = t0 + k * h``
-(never accumulated). A sample of an agent is ``n`` FMU steps (``advance(n)``).
+(never accumulated). A sample of an agent is ``n`` FMU steps (``advance(n)``). ``k`` lives in one
+C ``long long`` (the model's clock) that the native steppers (``bridge.fmu.sample``,
+``bridge.fmu.batch``) advance in place, so whoever steps the instance, the model knows its time.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from typing import Any, Literal
 
 from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
 from bridge.fmu import access, archive
-from bridge.fmu.backend import DISCARD, FATAL, STATUS_NAMES, WARNING, Backend, open_backend
+from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
+from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -95,13 +98,14 @@ class Model:
         self.reset_policy: ResetPolicy = reset_policy
         self.solver, self.solver_substeps = _check_solver(self.info, self.interface, solver, solver_substeps)
         self.can_restore = self.info.can_get_set_state.get(self.interface, False) and self.info.fmi_major >= 2
-        self.step_index = 0
+        self._clock = Clock(0)
         self.terminated = False
         self._initialized = False
         self._closed = False
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
         self._me: MeStepper | FixedStepper | None = None
+        self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         self._unzip = archive.acquire(self.info.path)
@@ -138,11 +142,27 @@ class Model:
         finally:
             archive.release(self.info.path)
 
-    # -- variables ----------------------------------------------------------------------------
+    # -- the clock ----------------------------------------------------------------------------
+    @property
+    def step_index(self) -> int:
+        """FMU steps ``k`` since the start time (the model's only clock)."""
+        return self._clock.value
+
+    @step_index.setter
+    def step_index(self, k: int) -> None:
+        self._clock.value = k
+
     @property
     def time_s(self) -> float:
         """Simulation time ``t0 + k * h`` of the current step index ``k``."""
-        return self.start_time_s + self.step_index * self.step_size_s
+        return self.start_time_s + self._clock.value * self.step_size_s
+
+    def _attach_clock(self, clock: Clock) -> None:
+        """Keep ``k`` in ``clock`` from now on (a cell of a batch's array), carrying its value over."""
+        clock.value = self._clock.value
+        self._clock = clock
+
+    # -- variables ----------------------------------------------------------------------------
 
     @property
     def log(self) -> list[str]:
@@ -263,15 +283,16 @@ class Model:
         if not self._initialized:
             self.initialize(values)
             return
-        checked = self._check_init_values(values or {})
-        key = _freeze(checked)
+        checked = self._check_init_values(values) if values else {}
+        key = _freeze(checked) if checked else ()
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
         if snapshot is not None and self.reset_policy in ("auto", "restore"):
             self._snapshots.move_to_end(key)
             state, next_event_s = snapshot
             self._backend.set_state(state)
-            self._restart()
+            self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
             if self._me is not None:
+                self._me.restart(self.start_time_s)
                 self._me.next_event_s = next_event_s
             return
         policy = self.reset_policy
@@ -425,92 +446,92 @@ class Model:
         """
         if not self._initialized or self.terminated or self._failed_status:
             self._refuse_step()
+        clock = self._clock
         if n == 1 and self._me is None:  # one FMU step per sample: the common hot path
-            k = self.step_index
+            k = clock.value
             status = self._do_step(self.start_time_s + k * self.step_size_s, self.step_size_s)
             if status > WARNING:
                 return self._step_failed(status)
-            self.step_index = k + 1
+            clock.value = k + 1
             return False
         if self._me is not None:
             return self._advance_me(n)
-        k, t0, h, do_step = self.step_index, self.start_time_s, self.step_size_s, self._do_step
+        k, t0, h, do_step = clock.value, self.start_time_s, self.step_size_s, self._do_step
         for _ in range(n):
             status = do_step(t0 + k * h, h)
             if status > WARNING:
-                self.step_index = k
+                clock.value = k
                 return self._step_failed(status)
             k += 1
-        self.step_index = k
+        clock.value = k
         return False
 
-    def native_handles(self) -> dict[str, int]:
+    # -- for the native steppers of this package (bridge.fmu.sample, bridge.fmu.batch) ------------
+    def _native_handles(self) -> dict[str, int]:
         """Addresses for a native stepper that calls this instance's FMI functions directly.
 
         Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
         ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
-        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised.
-        In model exchange (fixed-step solvers only) :attr:`fixed_stepper` integrates.
+        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised; the
+        same dict while the instance is the same (a reset by restore or fmi reset keeps it).
+        In model exchange (fixed-step solvers only) :attr:`_fixed_stepper` integrates.
         """
-        b = self._backend
-        if b.major < 2 or not b.component or (self.interface == "me" and self.fixed_stepper is None):
+        b, cached = self._backend, self._handles
+        if cached is not None and cached[0] is b.component:  # the same instance: the same addresses
+            return cached[1]
+        if b.major < 2 or not b.component or (self.interface == "me" and self._fixed_stepper is None):
             raise FmuError(
                 f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
                 f"(co-simulation, or model exchange with solver 'rk4' or 'euler')"
             )
-
-        def address(name: str) -> int:
-            fn = b.functions.get(name)
-            return int(ctypes.cast(fn, ctypes.c_void_p).value or 0) if fn is not None else 0
-
-        v = f"fmi{b.major}"
+        v, functions = f"fmi{b.major}", b.functions
         real = "Real" if b.major == 2 else "Float64"
-        return {
-            "component": int(ctypes.cast(b.component, ctypes.c_void_p).value or 0),
+        handles = {
+            "component": pointer_value(b.component),
             "major": b.major,
-            "set_real": address(f"{v}Set{real}"),
-            "get_real": address(f"{v}Get{real}"),
-            "do_step": address(f"{v}DoStep"),
-            "bool_status": address("fmi2GetBooleanStatus") if b.major == 2 else 0,
+            "set_real": address(functions.get(f"{v}Set{real}")),
+            "get_real": address(functions.get(f"{v}Get{real}")),
+            "do_step": address(functions.get(f"{v}DoStep")),
+            "bool_status": address(functions.get("fmi2GetBooleanStatus")) if b.major == 2 else 0,
         }
+        self._handles = (b.component, handles)
+        return handles
 
     @property
-    def fixed_stepper(self) -> FixedStepper | None:
+    def _fixed_stepper(self) -> FixedStepper | None:
         """The native fixed-step integrator of a model-exchange instance (solver 'rk4' or
         'euler', once initialised); None otherwise."""
         return self._me if isinstance(self._me, FixedStepper) else None
 
-    def native_me_finish(self, code: int, step_index: int, n: int) -> bool:
-        """Finish a sample of ``n`` FMU steps from ``step_index`` that a native batch loop began
-        with :attr:`fixed_stepper` and stopped with ``code`` (an event, termination or failure);
-        the model then stands after the sample. True if the FMU asked to terminate.
+    def _me_finish(self, code: int, n: int) -> bool:
+        """Finish a sample of ``n`` FMU steps from the current step index that a native batch
+        loop began with :attr:`_fixed_stepper` and stopped with ``code`` (an event, termination or
+        a failure); the model then stands after the sample. True if the FMU asked to terminate.
 
         Raises:
             StepError: as :meth:`advance` does.
         """
-        stepper = self.fixed_stepper
-        assert stepper is not None  # the batch loop runs only on fixed-step instances
-        t0, h = self.start_time_s, self.step_size_s
-        self.step_index = step_index
-        terminated = stepper.finish(code, t0 + step_index * h, t0 + (step_index + n) * h, step_index)
-        self.step_index, self.terminated = step_index + n, terminated
+        stepper = self._fixed_stepper
+        if stepper is None:
+            raise FmuError(f"{self.info.model_name}: no fixed-step integrator to finish the sample with")
+        k, t0, h = self.step_index, self.start_time_s, self.step_size_s
+        terminated = stepper.finish(code, t0 + k * h, t0 + (k + n) * h, k)
+        self.step_index, self.terminated = k + n, terminated
         return terminated
 
     @property
-    def steppable(self) -> bool:
+    def _steppable(self) -> bool:
         """True if :meth:`advance` would step now (open, initialised, not terminated, not failed)."""
         return self._initialized and not self.terminated and not self._failed_status and not self._closed
 
-    def native_terminated(self, step_index: int) -> None:
-        """Account for a native stepper's doStep after which the FMU asked to terminate; the
-        model now stands at ``step_index`` (the step included) and refuses further steps."""
-        self.step_index = step_index
+    def _native_terminated(self) -> None:
+        """Account for a native doStep after which the FMU asked to terminate (the clock already
+        counts the step): the model refuses further steps until reset."""
         self.terminated = True
 
-    def native_step_failed(self, step_index: int, status: int) -> bool:
-        """Account for a doStep that a native stepper made at step ``step_index`` and that returned
-        ``status`` (> Warning): True if the FMU asked to terminate, else :class:`StepError`."""
-        self.step_index = step_index
+    def _native_step_failed(self, status: int) -> bool:
+        """Account for a native doStep at the current step index that returned ``status``
+        (> Warning): True if the FMU asked to terminate, else :class:`StepError`."""
         return self._step_failed(status)
 
     def _advance_me(self, n: int) -> bool:

@@ -17,7 +17,8 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import FmuError, VariableError
-from bridge.fmu.backend import STATUS_NAMES, WARNING, numpy_dtype
+from bridge.fmu.abi import STATUS_NAMES, WARNING
+from bridge.fmu.backend import numpy_dtype
 from bridge.fmu.values import int_range
 
 if TYPE_CHECKING:

@@ -335,6 +335,12 @@ class RemotePlant(Plant):
         self.terminated = frame.terminated
         return frame.values
 
+    def answer_ready(self) -> bool:
+        return self.client.ready()
+
+    def notify_answers(self, event: threading.Event) -> None:
+        self.client.notify = event
+
     def provenance(self) -> dict[str, str]:
         d = self.client.description
         return {

@@ -10,7 +10,13 @@ A plant serves one model (or a system of models) in sample-sized steps::
     plant.close()
 
 ``step`` is ``send`` then ``receive``, so that a vector of plants in other processes or nodes
-can all be sent their inputs before any answer is awaited (they then step in parallel).
+can all be sent their inputs before any answer is awaited (they then step in parallel); such a
+plant says when ``receive`` would return at once (``answer_ready``) and sets an event its
+caller gives when an answer may have arrived (``notify_answers``), so a vector env takes the
+answers in the order they come. Three more things some plants can do, each with a default for
+those that cannot: save, restore and discard their state (a system's fixed-point iteration rolls
+its components back; the default refuses, saying why), and report each component's outputs (a
+system of models, for the recorder; the default has no components).
 
 One error semantics for every plant: a failed step raises :class:`StepError`, no answer in time
 raises :class:`StepTimeout`, a plant that is gone raises :class:`PlantDied`, each built by
@@ -19,6 +25,7 @@ raises :class:`StepTimeout`, a plant that is gone raises :class:`PlantDied`, eac
 
 from __future__ import annotations
 
+import threading
 from abc import ABC, abstractmethod
 from collections.abc import Mapping, Sequence
 from typing import Any, TypeVar
@@ -31,6 +38,8 @@ from bridge.experiment.validate import Timing
 from bridge.fmu.vocab import ModelInfo
 
 FloatArray = npt.NDArray[np.float64]
+_NO_VALUES: FloatArray = np.zeros(0)
+_NO_VALUES.flags.writeable = False
 E = TypeVar("E", bound=PlantError)
 MODEL_FAILED = "the model failed"
 MODEL_FAILED_HINT = (
@@ -93,6 +102,57 @@ class Plant(ABC):
     def reset_info(self) -> dict[str, Any]:
         """Extra entries for the env's ``info`` at reset (for example the node's name)."""
         return {}
+
+    # -- answers in the order they come (plants in other processes or nodes) ------------------------
+    def answer_ready(self) -> bool:
+        """Whether :meth:`receive` would return (or raise) at once. A plant that steps in
+        ``receive`` itself (in this process) always is."""
+        return True
+
+    def notify_answers(self, event: threading.Event) -> None:
+        """Set ``event`` too whenever an answer may have arrived (a vector env waits on one event
+        for all its plants). A plant that answers in ``receive`` has nothing to announce."""
+        return  # nothing arrives on its own: receive() computes the answer
+
+    # -- saved states (a system's fixed-point iteration rolls its components back) ------------------
+    @property
+    def can_save(self) -> bool:
+        """Whether :meth:`save`, :meth:`restore` and :meth:`discard` work."""
+        return False
+
+    @property
+    def save_refusal(self) -> str:
+        """Why this plant cannot save its state ("" where it can)."""
+        return "" if self.can_save else "it does not save or restore its state"
+
+    def save(self) -> Any:
+        """The state now, to :meth:`restore` later; :meth:`discard` it when done."""
+        raise self._cannot_save()
+
+    def restore(self, saved: Any) -> None:
+        """Back to ``saved`` (kept: restore it again, or discard it)."""
+        raise self._cannot_save()
+
+    def discard(self, saved: Any) -> None:
+        """Free ``saved``."""
+        raise self._cannot_save()
+
+    def _cannot_save(self) -> ConfigError:
+        return ConfigError(
+            f"{self.name} cannot save and restore its state: {self.save_refusal}; iterate a system "
+            "only over plants that can (FMI 2.0/3.0 FMUs with canGetAndSetFMUstate, in this process "
+            "or on a lockstep node)"
+        )
+
+    # -- components (a system of models) -------------------------------------------------------------
+    def component_outputs(self) -> dict[str, dict[str, float]]:
+        """Each component's output values now, by component name (a system of models, for
+        recording); a single model has no components: ``{}``."""
+        return {}
+
+    def component_values(self) -> FloatArray:
+        """The values of :meth:`component_outputs`, flat in the same order (cheap, per step)."""
+        return _NO_VALUES
 
     @abstractmethod
     def close(self) -> None:

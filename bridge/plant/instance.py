@@ -19,9 +19,9 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError, StepError
 from bridge.fmu import Model, ModelState, sha256
+from bridge.fmu.sample import NativeSample
 from bridge.fmu.signals import SignalGroup
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
-from bridge.plant.native_sample import NativeSample
 
 _EMPTY = np.zeros(0)
 
@@ -70,7 +70,7 @@ class FmuInstancePlant(Plant):
 
     @property
     def native_stepping(self) -> bool:
-        """True once samples run as one native call (``bridge.plant.native_sample``)."""
+        """True once samples run as one native call (``bridge.fmu.sample``)."""
         return self._native is not None
 
     @property
@@ -138,6 +138,12 @@ class FmuInstancePlant(Plant):
     def can_save(self) -> bool:
         """Whether :meth:`save` works: the FMU can get and set its state (FMI 2.0/3.0)."""
         return self.model.can_restore
+
+    @property
+    def save_refusal(self) -> str:
+        if self.can_save:
+            return ""
+        return "the FMU cannot get and set its state (FMI 1.0, or canGetAndSetFMUstate is false)"
 
     def save(self) -> SavedState:
         """The state now: the model's, the sample index and the terminated flag."""

@@ -173,7 +173,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
 
     def _components_now(self) -> list[Any]:
         """Each component's output values now (a system of FMUs), split from one flat array."""
-        values = self._plant.component_values()  # type: ignore[attr-defined]
+        values = self._plant.component_values()
         return np.split(np.asarray(values, dtype=np.float64), self._component_sizes)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
@@ -187,7 +187,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
                 obs.tobytes(),
                 reward,
                 info["outputs"].tobytes(),
-                self._plant.component_values().tobytes() if self._component_topics else b"",  # type: ignore[attr-defined]
+                self._plant.component_values().tobytes() if self._component_topics else b"",
             )
         )
         if terminated or truncated:

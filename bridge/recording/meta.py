@@ -38,6 +38,7 @@ import gymnasium as gym
 import yaml
 
 from bridge.net.ros2 import cdr
+from bridge.plant.base import Plant
 from bridge.recording.writer import McapWriter
 
 OBSERVATIONS = "/observations"
@@ -64,10 +65,9 @@ def component_topic(component: str) -> str:
     return f"{COMPONENTS}{component}/outputs"
 
 
-def component_names(plant: Any) -> dict[str, list[str]]:
-    """The outputs of each component of a system plant (its ``component_outputs`` hook), else {}."""
-    hook = getattr(plant, "component_outputs", None)
-    return {name: list(values) for name, values in hook().items()} if callable(hook) else {}
+def component_names(plant: Plant) -> dict[str, list[str]]:
+    """The outputs of each component of a system plant (``Plant.component_outputs``), else {}."""
+    return {name: list(values) for name, values in plant.component_outputs().items()}
 
 
 def topic_type(topic: str) -> str:

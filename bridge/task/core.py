@@ -22,11 +22,12 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
-from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
+from bridge.experiment.config import Experiment, known_references, scenario_inputs
 from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
-from bridge.task.rewards import build_reward
-from bridge.task.scenario import EpisodeSpec, ScenarioSampler, draw_many
+from bridge.task.observe import ObservationBuilder
+from bridge.task.rewards import build_reward, reward_signal_names
+from bridge.task.scenario import EpisodeSpec, ScenarioSampler, noise_table
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -48,14 +49,6 @@ def load_callable(path: str, key: str) -> Callable[..., Any]:
     if not callable(fn):
         raise ConfigError(f"{key}: {module_name} has no callable {attr!r}")
     return fn  # type: ignore[no-any-return]
-
-
-def _noise_table(
-    entries: list[tuple[int, Distribution]], rng: np.random.Generator, rows: int
-) -> list[list[float]]:
-    if not entries:
-        return []
-    return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
 
 
 @dataclass(frozen=True)
@@ -118,8 +111,6 @@ def task_signal_names(exp: Experiment, variables: Collection[str]) -> SignalName
     ``variables`` (names, array elements included). Names the experiment reads are taken as
     written; only ``reward.expression`` is resolved against ``variables`` and the references
     (an unknown name there is a ConfigError)."""
-    from bridge.task.rewards import reward_signal_names
-
     refs_known = known_references(exp)
     obs = exp.observations
     wanted = [*obs.outputs, *obs.errors.values(), *obs.references, *obs.errors]
@@ -154,11 +145,14 @@ class Task:
         self.sampler = ScenarioSampler(exp, self.sample_times)
         self._build_actions()
         self._build_observations()
-        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs)
+        user = load_callable(exp.reward.callable, "reward.callable") if exp.reward.callable else None
+        self.reward = build_reward(exp.reward, self.signal_names, self.action_inputs, user)
         self._build_termination()
         self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
         self.episode: EpisodeSpec | None = None
+        self._action_starts = [self._start(name) for name in self.action_inputs]  # the FMU's starts
         self._refs = np.zeros((1, len(self.reference_names)))
+        self._no_columns = np.zeros((0, 0))
         self._profile_inputs = np.zeros((1, len(self.input_names) - len(self.action_inputs)))
 
     def sample_times(self, duration_s: float | None = None) -> FloatArray:
@@ -297,8 +291,6 @@ class Task:
 
     # -- observations ------------------------------------------------------------------------------
     def _build_observations(self) -> None:
-        from bridge.task.observe import ObservationBuilder
-
         self.observer = ObservationBuilder(self, self.experiment.observations, self._variables)
         self.observation_space = self.observer.space
 
@@ -317,10 +309,12 @@ class Task:
             spec = self._episode_hook(spec, rng) or spec
         self.episode = spec
         n = spec.n_samples
+        if len(self._no_columns) != n + 1:  # kept between episodes of one length: a reset stays cheap
+            self._no_columns = np.zeros((n + 1, 0))
         self._refs = (
             np.column_stack([spec.references[r] for r in self.reference_names])
             if self.reference_names
-            else np.zeros((n + 1, 0))
+            else self._no_columns
         )
         profile_names = self.input_names[len(self.action_inputs) :]
         self._profile_inputs = (
@@ -328,14 +322,17 @@ class Task:
                 [spec.inputs.get(name, np.full(n + 1, self._start(name))) for name in profile_names]
             )
             if profile_names
-            else np.zeros((n + 1, 0))
+            else self._no_columns
         )
         self._has_refs = bool(self.reference_names)
         self._inputs[len(self.action_inputs) :] = self._profile_inputs[0].tolist() if profile_names else []
-        self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        if spec.values:
+            self._inputs[: len(self.action_inputs)] = [self._start(n) for n in self.action_inputs]
+        else:  # no parameters or start values this episode: the inputs start at their FMU starts
+            self._inputs[: len(self.action_inputs)] = self._action_starts
         self._previous_inputs[:] = self._inputs
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
-        self._action_noise_table = _noise_table(self._action_noise, rng, n + 1)
+        self._action_noise_table = noise_table(self._action_noise, rng, n + 1)
         self.observer.new_episode(rng, n + 1)
         return spec
 

@@ -20,6 +20,7 @@ import numpy.typing as npt
 from bridge.experiment.config import ObservationSection
 from bridge.fmu.vocab import Variable
 from bridge.task.codegen import observation, observation_source
+from bridge.task.scenario import noise_table
 
 if TYPE_CHECKING:
     from bridge.task.core import Task
@@ -129,9 +130,7 @@ class ObservationBuilder:
     # -- per sample ---------------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, rows: int) -> None:
         """Draw the sensor noise of a whole episode at once (rows = samples + 1)."""
-        from bridge.task.core import _noise_table
-
-        self._noise_table = _noise_table(self._noise, rng, rows)
+        self._noise_table = noise_table(self._noise, rng, rows)
         self._sample = 0
 
     def _single(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> list[float]:
@@ -145,6 +144,8 @@ class ObservationBuilder:
         self, signals: list[float], inputs: list[float], rng: np.random.Generator
     ) -> npt.NDArray[np.float32]:
         first = self._single(signals, inputs, rng)
+        if self._section.history == 1:  # as observe() does: no history to keep
+            return np.array(first, dtype=np.float32)
         self._history = deque([first] * self._section.history, maxlen=self._section.history)
         return self._stack()
 

@@ -85,9 +85,14 @@ class Reward:
         return total
 
 
-def build_reward(section: RewardSection, signal_names: Sequence[str], action_inputs: Sequence[str]) -> Reward:
-    from bridge.task.core import load_callable
-
+def build_reward(
+    section: RewardSection,
+    signal_names: Sequence[str],
+    action_inputs: Sequence[str],
+    user: Callable[..., Any] | None = None,
+) -> Reward:
+    """The reward of ``section`` over ``signal_names``; ``user`` is its ``reward.callable``, imported
+    by the caller (``bridge.task.core.load_callable``)."""
     index = {name: i for i, name in enumerate(signal_names)}
     terms = reward_terms(section.terms, index, action_inputs) if section.terms else None
     expression = None
@@ -95,5 +100,4 @@ def build_reward(section: RewardSection, signal_names: Sequence[str], action_inp
         from bridge.task.expr import compile_expression
 
         expression = compile_expression(section.expression, list(signal_names), where="reward.expression")
-    user = load_callable(section.callable, "reward.callable") if section.callable else None
     return Reward(terms, expression, user, signal_names, section.termination_penalty)

@@ -121,6 +121,15 @@ def _read_csv(path: Path, time_column: str, column: str) -> tuple[FloatArray, Fl
     return t, v
 
 
+def noise_table(
+    entries: Sequence[tuple[int, Distribution]], rng: np.random.Generator, rows: int
+) -> list[list[float]]:
+    """``rows`` draws of each entry's distribution (a column per entry): an episode's noise at once."""
+    if not entries:
+        return []
+    return np.column_stack([draw_many(dist, rng, rows) for _, dist in entries]).tolist()  # type: ignore[no-any-return]
+
+
 @dataclass
 class EpisodeSpec:
     """What one episode gets; hooks may return a modified copy (``dataclasses.replace``)."""
@@ -134,6 +143,17 @@ class EpisodeSpec:
 
     def with_values(self, **values: Any) -> EpisodeSpec:
         return replace(self, values={**self.values, **values})
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """One scenario's fixed values, the draws in their order, and its sample times."""
+
+    values: dict[str, Any]
+    draws: tuple[tuple[str, Distribution], ...]
+    profiles: bool  # references or input profiles, evaluated per episode on ``times``
+    times: FloatArray
+    n_samples: int
 
 
 class ScenarioSampler:
@@ -151,6 +171,7 @@ class ScenarioSampler:
         if self._mode == "weighted" and self._weights.sum() <= 0:
             raise ConfigError("schedule.weights: at least one training scenario needs a positive weight")
         self._next = 0
+        self._plans: dict[str, _Plan] = {}
 
     @property
     def names(self) -> list[str]:
@@ -175,28 +196,38 @@ class ScenarioSampler:
     def episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
         """Everything an episode needs; ``scenario`` forces one by name."""
         name = scenario or self.choose(rng)
-        if name not in self._scenarios:
-            raise ConfigError(f"scenario {name!r} is not defined; defined: {sorted(self._scenarios)}")
-        sc = self._scenarios[name]
-        model = self._exp.model
-        values: dict[str, Any] = {
-            **model.parameters,
-            **model.start_values,
-            **sc.parameters,
-            **sc.start_values,
-        }
+        plan = self._plans.get(name) or self._plan(name)
+        values = dict(plan.values)
         drawn: dict[str, float] = {}
-        for rand in (self._exp.randomization, sc.randomization):
-            for section in (rand.parameters, rand.start_values):
-                for var, dist in section.items():
-                    drawn[var] = values[var] = draw(dist, rng)
-        times = self._times(sc.episode_duration)
-        base = self._exp.base_dir
+        for var, dist in plan.draws:
+            drawn[var] = values[var] = draw(dist, rng)
+        if not plan.profiles:  # values only (the common case): nothing depends on the sample times
+            return EpisodeSpec(name, values, {}, {}, drawn, n_samples=plan.n_samples)
+        sc, times, base = self._scenarios[name], plan.times, self._exp.base_dir
         references = {n: evaluate(p, times, base) for n, p in sc.references.items()}
         for rand in (self._exp.randomization, sc.randomization):
             references.update(_drawn_references(rand, times, rng, drawn))
         inputs = {n: evaluate(p, times, base) for n, p in sc.inputs.items()}
-        return EpisodeSpec(name, values, references, inputs, drawn, n_samples=len(times) - 1)
+        return EpisodeSpec(name, values, references, inputs, drawn, n_samples=plan.n_samples)
+
+    def _plan(self, name: str) -> _Plan:
+        """What every episode of scenario ``name`` shares, worked out once (a reset stays cheap)."""
+        if name not in self._scenarios:
+            raise ConfigError(f"scenario {name!r} is not defined; defined: {sorted(self._scenarios)}")
+        sc, model = self._scenarios[name], self._exp.model
+        rands = (self._exp.randomization, sc.randomization)
+        times = self._times(sc.episode_duration)
+        times.flags.writeable = False
+        self._plans[name] = plan = _Plan(
+            values={**model.parameters, **model.start_values, **sc.parameters, **sc.start_values},
+            draws=tuple(
+                item for r in rands for section in (r.parameters, r.start_values) for item in section.items()
+            ),
+            profiles=bool(sc.references or sc.inputs or any(r.references for r in rands)),
+            times=times,
+            n_samples=len(times) - 1,
+        )
+        return plan
 
 
 def _drawn_references(

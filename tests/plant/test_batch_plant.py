@@ -109,3 +109,16 @@ def test_bad_sizes_are_config_errors(experiment: Path) -> None:
 
     with pytest.raises(ConfigError, match="n >= 1"):
         BatchPlant(load_experiment(experiment), 0)
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_the_batch_clock_is_each_models_own(experiment: Path, native: bool) -> None:
+    with open_plant(experiment, 2, native=native) as plant:
+        for i in range(2):
+            plant.reset(i, {}, [0.0])
+        for _ in range(3):
+            plant.step(np.zeros((2, 1)), np.array([True, False]))
+        assert plant.k.tolist() == [6, 0]
+        assert [m.step_index for m in plant.models] == [6, 0]
+        assert [m.time_s for m in plant.models] == [plant.time_s(0), plant.time_s(1)]
+        assert plant.models[0].time_s == pytest.approx(6 * H)

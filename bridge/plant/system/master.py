@@ -104,7 +104,7 @@ class Master:
         saved: dict[str, Any] = {}
         try:
             for n, p in plants.items():
-                saved[n] = p.save()  # type: ignore[attr-defined]
+                saved[n] = p.save()
             for k in range(1, self.iterations + 1):
                 used = self._pass()
                 self.last_iterations = k
@@ -115,10 +115,10 @@ class Master:
                     _log.debug("macro step did not converge in %d iterations", k)
                     return
                 for n, p in plants.items():  # back to t; the outputs stay those at t + H
-                    p.restore(saved[n])  # type: ignore[attr-defined]
+                    p.restore(saved[n])
         finally:
             for n, state in saved.items():
-                plants[n].discard(state)  # type: ignore[attr-defined]
+                plants[n].discard(state)
 
     def _pass(self) -> dict[str, FloatArray]:
         """Step every component once; the inputs each one was given (only when iterating)."""
@@ -152,14 +152,11 @@ class Master:
 
 def _check_rollback(system: SystemDescription, plants: Mapping[str, Plant]) -> None:
     """Iteration rolls every component back: each must save and restore its state."""
-    cannot = [p for p in plants.values() if not getattr(p, "can_save", False)]
+    cannot = [p for p in plants.values() if not p.can_save]
     if cannot:
-        why = "; ".join(f"{p.name} cannot: {getattr(p, 'save_refusal', '') or _FMU_CANNOT}" for p in cannot)
+        why = "; ".join(f"{p.name} cannot: {p.save_refusal}" for p in cannot)
         raise ConfigError(
             f"system.iteration: fixed-point iteration rolls every component back to the start of the "
             f"macro step, and {why}; remove system.iteration, or use FMUs that can save their state "
             f"(FMI 2.0/3.0 with canGetAndSetFMUstate){system.where}"
         )
-
-
-_FMU_CANNOT = "the FMU cannot get and set its state (FMI 1.0, or canGetAndSetFMUstate is false)"

@@ -2,8 +2,9 @@
 
 The Python path makes three foreign calls per sample (set, doStep, get), and each ctypes call
 costs about a microsecond of argument conversion, more than a small FMU's doStep itself. The
-batch stepper's C helper (``bridge/plant/batch/batch.c``, ``step_one``) makes the same FMI
-calls, in the same order, with the same arguments and the same time grid ``t0 + k*h``, in one.
+batch stepper's C helper (``bridge/fmu/batch.c``, ``step_one``) makes the same FMI calls, in the
+same order, with the same arguments and the same time grid ``t0 + k*h``, in one, and advances
+the model's own clock in place.
 
 It serves initialised FMI 2.0/3.0 co-simulation instances whose inputs and outputs are all
 Float64 scalars (the common case); anything else, or a machine without a C compiler, takes the
@@ -16,11 +17,10 @@ import ctypes
 from collections.abc import Sequence
 
 from bridge.errors import FmuError
-from bridge.fmu import Model
+from bridge.fmu import batch_stepper as nat
+from bridge.fmu.abi import TERMINATED, WARNING, BatchSpec
+from bridge.fmu.model import Model
 from bridge.fmu.signals import FloatArray, SignalGroup
-from bridge.plant.batch import native as nat
-
-_WARNING = 1
 
 
 class NativeSample:
@@ -43,12 +43,12 @@ class NativeSample:
         self._model, self._inputs, self._outputs = model, inputs, outputs
         self._n = steps_per_sample
         self._call = stepper.step_one
-        self._spec = nat.BatchSpec()
-        self._k = ctypes.c_longlong(0)
-        self._refs = (ctypes.byref(self._spec), ctypes.byref(self._k))
+        self._spec = BatchSpec()
+        self._refs = (ctypes.byref(self._spec), ctypes.byref(model._clock))
         self._u: int | None = None
         self._y: int | None = None
         self._component = ctypes.c_void_p(0)
+        self._bound: tuple[object, object] | None = None  # the instance and the clock bound
         self.refresh()
 
     @classmethod
@@ -60,16 +60,22 @@ class NativeSample:
         if inputs is not None and inputs.native_buffer(writing=True) is None:
             return None
         try:
-            model.native_handles()
+            model._native_handles()
         except FmuError:  # FMI 1.0, not initialised: the Python path serves it
             return None
         stepper = nat.load()
         return cls(stepper, model, inputs, outputs, steps_per_sample) if stepper is not None else None
 
     def refresh(self) -> None:
-        """Re-read the instance's function and component addresses (after a reset)."""
-        h = self._model.native_handles()
-        spec, model = self._spec, self._model
+        """Re-read the instance's function and component addresses (after a reset); nothing to
+        do where the reset kept the instance (restore, fmi reset): a reset stays cheap."""
+        model = self._model
+        bound = self._bound
+        if bound is not None and bound[0] is model._backend.component and bound[1] is model._clock:
+            return
+        h = model._native_handles()
+        self._bound = (model._backend.component, model._clock)
+        spec = self._spec
         spec.major, spec.set_real, spec.get_real = h["major"], h["set_real"], h["get_real"]
         spec.do_step, spec.bool_status = h["do_step"], h["bool_status"]
         spec.t0, spec.h, spec.steps = model.start_time_s, model.step_size_s, self._n
@@ -81,29 +87,22 @@ class NativeSample:
         assert out is not None  # checked in create()
         spec.out_vr, spec.n_out, self._y = out
         self._component.value = h["component"]
+        self._refs = (self._refs[0], ctypes.byref(model._clock))
 
     def __call__(self, inputs: Sequence[float] | None) -> FloatArray:
         model = self._model
-        if not model.steppable:
+        if not model._steppable:
             model.advance(self._n)  # raises the model's own refusal (terminated, failed, closed)
         if inputs is not None and self._inputs is not None:
             self._inputs.stage(inputs)
-        k = self._k
-        k.value = model.step_index
         spec_ref, k_ref = self._refs
         status = self._call(spec_ref, self._component, self._u, self._y, k_ref)
         self.terminated = False
-        if status > _WARNING:
-            if status != nat.TERMINATED:
+        if status > WARNING:
+            if status != TERMINATED:
                 raise nat.native_failure(
-                    model,
-                    status,
-                    k.value,
-                    self._inputs.names if self._inputs is not None else (),
-                    self._outputs.names,
+                    model, status, self._inputs.names if self._inputs is not None else (), self._outputs.names
                 )
-            model.native_terminated(k.value)
+            model._native_terminated()
             self.terminated = True
-        else:
-            model.step_index = k.value
         return self._outputs.latest()

@@ -1,9 +1,8 @@
-"""The native batch stepper: ``batch.c`` built with gcc on first use, cached, bound with ctypes.
+"""The native batch stepper: ``batch.c`` (next to this module) built with gcc on first use, bound with ctypes.
 
-The library is keyed by a hash of its source, the FMI headers it includes (FMPy's copy) and the
-compiler flags, and moved into the per-user cache atomically (like the example models), so
-parallel processes never load a half-written file. ctypes releases the GIL for the duration of
-a foreign call, so other Python threads run while the batch steps.
+The library is built and cached by ``bridge.fmu.native`` (keyed by source, FMI headers and
+compiler flags, moved into the per-user cache atomically). ctypes releases the GIL for the
+duration of a foreign call, so other Python threads run while the batch steps.
 
 ``load()`` returns None (and logs why) when there is no compiler: the caller then steps with
 the pure-Python path, which gives the same results.
@@ -17,49 +16,26 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
-from typing import TYPE_CHECKING, Final
+from typing import TYPE_CHECKING
 
 import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, FmuError
 from bridge.fmu import native as native_build
-from bridge.fmu.backend import STATUS_NAMES
+from bridge.fmu.abi import GET_FAILED, SET_FAILED, BatchSpec, status_name
 
 if TYPE_CHECKING:
-    from bridge.fmu import Model
+    from bridge.fmu.model import Model
 
 _log = logging.getLogger(__name__)
-SOURCE: Final = Path(__file__).with_name("batch.c")
-TERMINATED, SET_FAILED, GET_FAILED, INACTIVE = 5, 16, 32, -1
-
-
-class BatchSpec(ctypes.Structure):
-    """The C ``BatchSpec``: which FMI functions, which value references, the time grid."""
-
-    _fields_ = [
-        ("major", ctypes.c_int),
-        ("set_real", ctypes.c_void_p),
-        ("get_real", ctypes.c_void_p),
-        ("do_step", ctypes.c_void_p),
-        ("bool_status", ctypes.c_void_p),
-        ("n_in", ctypes.c_int),
-        ("in_vr", ctypes.c_void_p),
-        ("n_out", ctypes.c_int),
-        ("out_vr", ctypes.c_void_p),
-        ("t0", ctypes.c_double),
-        ("h", ctypes.c_double),
-        ("steps", ctypes.c_int),
-    ]
 
 
 @dataclass
 class NativeStepper:
-    """``batch_step`` and ``batch_do_steps`` of the loaded library."""
+    """``batch_step``, ``step_one`` and ``batch_do_steps`` of the loaded library."""
 
     library: ctypes.CDLL
-    path: Path
 
     def __post_init__(self) -> None:
         p = ctypes.c_void_p
@@ -110,42 +86,34 @@ class NativeStepper:
         )
 
 
-def library_path() -> Path:
-    """Where the built library lives in the per-user cache (keyed by source, headers and flags)."""
-    return native_build.library_path(SOURCE)
-
-
 @lru_cache(maxsize=1)
 def load() -> NativeStepper | None:
-    """The native stepper, built on first use; None when it cannot be built (no gcc, no headers)."""
+    """The native stepper, built on first use; None when it cannot be built (no gcc, no headers)
+    or ``FMU_BRIDGE_NO_NATIVE`` is set: the caller then steps from Python, with the same results."""
     if os.environ.get("FMU_BRIDGE_NO_NATIVE"):
         return None
     try:
-        target = library_path()
-        if not target.is_file():
-            native_build.build(SOURCE, target)
-        return NativeStepper(ctypes.CDLL(str(target)), target)
-    except (BridgeError, OSError) as exc:
+        return NativeStepper(native_build.load("batch"))
+    except BridgeError as exc:
         _log.warning("native batch stepping unavailable, stepping in Python instead: %s", exc)
         return None
 
 
 def native_failure(
-    model: Model, status: int, k: int, input_names: Sequence[str], output_names: Sequence[str]
+    model: Model, status: int, input_names: Sequence[str], output_names: Sequence[str]
 ) -> FmuError:
     """The error for a native sample of ``model`` that ended in ``status`` (above Warning, not
-    TERMINATED) at step ``k``: a failed set or get names the variables, a failed doStep is
-    accounted in the model (which then refuses to step until reset) and carries its message."""
+    TERMINATED) at its current step: a failed set or get names the variables, a failed doStep
+    is accounted in the model (which then refuses to step until reset) and carries its message."""
     if status >= SET_FAILED:
         what, names = ("get", output_names) if status >= GET_FAILED else ("set", input_names)
-        t = model.start_time_s + k * model.step_size_s
         return FmuError(
-            f"{model.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[status & 15]} "
-            f"at step {k} (t={t:g} s)",
+            f"{model.info.model_name}: {what} of {list(names)} returned {status_name(status & 15)} "
+            f"at step {model.step_index} (t={model.time_s:g} s)",
             log=model.log,
         )
     try:
-        model.native_step_failed(k, status)
+        model._native_step_failed(status)
     except FmuError as exc:
         return exc
-    return FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log)
+    return FmuError(f"doStep returned {status_name(status)}", log=model.log)

@@ -1,0 +1,111 @@
+"""The C side's vocabulary: FMI status codes, the native helpers' result codes and struct mirrors.
+
+One module, so that a field added to a struct in ``batch.c`` or ``fixed_step.c`` has one Python
+mirror to follow, and so that status codes have one spelling. Nothing outside ``bridge.fmu``
+imports it (pyproject.toml's import contracts say so; ``lint-imports`` checks it in CI): above
+this package, outcomes are booleans and exceptions, never FMI statuses.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from typing import Any, Final
+
+# -- FMI statuses (fmi2Status / fmi3Status; FMI 1.0 uses the same numbers) -------------------------
+OK, WARNING, DISCARD, ERROR, FATAL = 0, 1, 2, 3, 4
+STATUS_NAMES: Final = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
+
+# -- batch.c: a sample's outcome per instance (an FMI status, or one of these) ----------------------
+TERMINATED: Final = 5  # the FMU asked to stop (FMI 2.0: Discard with fmi2Terminated)
+SET_FAILED: Final = 16  # + the status of the failed set
+GET_FAILED: Final = 32  # + the status of the failed get
+INACTIVE: Final = -1  # the instance was not stepped
+
+# -- fixed_step.c: why the integration loop returned ---------------------------------------------------
+END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE = 0, 1, 2, 3, 4
+FAILED: Final = 64  # + 16 * the failing function's index + its status
+
+
+def status_name(status: int) -> str:
+    """``"Error"`` for 3; statuses above Pending (the helpers' own codes) read as Pending."""
+    return STATUS_NAMES[min(max(status, 0), len(STATUS_NAMES) - 1)]
+
+
+def address(fn: Any) -> int:
+    """The address of a ctypes function (0 for None): what the C helpers call through."""
+    return int(ctypes.cast(fn, ctypes.c_void_p).value or 0) if fn is not None else 0
+
+
+def pointer_value(handle: Any) -> int:
+    """The integer value of an FMU component (or any) pointer, 0 for NULL."""
+    return int(ctypes.cast(handle, ctypes.c_void_p).value or 0)
+
+
+class BatchSpec(ctypes.Structure):
+    """``batch.c``'s ``BatchSpec``: which FMI functions, which value references, the time grid."""
+
+    _fields_ = [
+        ("major", ctypes.c_int),
+        ("set_real", ctypes.c_void_p),
+        ("get_real", ctypes.c_void_p),
+        ("do_step", ctypes.c_void_p),
+        ("bool_status", ctypes.c_void_p),
+        ("n_in", ctypes.c_int),
+        ("in_vr", ctypes.c_void_p),
+        ("n_out", ctypes.c_int),
+        ("out_vr", ctypes.c_void_p),
+        ("t0", ctypes.c_double),
+        ("h", ctypes.c_double),
+        ("steps", ctypes.c_int),
+    ]
+
+
+class FixedSpec(ctypes.Structure):
+    """``fixed_step.c``'s ``FixedSpec``: FMI version, method, sizes, function addresses, work array."""
+
+    _fields_ = [
+        ("major", ctypes.c_int),
+        ("method", ctypes.c_int),
+        ("nx", ctypes.c_int),
+        ("nz", ctypes.c_int),
+        ("completed", ctypes.c_int),
+        *((name, ctypes.c_void_p) for name in ("set_time", "set_x", "get_x", "get_dx", "get_z", "step")),
+        ("work", ctypes.c_void_p),
+    ]
+
+
+class FixedCall(ctypes.Structure):
+    """``fixed_step.c``'s ``FixedCall``: one call's instance, times and announced time event (NaN: none)."""
+
+    _fields_ = [
+        ("component", ctypes.c_void_p),
+        ("time", ctypes.c_double),
+        ("origin", ctypes.c_double),
+        ("substep", ctypes.c_double),
+        ("total", ctypes.c_longlong),
+        ("end", ctypes.c_double),
+        ("next_event", ctypes.c_double),
+        ("announced", ctypes.c_double),
+    ]
+
+
+class FixedBatchSpec(ctypes.Structure):
+    """``fixed_step.c``'s ``FixedBatch``: FMI version, Float64 set/get, value references, the time grid."""
+
+    _fields_ = [
+        ("major", ctypes.c_int),
+        ("set_real", ctypes.c_void_p),
+        ("get_real", ctypes.c_void_p),
+        ("n_in", ctypes.c_int),
+        ("in_vr", ctypes.c_void_p),
+        ("n_out", ctypes.c_int),
+        ("out_vr", ctypes.c_void_p),
+        ("t0", ctypes.c_double),
+        ("h", ctypes.c_double),
+        ("steps", ctypes.c_int),
+        ("substeps", ctypes.c_int),
+    ]
+
+
+Clock = ctypes.c_longlong
+"""A model's step counter ``k``: one C ``long long`` that native steppers advance in place."""
