@@ -39,7 +39,7 @@ from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.node_link import NodeLink
 from bridge.net.node_state import SavedState
-from bridge.net.realtime import RealtimeDriver
+from bridge.net.realtime import Pacing, RealtimeDriver
 from bridge.net.requests import Refused, RequestRules, redact
 from bridge.net.ros2.view import RosViewSettings
 from bridge.net.served import Served, served_by
@@ -63,6 +63,7 @@ class FmuNode:
         isolate: run the FMU in a child process as ``model.isolation`` would: a hung or crashing
             FMU is killed after ``step_timeout_s`` and restarted by the next reset.
         step_timeout_s: the longest a reset or step may take before the node reports it hung.
+        pacing: how a real-time node keeps its period (``bridge.net.realtime.Pacing``).
     """
 
     def __init__(
@@ -79,6 +80,7 @@ class FmuNode:
         isolate: bool = False,
         step_timeout_s: float = 10.0,
         served: Served | None = None,
+        pacing: Pacing | None = None,
     ) -> None:
         if mode not in ("lockstep", "realtime"):
             raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
@@ -117,7 +119,7 @@ class FmuNode:
         self._driver: RealtimeDriver | None = None
         self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
         self.closed_cleanly = True
-        self._declare(session if session is not None else open_session(options), ros)
+        self._declare(session if session is not None else open_session(options), ros, pacing)
 
     @property
     def isolated(self) -> bool:
@@ -125,7 +127,7 @@ class FmuNode:
         return self.plant.isolated
 
     # -- life cycle --------------------------------------------------------------------------------
-    def _declare(self, session: Any, ros: RosViewSettings | None) -> None:
+    def _declare(self, session: Any, ros: RosViewSettings | None, pacing: Pacing | None) -> None:
         self._link = link = NodeLink(
             session,
             self.keys,
@@ -141,7 +143,9 @@ class FmuNode:
         if self.mode == "realtime":  # runs from the start with the nominal values
             self.reset(dict(self.served.nominal), None, 0)
             period = self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0
-            self._driver = RealtimeDriver(self._tick, period, name=self.name, counters=self.counters)
+            self._driver = RealtimeDriver(
+                self._tick, period, name=self.name, counters=self.counters, pacing=pacing
+            )
             self._driver.start()
         _log.info(
             "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, self.keys.base

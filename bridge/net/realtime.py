@@ -25,9 +25,19 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
 
 _log = logging.getLogger(__name__)
 SPIN_S = 300e-6  # the busy tail before each deadline
+
+
+@dataclass(frozen=True)
+class Pacing:
+    """How a real-time node keeps its period: ``spin_s`` of busy tail before each deadline (0:
+    sleep only), and SCHED_FIFO at ``priority`` (1-99) where the process may (None: never ask)."""
+
+    spin_s: float = SPIN_S
+    priority: int | None = None
 
 
 class RealtimeDriver:
@@ -38,8 +48,7 @@ class RealtimeDriver:
             so with period 0 the driver idles instead of spinning).
         period_s: seconds between ticks (0: as fast as possible).
         counters: where overruns and internal errors are counted (the node's counters).
-        spin_s: the busy tail before each deadline (0: sleep only).
-        realtime_priority: ask for SCHED_FIFO at this priority (1-99) for the driver's thread.
+        pacing: the busy tail and the scheduling policy (:class:`Pacing`).
     """
 
     def __init__(
@@ -49,13 +58,12 @@ class RealtimeDriver:
         *,
         name: str,
         counters: Counter[str],
-        spin_s: float = SPIN_S,
-        realtime_priority: int | None = None,
+        pacing: Pacing | None = None,
     ) -> None:
         self._tick, self.period_s, self.name = tick, period_s, name
         self.counters = counters
-        self.spin_s = spin_s
-        self.realtime_priority = realtime_priority
+        pacing = pacing or Pacing()
+        self.spin_s, self.realtime_priority = pacing.spin_s, pacing.priority
         self.scheduling = "normal"
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name=f"realtime-{name}", daemon=True)
