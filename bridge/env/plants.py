@@ -21,19 +21,7 @@ def plant_for(experiment: Experiment) -> Plant:
         from bridge.plant.system.plant import SystemPlant
 
         return SystemPlant(experiment, remote=NodeComponents())
-    isolation = experiment.model.isolation
-    if isolation is not None:
-        from bridge.plant.isolated import IsolatedFmuPlant
-
-        return IsolatedFmuPlant(
-            experiment,
-            timeout_s=isolation.timeout,
-            memory_limit_mb=isolation.memory_limit_mb,
-            restart=isolation.restart,
-        )
-    from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
-
-    return LocalFmuPlant(experiment)
+    return factory.fmu_plant(experiment)
 
 
 def model_info_for(experiment: Experiment) -> ModelInfo:

@@ -113,9 +113,10 @@ class SystemPlant(Plant):
         outs: dict[str, list[str]] = {n: [] for n in system.components}
         external = [split_name(n, system.components, "actions", where) for n in self.input_names]
         observed = [split_name(n, system.components, "observations", where) for n in self.output_names]
-        for name, info in self.infos.items():  # every output, for the per-component recording
+        for name, info in self.infos.items():  # every numeric output, for the per-component recording
             for var in info.by_causality("output"):
-                _add(outs, Endpoint(name, var.name))
+                if var.is_numeric:  # a String output is read by name, never as a signal
+                    _add(outs, Endpoint(name, var.name))
         for c in system.connections:  # in the order a component's node serves them
             _add(outs, c.source)
             _add(ins, c.target)
