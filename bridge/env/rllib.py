@@ -41,8 +41,8 @@ def check_next_step(env: Any) -> None:
         raise ConfigError(
             f"RLlib's env runner reads vector envs by NEXT_STEP autoreset rules, but this {name} declares "
             f"autoreset_mode {getattr(declared, 'value', declared)!r}: its episodes would end in the next "
-            "episode's reset state and lose their first step. Build it with autoreset_mode=AutoresetMode.NEXT_STEP (BatchVectorEnv: "
-            "BatchEnvCreator does) or wrap it so that it resets on the next step"
+            "episode's reset state and lose their first step. Build it with "
+            "autoreset_mode=AutoresetMode.NEXT_STEP (BatchEnvCreator does for BatchVectorEnv)"
         )
 
 
