@@ -36,6 +36,7 @@ from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.plant.batch import BatchPlant
+from bridge.plant.factory import model_info_for
 from bridge.task.batch import BatchTask
 from bridge.task.core import NonFiniteOutputs
 
@@ -74,6 +75,7 @@ class BatchEnv:
         self.experiment = exp = as_experiment(experiment, version)
         self.n, self.on_error, self.autoreset = n_envs, on_error, autoreset
         self.active = np.ones(n_envs, dtype=bool)
+        _check_once_per_process(exp, n_envs)
         self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)
         try:
             self.task = BatchTask(exp, plant.info.variables, plant.timing, n_envs)
@@ -327,6 +329,20 @@ class BatchVecEnv(Sb3VecEnv):
 
     def close(self) -> None:
         self.engine.close()
+
+
+def _check_once_per_process(exp: Experiment, n_envs: int) -> None:
+    """A batch steps its instances in this process: refuse several of a once-per-process FMU."""
+    if n_envs < 2:
+        return
+    info = model_info_for(exp)
+    if info.once_per_process:
+        raise ConfigError(
+            f"{info.model_name} declares canBeInstantiatedOnlyOncePerProcess: the {n_envs} instances of a "
+            f"batch env would share one process and its global state. Use n_envs=1 per process (e.g. one "
+            f"per Ray env runner), or a PlantVecEnv of FmuEnv, which gives each instance its own process "
+            f"[{info.path}]"
+        )
 
 
 def _per_episode(info: dict[str, Any]) -> dict[str, Any]:

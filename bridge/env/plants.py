@@ -15,13 +15,19 @@ from bridge.plant.factory import is_system
 
 def plant_for(experiment: Experiment) -> Plant:
     """A :class:`SystemPlant` for a system (node components over Zenoh); the FMU in a child
-    process where ``model.isolation`` asks for it; else the FMU in this process."""
+    process where ``model.isolation`` asks for it or the FMU declares
+    ``canBeInstantiatedOnlyOncePerProcess`` (so that any number of envs over it each have their own
+    process and globals); else the FMU in this process."""
     if is_system(experiment):
         from bridge.net.system_node import NodeComponents
         from bridge.plant.system.plant import SystemPlant
 
         return SystemPlant(experiment, remote=NodeComponents())
     isolation = experiment.model.isolation
+    if isolation is None and factory.model_info_for(experiment).once_per_process:
+        from bridge.experiment.config import IsolationSection
+
+        isolation = IsolationSection()
     if isolation is not None:
         from bridge.plant.isolated import IsolatedFmuPlant
 
