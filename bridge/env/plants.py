@@ -15,7 +15,9 @@ from bridge.plant.factory import is_system
 
 def plant_for(experiment: Experiment) -> Plant:
     """A :class:`SystemPlant` for a system (node components over Zenoh); the FMU in a child
-    process where ``model.isolation`` asks for it; else the FMU in this process."""
+    process where ``model.isolation`` asks for it or the FMU declares
+    ``canBeInstantiatedOnlyOncePerProcess`` (so that any number of envs over it each have their own
+    process and globals); else the FMU in this process."""
     if is_system(experiment):
         from bridge.net.system_node import NodeComponents
         from bridge.plant.system.plant import SystemPlant

@@ -76,11 +76,13 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
     interfaces: list[Interface] = []
     identifiers: dict[str, str] = {}
     can_state: dict[str, bool] = {}
+    once_per_process = False
     for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange)):
         if iface is not None:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
             can_state[kind] = bool(iface.canGetAndSetFMUstate)
+            once_per_process |= bool(iface.canBeInstantiatedOnlyOncePerProcess)
     scheduled = md.scheduledExecution is not None
     if not interfaces and not scheduled:
         raise FmuLoadError(
@@ -104,6 +106,7 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
         description=md.description,
         problems=problems,
         scheduled_execution=scheduled,
+        once_per_process=once_per_process,
         raw=md,
     )
 

@@ -22,6 +22,12 @@ def fmu_plant(experiment: Experiment, *, isolate: bool = False, timeout_s: float
     it (bounded by the file's ``timeout``, else ``timeout_s``, else 10 s), else in this process.
     ``plant.isolated`` says which."""
     isolation = experiment.model.isolation
+    if isolation is None and not isolate and model_info_for(experiment).once_per_process:
+        # canBeInstantiatedOnlyOncePerProcess: each instance gets a process of its own, so that
+        # several envs, a vector env or a system never share the FMU's global state.
+        from bridge.experiment.config import IsolationSection
+
+        isolation = IsolationSection()
     if isolation is not None or isolate:
         from bridge.plant.isolated import IsolatedFmuPlant
 
