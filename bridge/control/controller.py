@@ -175,6 +175,7 @@ class LinearController:
 
     def _law(self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix) -> Matrix:
         """nu = -K s - sum_j F_j (x*_j - x*_j+1)."""
-        changes = x_star[:-1] - x_star[1:]
-        feedforward = np.einsum("jmn,jn->m", m.preview[: len(changes)], changes) if len(changes) else 0.0
+        j = min(len(x_star) - 1, len(m.preview))
+        changes = x_star[:j] - x_star[1 : j + 1]
+        feedforward = np.einsum("jmn,jn->m", m.preview[:j], changes) if j else 0.0
         return -m.k @ state - feedforward  # type: ignore[no-any-return]
