@@ -163,7 +163,9 @@ class LinearController:
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
         applied = np.clip(u, low, high)
-        if len(self._z) and np.array_equal(applied, u):  # integrate only while not saturated
+        span = 1e-6 * np.maximum(1.0, np.abs(applied))
+        saturated = np.any((applied <= low + span) | (applied >= high - span))
+        if len(self._z) and not saturated:  # integrate only while no input is at a limit (anti-windup)
             tracked = [o for o in s.tracking if o in s.integral]
             self._z = self._z + self.dt * np.array([signals[s.tracking[o]] - signals[o] for o in tracked])
         self._x = m.a @ x_hat + m.bu @ (applied - m.u0) + m.bw @ w[0] + m.f0

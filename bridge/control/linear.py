@@ -102,7 +102,14 @@ def linearize(
         relative_step: central differences of ``relative_step * max(|value|, nominal)``.
     """
     point = dict(operating_point or {})
-    with Model(fmu, interface="me") as model:
+    try:
+        opened = Model(fmu, interface="me")
+    except ConfigError as exc:
+        raise ConfigError(
+            f"linearisation sets the FMU's continuous states, which needs model exchange (FMI does not "
+            f"let a co-simulation master set states); export the FMU with model exchange too ({exc})"
+        ) from exc
+    with opened as model:
         every = state_names(model)
         chosen = list(states) if states is not None else every
         unknown = [s for s in chosen if s not in every]

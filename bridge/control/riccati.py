@@ -17,13 +17,8 @@ def dare(a: Matrix, b: Matrix, q: Matrix, r: Matrix, *, tol: float = 1e-12, max_
     ak, gk, hk = a.copy(), b @ np.linalg.solve(r, b.T), q.copy()
     identity = np.eye(n)
     for _ in range(max_iter):
-        w = identity + gk @ hk
-        a_w = ak @ np.linalg.inv(w)
-        h_next = hk + ak.T @ hk @ np.linalg.solve(w, ak)
-        g_next = gk + a_w @ gk @ ak.T
-        ak = a_w @ ak
-        converged = np.linalg.norm(h_next - hk, 1) <= tol * max(1.0, np.linalg.norm(h_next, 1))
-        hk, gk = h_next, g_next
+        with np.errstate(over="ignore", invalid="ignore"):  # a diverging iteration ends below
+            ak, gk, hk, converged = _double(ak, gk, hk, identity, tol)
         if not np.all(np.isfinite(hk)):
             break
         if converged:
@@ -32,6 +27,16 @@ def dare(a: Matrix, b: Matrix, q: Matrix, r: Matrix, *, tol: float = 1e-12, max_
         "the Riccati equation has no stabilising solution: check that every unstable mode is "
         "controlled by the inputs and weighted in q (the states, inputs and weights of the design)"
     )
+
+
+def _double(ak: Matrix, gk: Matrix, hk: Matrix, identity: Matrix, tol: float) -> tuple[Matrix, Matrix, Matrix, bool]:
+    """One doubling step (A, G, H) -> (A (I + GH)^-1 A, G + A (I + GH)^-1 G A', H + A'H (I + GH)^-1 A)."""
+    w = identity + gk @ hk
+    a_w = ak @ np.linalg.inv(w)
+    h_next = hk + ak.T @ hk @ np.linalg.solve(w, ak)
+    g_next = gk + a_w @ gk @ ak.T
+    converged = bool(np.linalg.norm(h_next - hk, 1) <= tol * max(1.0, np.linalg.norm(h_next, 1)))
+    return a_w @ ak, g_next, h_next, converged
 
 
 def lqr_gain(a: Matrix, b: Matrix, q: Matrix, r: Matrix) -> tuple[Matrix, Matrix]:
