@@ -127,6 +127,7 @@ class ModelBased:
         self.kind, self.name = kind, name
         self.design = ControlDesign.model_validate(design)
         self.controller: Any = None
+        self._experiment: Any = None
 
     def reset(self, task: Task, seed: int | None) -> None:
         if self.controller is None or self._experiment is not task.experiment:
@@ -342,7 +343,9 @@ def baseline(name: str, config: Mapping[str, Any]) -> Policy:
         return FixedPolicy(name, float(config["value"]))
     if kind == "python":
         return PythonPolicy(name, _import(str(config["callable"]), f"evaluation.baselines.{name}"))
-    raise ConfigError(f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, lqr, mpc, constant or python")
+    raise ConfigError(
+        f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, lqr, mpc, constant or python"
+    )
 
 
 def _import(path: str, key: str) -> Callable[..., Any]:

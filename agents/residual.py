@@ -19,7 +19,6 @@ from bridge.experiment.config import Experiment
 from bridge.experiment.sections import ResidualSection
 from bridge.task.core import Task
 
-
 Baseline = Pid | ModelBased
 
 
@@ -58,7 +57,8 @@ def residual_setup(experiment: Experiment, residual: ResidualSection) -> dict[st
         raise ConfigError("training.residual needs continuous actions (actions.type: continuous)")
     if baselines[name].type not in ("pid", "lqr", "mpc"):
         raise ConfigError(
-            f"training.residual.baseline: {name!r} is a {baselines[name].type} baseline; use a pid, lqr or mpc"
+            f"training.residual.baseline: {name!r} is a {baselines[name].type} baseline; "
+            "use a pid, lqr or mpc"
         )
     return {"baseline": name, "config": baselines[name].settings(), "scale": residual.scale}
 

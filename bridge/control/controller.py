@@ -84,7 +84,9 @@ class LinearController:
                 self.points = [0.0]
             else:
                 self.points = list(schedule.points)
-                self.designs = [design_point(fmu, self.spec, self.dt, noise, {schedule.input: v}) for v in self.points]
+                self.designs = [
+                    design_point(fmu, self.spec, self.dt, noise, {schedule.input: v}) for v in self.points
+                ]
         given = {**(limits or {}), **self.spec.limits}
         self._limits = [given.get(name, (-np.inf, np.inf)) for name in self.spec.inputs]
         self._steps = preview_samples(self.spec, self.dt)
@@ -125,12 +127,13 @@ class LinearController:
             kalman=mix(lambda d: d.kalman), a=mix(lambda d: d.model.a),
             bu=mix(lambda d: d.model.b[:, :nu]), bw=mix(lambda d: d.bw), f0=mix(lambda d: d.model.f0),
             cm=mix(lambda d: d.cm), dm=mix(lambda d: d.dm), dmw=mix(lambda d: d.dmw),
-            x0=mix(lambda d: d.model.x0), u0=mix(lambda d: d.model.u0[:nu]), w0=mix(lambda d: d.model.u0[nu:]),
+            x0=mix(lambda d: d.model.x0), u0=mix(lambda d: d.model.u0[:nu]),
+            w0=mix(lambda d: d.model.u0[nu:]),
             ym0=mix(lambda d: d.model.y0[mi]), yt0=mix(lambda d: d.model.y0[ti]),
         )  # fmt: skip
 
     def _disturbance_sequence(self, signals: Mapping[str, float], steps: int) -> Matrix:
-        """Values of each disturbance now and ``steps`` samples ahead (linear between previews, held after)."""
+        """Each disturbance now and ``steps`` samples ahead (linear between previews, then held)."""
         out = np.zeros((steps + 1, len(self.spec.disturbances)))
         times = np.arange(steps + 1) * self.dt
         for i, (name, signal) in enumerate(self.spec.disturbances.items()):

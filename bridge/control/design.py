@@ -51,7 +51,7 @@ class PointDesign:
 
 def preview_samples(design: ControlDesign, dt: float) -> int:
     horizons = [t for table in design.preview.values() for t in table]
-    return int(round(max(horizons) / dt)) if horizons else 0
+    return round(max(horizons) / dt) if horizons else 0
 
 
 def design_point(
@@ -64,16 +64,24 @@ def design_point(
     """Linearise ``fmu`` at the design's operating point (plus ``extra_point``) and design there."""
     inputs, dist = list(design.inputs), list(design.disturbances)
     tracked = list(design.tracking)
-    outputs = list(dict.fromkeys([*design.measured, *tracked, *(n for n in design.q if n not in (design.states or []))]))
+    outputs = list(
+        dict.fromkeys([*design.measured, *tracked, *(n for n in design.q if n not in (design.states or []))])
+    )
     point = {**design.operating_point, **(extra_point or {})}
-    continuous = linearize(fmu, inputs=[*inputs, *dist], outputs=outputs, states=design.states, operating_point=point)
+    continuous = linearize(
+        fmu, inputs=[*inputs, *dist], outputs=outputs, states=design.states, operating_point=point
+    )
     for name in design.q:
         if name not in continuous.states and name not in continuous.outputs:
-            raise ConfigError(f"design.q: {name!r} is neither a state {list(continuous.states)} nor an output")
+            raise ConfigError(
+                f"design.q: {name!r} is neither a state {list(continuous.states)} nor an output"
+            )
     return design_from_model(continuous.discretize(dt), design, noise_std)
 
 
-def design_from_model(model: LinearModel, design: ControlDesign, noise_std: Mapping[str, float]) -> PointDesign:
+def design_from_model(
+    model: LinearModel, design: ControlDesign, noise_std: Mapping[str, float]
+) -> PointDesign:
     """The LQR design on a sampled linear model (the FMU's or any other, e.g. an analytic one)."""
     assert model.dt is not None
     dt = model.dt

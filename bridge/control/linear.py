@@ -13,7 +13,7 @@ the states, so the FMU must offer model exchange (every example model with state
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -114,7 +114,9 @@ def linearize(
         chosen = list(states) if states is not None else every
         unknown = [s for s in chosen if s not in every]
         if unknown:
-            raise ConfigError(f"states {unknown} are not continuous states of {model.info.model_name}: {every}")
+            raise ConfigError(
+                f"states {unknown} are not continuous states of {model.info.model_name}: {every}"
+            )
         for name in [*inputs, *outputs]:
             model.variable(name)  # a clear error for a name the FMU does not have
         state_values = {k: v for k, v in point.items() if k in every}
@@ -126,7 +128,9 @@ def linearize(
         dx_all = np.zeros(n_all)
         x_ptr = x_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
         dx_ptr = dx_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        get_dx = fmu_obj.getContinuousStateDerivatives if model.info.fmi_major == 3 else fmu_obj.getDerivatives
+        get_dx = (
+            fmu_obj.getContinuousStateDerivatives if model.info.fmi_major == 3 else fmu_obj.getDerivatives
+        )
         fmu_obj.getContinuousStates(x_ptr, n_all)
         for name, value in state_values.items():
             x_all[every.index(name)] = value
@@ -145,28 +149,32 @@ def linearize(
         f0, y0 = evaluate(base_x, u0)
         nominal_x = np.array([_nominal(model, s) for s in chosen])
         nominal_u = np.array([_nominal(model, u) for u in inputs])
-        a = np.zeros((len(chosen), len(chosen)))
-        c = np.zeros((len(outputs), len(chosen)))
-        for j, i in enumerate(index):
-            h = relative_step * max(abs(base_x[i]), nominal_x[j])
-            plus, minus = base_x.copy(), base_x.copy()
-            plus[i] += h
-            minus[i] -= h
-            (fp, yp), (fm, ym) = evaluate(plus, u0), evaluate(minus, u0)
-            a[:, j], c[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
-        b = np.zeros((len(chosen), len(inputs)))
-        d = np.zeros((len(outputs), len(inputs)))
-        for j in range(len(inputs)):
-            h = relative_step * max(abs(u0[j]), nominal_u[j])
-            plus, minus = u0.copy(), u0.copy()
-            plus[j] += h
-            minus[j] -= h
-            (fp, yp), (fm, ym) = evaluate(base_x, plus), evaluate(base_x, minus)
-            b[:, j], d[:, j] = (fp - fm) / (2 * h), (yp - ym) / (2 * h)
+        a, c = _central(lambda x: evaluate(x, u0), base_x, index, nominal_x, relative_step)
+        b, d = _central(lambda u: evaluate(base_x, u), u0, range(len(inputs)), nominal_u, relative_step)
     return LinearModel(
         a=a, b=b, c=c, d=d, states=tuple(chosen), inputs=tuple(inputs), outputs=tuple(outputs),
         x0=base_x[index], u0=u0, y0=y0, f0=f0, nominal=nominal_x,
     )  # fmt: skip
+
+
+def _central(
+    fn: Callable[[Matrix], tuple[Matrix, Matrix]],
+    base: Matrix,
+    positions: Iterable[int],
+    nominal: Matrix,
+    relative_step: float,
+) -> tuple[Matrix, Matrix]:
+    """Central differences of both results of ``fn`` by the entries ``positions`` of ``base``."""
+    f_cols, y_cols = [], []
+    for j, i in enumerate(positions):
+        h = relative_step * max(abs(base[i]), nominal[j])
+        plus, minus = base.copy(), base.copy()
+        plus[i] += h
+        minus[i] -= h
+        (fp, yp), (fm, ym) = fn(plus), fn(minus)
+        f_cols.append((fp - fm) / (2 * h))
+        y_cols.append((yp - ym) / (2 * h))
+    return np.column_stack(f_cols), np.column_stack(y_cols)
 
 
 def _nominal(model: Model, name: str) -> float:

@@ -50,11 +50,21 @@ class _Qp:
         self.solver.setup(
             sparse.triu(sparse.csc_matrix(hessian), format="csc"), np.zeros(horizon * m), constraints,
             -np.full(n_con, np.inf), np.full(n_con, np.inf),
-            verbose=False, eps_abs=1e-7, eps_rel=1e-7, polish=False, warm_starting=True, max_iter=20000,
+            verbose=False, eps_abs=1e-7, eps_rel=1e-7, warm_starting=True, max_iter=20000,
         )  # fmt: skip
         self.failures = 0
 
-    def solve(self, state: Matrix, changes: Matrix, u_star: Matrix, u0: Matrix, low: Matrix, high: Matrix, u_prev: Matrix) -> Matrix | None:
+    def solve(
+        self,
+        state: Matrix,
+        changes: Matrix,
+        *,
+        u_star: Matrix,
+        u0: Matrix,
+        low: Matrix,
+        high: Matrix,
+        u_prev: Matrix,
+    ) -> Matrix | None:
         h, m = self.horizon, self.m
         q = self.gradient @ (self.sx @ state + self.sd @ changes.reshape(-1))
         base = (u0 + u_star[:h]).reshape(-1)  # u_j = base_j + nu_j
@@ -62,7 +72,7 @@ class _Qp:
         step = base - np.concatenate([u_prev, base[:-m]])  # u_j - u_j-1 = nu_j - nu_j-1 + step_j
         rate_lo, rate_hi = -self.rate - step, self.rate - step
         self.solver.update(q=q, l=np.concatenate([box_lo, rate_lo]), u=np.concatenate([box_hi, rate_hi]))
-        result = self.solver.solve()
+        result = self.solver.solve(raise_error=False)
         x = result.x
         if x is None or not np.all(np.isfinite(x)) or "solved" not in str(result.info.status).lower():
             self.failures += 1
@@ -78,7 +88,9 @@ class Mpc(LinearController):
         rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
         unknown = sorted(set(self.spec.rate_limits) - set(self.spec.inputs))
         if unknown:
-            raise ConfigError(f"baseline {self.name}: rate_limits {unknown} are not inputs {self.spec.inputs}")
+            raise ConfigError(
+                f"baseline {self.name}: rate_limits {unknown} are not inputs {self.spec.inputs}"
+            )
         self._qps = [_Qp(d, self.spec.horizon, rate, self.dt) for d in self.designs]
         self._nearest = 0
 
@@ -100,7 +112,9 @@ class Mpc(LinearController):
         changes = x_star[:h] - x_star[1 : h + 1]
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
-        move = self._qps[self._nearest].solve(state, changes, u_star, m.u0, low, high, u_prev)
+        move = self._qps[self._nearest].solve(
+            state, changes, u_star=u_star, u0=m.u0, low=low, high=high, u_prev=u_prev
+        )
         if move is None:  # the LQR law (clipped by the caller) when the solver gives no answer
             return super()._law(m, state, x_star, u_star, u_prev)
         return move

@@ -29,27 +29,32 @@ def dare(a: Matrix, b: Matrix, q: Matrix, r: Matrix, *, tol: float = 1e-12, max_
     )
 
 
-def _double(ak: Matrix, gk: Matrix, hk: Matrix, identity: Matrix, tol: float) -> tuple[Matrix, Matrix, Matrix, bool]:
+def _double(
+    ak: Matrix, gk: Matrix, hk: Matrix, identity: Matrix, tol: float
+) -> tuple[Matrix, Matrix, Matrix, bool]:
     """One doubling step (A, G, H) -> (A (I + GH)^-1 A, G + A (I + GH)^-1 G A', H + A'H (I + GH)^-1 A)."""
     w = identity + gk @ hk
     a_w = ak @ np.linalg.inv(w)
     h_next = hk + ak.T @ hk @ np.linalg.solve(w, ak)
     g_next = gk + a_w @ gk @ ak.T
-    converged = bool(np.linalg.norm(h_next - hk, 1) <= tol * max(1.0, np.linalg.norm(h_next, 1)))
+    converged = bool(np.linalg.norm(h_next - hk, 1) <= tol * max(1.0, float(np.linalg.norm(h_next, 1))))
     return a_w @ ak, g_next, h_next, converged
 
 
 def lqr_gain(a: Matrix, b: Matrix, q: Matrix, r: Matrix) -> tuple[Matrix, Matrix]:
     """K and P of the discrete LQR u = -K x minimising the sum of x'Qx + u'Ru."""
     p = dare(a, b, q, r)
-    return np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a), p
+    k = np.asarray(np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a), dtype=np.float64)
+    return k, p
 
 
-def finite_horizon_gains(a: Matrix, b: Matrix, q: Matrix, r: Matrix, terminal: Matrix, n: int) -> list[Matrix]:
+def finite_horizon_gains(
+    a: Matrix, b: Matrix, q: Matrix, r: Matrix, *, terminal: Matrix, n: int
+) -> list[Matrix]:
     """K_0 .. K_{n-1} of the finite-horizon LQR with terminal weight ``terminal`` (backward recursion)."""
     p, gains = terminal, []
     for _ in range(n):
-        k = np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a)
+        k = np.asarray(np.linalg.solve(r + b.T @ p @ b, b.T @ p @ a), dtype=np.float64)
         p = q + a.T @ p @ (a - b @ k)
         gains.append(k)
     return gains[::-1]

@@ -67,7 +67,9 @@ class ControlDesign(Strict):
     def _consistent(self) -> ControlDesign:
         stray = sorted(set(self.integral) - set(self.tracking))
         if stray:
-            raise ValueError(f"integral {stray} must be tracked outputs too (tracking: {sorted(self.tracking)})")
+            raise ValueError(
+                f"integral {stray} must be tracked outputs too (tracking: {sorted(self.tracking)})"
+            )
         stray = sorted(set(self.preview) - set(self.disturbances))
         if stray:
             raise ValueError(

@@ -13,7 +13,9 @@ from bridge.errors import ConfigError
 from bridge.models import example_fmu
 
 
-def cartpole_closed_form(m_cart: float, m_pole: float, length: float, g: float) -> tuple[np.ndarray, np.ndarray]:
+def cartpole_closed_form(
+    m_cart: float, m_pole: float, length: float, g: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Gymnasium's cart-pole equations linearised upright (x, x_dot, theta, theta_dot; force)."""
     total = m_cart + m_pole
     denominator = length * (4.0 / 3.0 - m_pole / total)
@@ -28,7 +30,9 @@ def cartpole_closed_form(m_cart: float, m_pole: float, length: float, g: float) 
 
 def test_cartpole_linearisation_matches_the_closed_form() -> None:
     point = {"m_cart": 1.3, "m_pole": 0.2, "length": 0.6}
-    lin = linearize(example_fmu("cartpole", "2.0", "me"), inputs=["force"], outputs=["theta"], operating_point=point)
+    lin = linearize(
+        example_fmu("cartpole", "2.0", "me"), inputs=["force"], outputs=["theta"], operating_point=point
+    )
     a, b = cartpole_closed_form(1.3, 0.2, 0.6, 9.8)
     assert lin.states == ("x", "x_dot", "theta", "theta_dot")
     np.testing.assert_allclose(lin.a, a, rtol=1e-6, atol=1e-8)
@@ -45,23 +49,25 @@ def test_fmi3_cartpole_gives_the_same_model() -> None:
 
 
 def test_dc_motor_linearisation_and_sampling_match_the_closed_form() -> None:
-    r, l, k, j, b = 1.2, 0.003, 0.09, 0.012, 0.0002
-    point = {"R": r, "L": l, "K": k, "J": j, "b": b, "omega": 50.0, "voltage": 6.0}
+    r, ind, k, j, b = 1.2, 0.003, 0.09, 0.012, 0.0002
+    point = {"R": r, "L": ind, "K": k, "J": j, "b": b, "omega": 50.0, "voltage": 6.0}
     lin = linearize(
         example_fmu("dcmotor", "2.0", "me"), inputs=["voltage", "load_torque"], outputs=["omega", "torque"],
         operating_point=point,
     )  # fmt: skip
-    a = np.array([[-r / l, -k / l], [k / j, -b / j]])
-    bu = np.array([[1 / l, 0.0], [0.0, -1 / j]])
+    a = np.array([[-r / ind, -k / ind], [k / j, -b / j]])
+    bu = np.array([[1 / ind, 0.0], [0.0, -1 / j]])
     assert lin.states == ("current", "omega")
     np.testing.assert_allclose(lin.a, a, rtol=1e-6)
     np.testing.assert_allclose(lin.b, bu, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(lin.c, [[0, 1], [k, 0]], rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(lin.f0, [(6.0 - k * 50.0) / l, -b * 50.0 / j], rtol=1e-9)
+    np.testing.assert_allclose(lin.f0, [(6.0 - k * 50.0) / ind, -b * 50.0 / j], rtol=1e-9)
     sampled = lin.discretize(0.01)
     np.testing.assert_allclose(sampled.a, expm(a * 0.01), rtol=1e-8, atol=1e-12)
     # zero-order hold input matrix: integral of e^(A s) ds B = A^-1 (e^(A dt) - I) B
-    np.testing.assert_allclose(sampled.b, np.linalg.solve(a, expm(a * 0.01) - np.eye(2)) @ bu, rtol=1e-7, atol=1e-12)
+    np.testing.assert_allclose(
+        sampled.b, np.linalg.solve(a, expm(a * 0.01) - np.eye(2)) @ bu, rtol=1e-7, atol=1e-12
+    )
 
 
 def test_vehicle_linearisation_is_the_linear_single_track_model() -> None:
@@ -109,10 +115,10 @@ def test_finite_horizon_gains_converge_to_the_infinite_horizon_gain() -> None:
     lin = linearize(example_fmu("cartpole", "2.0", "me"), inputs=["force"]).discretize(0.02)
     q, r = np.diag([1.0, 0.1, 10.0, 0.1]), np.array([[0.1]])
     k, p = lqr_gain(lin.a, lin.b, q, r)
-    gains = finite_horizon_gains(lin.a, lin.b, q, r, np.zeros((4, 4)), 2000)
+    gains = finite_horizon_gains(lin.a, lin.b, q, r, terminal=np.zeros((4, 4)), n=2000)
     np.testing.assert_allclose(gains[0], k, rtol=1e-6)
     # with the Riccati solution as terminal weight every finite-horizon gain is the stationary one
-    for gain in finite_horizon_gains(lin.a, lin.b, q, r, p, 5):
+    for gain in finite_horizon_gains(lin.a, lin.b, q, r, terminal=p, n=5):
         np.testing.assert_allclose(gain, k, rtol=1e-8)
 
 
