@@ -17,6 +17,7 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("compare")(compare_cmd)
+    app.command("tune")(tune_cmd)
     agent_app = typer.Typer(
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
     )
@@ -27,6 +28,43 @@ def register(app: typer.Typer) -> None:
     export_app.command("fmu")(export_fmu_cmd)
     agent_app.add_typer(export_app, name="export")
     app.add_typer(agent_app, name="agent")
+
+
+def tune_cmd(
+    config: Annotated[Path, typer.Argument(help="The experiment YAML file.")],
+    baseline: Annotated[str, typer.Argument(help="A baseline of evaluation.baselines.")],
+    param: Annotated[
+        list[str], typer.Option("--param", help="A positive value to tune: kp, design.q.NAME (repeat).")
+    ],
+    iterations: Annotated[int, typer.Option(help="Objective evaluations (Nelder-Mead).")] = 100,
+    seeds: Annotated[int, typer.Option(help="Episodes per training scenario (seeds 1000..).")] = 2,
+    penalty: Annotated[float, typer.Option(help="Added per episode that terminates early.")] = 100.0,
+    write: Annotated[
+        Path | None,
+        typer.Option(help="Write the experiment with the tuned values here (default: CONFIG.tuned.yaml)."),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="tuning.json (default: beside that file).")] = None,
+    version: Annotated[str | None, typer.Option()] = None,
+) -> None:
+    """Tune a baseline's gains or weights on the training scenarios (held IAE; see agents/tune.py)."""
+    import json
+
+    from agents.tune import tune, write_experiment
+
+    result = tune(
+        config, baseline, param, iterations=iterations, seeds=seeds, penalty=penalty, version=version,
+        log=console.print,
+    )  # fmt: skip
+    target = write_experiment(config, result, write or config.with_suffix(".tuned.yaml"))
+    report = out or target.with_suffix(".tuning.json")
+    report.write_text(json.dumps(result.as_dict(), indent=1))
+    best = ", ".join(f"{k} = {v:.5g}" for k, v in zip(result.parameters, result.best))
+    console.print(f"objective: {result.objective}")
+    console.print(
+        f"{result.start_objective:.4f} -> {result.best_objective:.4f} "
+        f"({len(result.evaluations)} evaluations, {result.wall_time_s:.0f} s): {best}"
+    )
+    console.print(f"experiment: {target}; tuning record: {report}")
 
 
 ZenohModeOpt = Annotated[
