@@ -11,7 +11,7 @@ as ``tuning.json`` (objective, parameters, start and best values, every evaluati
 
 from __future__ import annotations
 
-import json
+import copy
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -62,7 +62,7 @@ def get_path(settings: dict[str, Any], key: str) -> float:
 
 
 def set_path(settings: dict[str, Any], key: str, value: float) -> dict[str, Any]:
-    out = json.loads(json.dumps(settings))  # a deep copy of plain data
+    out: dict[str, Any] = copy.deepcopy(settings)
     node = out
     *parents, last = key.split(".")
     for part in parents:
