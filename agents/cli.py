@@ -38,7 +38,10 @@ def tune_cmd(
     ],
     iterations: Annotated[int, typer.Option(help="Objective evaluations (Nelder-Mead).")] = 100,
     seeds: Annotated[int, typer.Option(help="Episodes per training scenario (seeds 1000..).")] = 2,
-    penalty: Annotated[float, typer.Option(help="Added per episode that terminates early.")] = 100.0,
+    penalty: Annotated[float, typer.Option(help="held_iae: added per episode ending early.")] = 100.0,
+    objective: Annotated[
+        str, typer.Option(help="held_iae (tracking) or return (minus the task's episode return).")
+    ] = "held_iae",
     write: Annotated[
         Path | None,
         typer.Option(help="Write the experiment with the tuned values here (default: CONFIG.tuned.yaml)."),
@@ -52,7 +55,8 @@ def tune_cmd(
     from agents.tune import tune, write_experiment
 
     result = tune(
-        config, baseline, param, iterations=iterations, seeds=seeds, penalty=penalty, version=version,
+        config, baseline, param, iterations=iterations, seeds=seeds, penalty=penalty, objective=objective,
+        version=version,
         log=console.print,
     )  # fmt: skip
     target = write_experiment(config, result, write or config.with_suffix(".tuned.yaml"))
@@ -147,7 +151,11 @@ def agent_run_cmd(
     zenoh_mode: ZenohModeOpt = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID (ros2 transport).")] = None,
     runtime: Annotated[
-        str, typer.Option(help="torch (stable-baselines3) or onnx (onnxruntime, no torch needed).")
+        str,
+        typer.Option(
+            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed) or baseline "
+            "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
+        ),
     ] = "torch",
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
@@ -202,8 +210,8 @@ def agent_settings(
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    if runtime not in ("torch", "onnx"):
-        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
+    if runtime not in ("torch", "onnx", "baseline"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
     ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings

@@ -1,9 +1,11 @@
 """``fmu-bridge tune``: tune a baseline's gains or weights on the training scenarios.
 
-Objective (stated with every result): the mean over the training scenarios and the seeds
-1000, 1001, .. (never the evaluation seeds 0.. nor the held-out scenarios) of the held IAE of the
-first tracking pair (``evaluation.metrics.tracking``, else the reward's), plus ``penalty`` for each
-episode that terminates early (left its envelope). Nelder-Mead searches the logarithms of the
+Objective (stated with every result), a mean over the training scenarios and the seeds 1000,
+1001, .. (never the evaluation seeds 0.. nor the held-out scenarios) of, per episode: ``held_iae``
+the held IAE of the first tracking pair (``evaluation.metrics.tracking``, else the reward's) plus
+``penalty`` if the episode terminates early (left its envelope); or ``return`` minus the episode
+return, the task's own reward (what a trained agent maximises on the same scenarios, with its
+effort or rate terms and termination penalty). Nelder-Mead searches the logarithms of the
 chosen parameters (they stay positive and are searched relative to their size), starting from
 the experiment's values. The result is written into a copy of the experiment (``--write``) and
 as ``tuning.json`` (objective, parameters, start and best values, every evaluation, wall time).
@@ -95,6 +97,7 @@ def tune(
     iterations: int = 100,
     seeds: int = 2,
     penalty: float = 100.0,
+    objective: str = "held_iae",
     version: str | None = None,
     log: Any = None,
 ) -> TuneResult:
@@ -116,17 +119,21 @@ def tune(
     if not spec.tracking:
         raise ConfigError("tune: the objective needs a tracking pair (evaluation.metrics.tracking)")
     output = spec.tracking[0][0]
+    if objective not in ("held_iae", "return"):
+        raise ConfigError(f"tune: objective {objective!r} is unknown; use held_iae or return")
     scenarios = training_scenarios(experiment)
     seed_list = [TRAINING_SEED + i for i in range(seeds)]
     env = FmuEnv(experiment)
     result = TuneResult(
         baseline=name, parameters=list(parameters), start=start, best=start, start_objective=np.nan,
         best_objective=np.nan, scenarios=[s or "" for s in scenarios], seeds=seed_list,
-        objective=f"mean held IAE of {output} over {len(scenarios)} training scenarios x seeds "
-        f"{seed_list[0]}..{seed_list[-1]}, plus {penalty:g} per episode that terminates",
+        objective=(
+            f"mean held IAE of {output}, plus {penalty:g} per episode that terminates,"
+            if objective == "held_iae" else "minus the mean episode return"
+        ) + f" over {len(scenarios)} training scenarios x seeds {seed_list[0]}..{seed_list[-1]}",
     )  # fmt: skip
 
-    def objective(log_values: np.ndarray) -> float:
+    def cost(log_values: np.ndarray) -> float:
         values = [float(v) for v in np.exp(log_values)]
         config = base
         for key, value in zip(parameters, values):
@@ -136,8 +143,11 @@ def tune(
         for scenario in scenarios:
             for seed in seed_list:
                 trace = run_episode(env, policy, seed, scenario)
-                held = compute(trace, spec)[f"{output}.iae_held"]
-                total += float(held) + (penalty if trace.terminated else 0.0)
+                if objective == "return":
+                    total -= float(np.sum(trace.rewards))
+                else:
+                    held = compute(trace, spec)[f"{output}.iae_held"]
+                    total += float(held) + (penalty if trace.terminated else 0.0)
                 count += 1
         value = total / count
         result.evaluations.append({"values": values, "objective": value})
@@ -147,9 +157,9 @@ def tune(
 
     try:
         x0 = np.log(np.asarray(start))
-        result.start_objective = objective(x0)
+        result.start_objective = cost(x0)
         found = minimize(
-            objective, x0, method="Nelder-Mead",
+            cost, x0, method="Nelder-Mead",
             options={"maxfev": iterations, "xatol": 1e-3, "fatol": 1e-4, "initial_simplex": _simplex(x0)},
         )  # fmt: skip
     finally:

@@ -1,0 +1,49 @@
+"""A baseline deployed like a trained agent (``agent run --runtime baseline``): the deployed agent's
+inputs are the baseline's, step by step, and it keeps the cart-pole up for a whole episode."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
+from agents.policies import make_policy
+from agents.runtime import load_policy
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError
+from bridge.experiment.examples import example_experiment
+
+CARTPOLE = example_experiment("cartpole_continuous")
+
+
+def test_deployed_lqr_acts_like_the_evaluated_one_and_balances() -> None:
+    experiment, _ = deployment_experiment(Path("lqr"), CARTPOLE)
+    policy = load_policy(Path("lqr"), "baseline", experiment)
+    sent: list[list[float]] = []
+    agent = DeployedAgent(
+        policy, experiment, model_info_for(experiment, CARTPOLE.parent, None),
+        DeploySettings(runtime="baseline"), lambda inputs, step: sent.append(inputs),
+    )  # fmt: skip
+    reference = make_policy("lqr", {"lqr": experiment.evaluation.baselines["lqr"].settings()})
+    env = FmuEnv(experiment)
+    try:
+        obs, info = env.reset(seed=2)
+        reference.reset(env.task, 2)
+        for step in range(500):
+            expected = reference.act(obs, env.task.signal_dict())
+            inputs = agent.observe(info["outputs"].tolist(), episode=1, step=step)
+            assert inputs[0] == pytest.approx(float(env.task.action_mapping.half[0] * expected[0]), abs=1e-5)
+            obs, _, terminated, truncated, info = env.step(expected)
+            assert not terminated
+        assert truncated and len(sent) == 500
+        assert abs(float(info["outputs"][2])) < 0.05  # theta: the pole is up at the end
+    finally:
+        agent.close()
+        env.close()
+
+
+def test_baseline_runtime_needs_a_baseline_of_the_experiment() -> None:
+    experiment, _ = deployment_experiment(Path("lqr"), CARTPOLE)
+    with pytest.raises(ConfigError, match=r"not in evaluation\.baselines"):
+        load_policy(Path("mpc"), "baseline", experiment)
