@@ -17,6 +17,7 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("compare")(compare_cmd)
+    app.command("tune")(tune_cmd)
     agent_app = typer.Typer(
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
     )
@@ -27,6 +28,47 @@ def register(app: typer.Typer) -> None:
     export_app.command("fmu")(export_fmu_cmd)
     agent_app.add_typer(export_app, name="export")
     app.add_typer(agent_app, name="agent")
+
+
+def tune_cmd(
+    config: Annotated[Path, typer.Argument(help="The experiment YAML file.")],
+    baseline: Annotated[str, typer.Argument(help="A baseline of evaluation.baselines.")],
+    param: Annotated[
+        list[str], typer.Option("--param", help="A positive value to tune: kp, design.q.NAME (repeat).")
+    ],
+    iterations: Annotated[int, typer.Option(help="Objective evaluations (Nelder-Mead).")] = 100,
+    seeds: Annotated[int, typer.Option(help="Episodes per training scenario (seeds 1000..).")] = 2,
+    penalty: Annotated[float, typer.Option(help="held_iae: added per episode ending early.")] = 100.0,
+    objective: Annotated[
+        str, typer.Option(help="held_iae (tracking) or return (minus the task's episode return).")
+    ] = "held_iae",
+    write: Annotated[
+        Path | None,
+        typer.Option(help="Write the experiment with the tuned values here (default: CONFIG.tuned.yaml)."),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="tuning.json (default: beside that file).")] = None,
+    version: Annotated[str | None, typer.Option()] = None,
+) -> None:
+    """Tune a baseline's gains or weights on the training scenarios (held IAE; see agents/tune.py)."""
+    import json
+
+    from agents.tune import tune, write_experiment
+
+    result = tune(
+        config, baseline, param, iterations=iterations, seeds=seeds, penalty=penalty, objective=objective,
+        version=version,
+        log=console.print,
+    )  # fmt: skip
+    target = write_experiment(config, result, write or config.with_suffix(".tuned.yaml"))
+    report = out or target.with_suffix(".tuning.json")
+    report.write_text(json.dumps(result.as_dict(), indent=1))
+    best = ", ".join(f"{k} = {v:.5g}" for k, v in zip(result.parameters, result.best))
+    console.print(f"objective: {result.objective}")
+    console.print(
+        f"{result.start_objective:.4f} -> {result.best_objective:.4f} "
+        f"({len(result.evaluations)} evaluations, {result.wall_time_s:.0f} s): {best}"
+    )
+    console.print(f"experiment: {target}; tuning record: {report}")
 
 
 ZenohModeOpt = Annotated[
@@ -109,7 +151,11 @@ def agent_run_cmd(
     zenoh_mode: ZenohModeOpt = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID (ros2 transport).")] = None,
     runtime: Annotated[
-        str, typer.Option(help="torch (stable-baselines3) or onnx (onnxruntime, no torch needed).")
+        str,
+        typer.Option(
+            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed) or baseline "
+            "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
+        ),
     ] = "torch",
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
@@ -164,8 +210,8 @@ def agent_settings(
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    if runtime not in ("torch", "onnx"):
-        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
+    if runtime not in ("torch", "onnx", "baseline"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
     ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings

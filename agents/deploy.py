@@ -46,7 +46,7 @@ class DeploySettings:
     scenario: str | None = None
     domain_id: int | None = None
     namespace: str = "/"
-    runtime: Literal["torch", "onnx"] = "torch"
+    runtime: Literal["torch", "onnx", "baseline"] = "torch"
 
 
 @dataclass
@@ -130,7 +130,10 @@ class DeployedAgent:
 
     def _warm_up(self) -> None:
         """The first inference of a torch model is slow (allocations, kernel choice): do it before
-        observations arrive, so the first real action is on time. One thread: lower latency."""
+        observations arrive, so the first real action is on time. One thread: lower latency.
+        A baseline has nothing to warm up (and acts only within an episode: its controller state)."""
+        if self.settings.runtime == "baseline":
+            return
         if self.settings.runtime == "torch":  # the onnx runtime must work without torch
             import torch
 

@@ -35,7 +35,7 @@ class AgentNode:
         self._declared: list[Any] = []
         self._ros: Any = None  # the ROS node (ros2/rclpy transports), made by _ros_publisher
         experiment, _ = deployment_experiment(model, config)
-        policy = load_policy(model, settings.runtime)
+        policy = load_policy(model, settings.runtime, experiment)
         description = self._node_description() if settings.transport == "zenoh" else None
         run_dir = model if model.is_dir() else model.parent
         info = model_info_for(experiment, run_dir, description)

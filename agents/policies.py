@@ -110,10 +110,64 @@ class Pid:
             self._integral += step
         return u
 
-    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+    def inputs(self, signals: Mapping[str, float]) -> list[float]:
+        """Physical values of every action input: the controlled one from the PID, the rest as they are."""
         inputs = [signals[name] for name in self._task.action_inputs]
         inputs[self._index] = self.control(signals)
-        return self._task.action_for_inputs(inputs)
+        return inputs
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self._task.action_for_inputs(self.inputs(signals))
+
+
+class ModelBased:
+    """An ``lqr`` or ``mpc`` baseline: designed from the FMU linearised through model exchange
+    (``bridge.control``), once per policy, at the first reset."""
+
+    def __init__(self, kind: str, design: Mapping[str, Any], name: str) -> None:
+        from bridge.experiment.control import ControlDesign
+
+        self.kind, self.name = kind, name
+        self.design = ControlDesign.model_validate(design)
+        self.controller: Any = None
+        self._experiment: Any = None
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        if self.controller is None or self._experiment is not task.experiment:
+            from bridge.control.controller import LinearController
+
+            cls: Any = LinearController
+            if self.kind == "mpc":
+                from bridge.control.mpc import Mpc
+
+                cls = Mpc
+            stray = [n for n in self.design.inputs if n not in task.action_inputs]
+            if stray:
+                raise ConfigError(
+                    f"baseline {self.name}: inputs {stray} are not action inputs {list(task.action_inputs)}"
+                )
+            controller = cls(self.design, task.experiment, task.timing.sampling_time_s, self.name)
+            controller.check_signals(task.signal_names)
+            mapping = task.action_mapping
+            limits = {}
+            if mapping.kind == "continuous":
+                limits = {
+                    n: (c - h, c + h) for n, c, h in zip(task.action_inputs, mapping.centre, mapping.half)
+                }
+            controller.build(limits)
+            self.controller, self._experiment = controller, task.experiment
+        self._task = task
+        self._index = [task.action_inputs.index(n) for n in self.design.inputs]
+        self.controller.reset()
+
+    def inputs(self, signals: Mapping[str, float]) -> list[float]:
+        inputs = [signals[name] for name in self._task.action_inputs]
+        for i, value in zip(self._index, self.controller.control(signals)):
+            inputs[i] = value
+        return inputs
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self._task.action_for_inputs(self.inputs(signals))
 
 
 def discrete_levels(task: Task) -> dict[str, list[float]] | None:
@@ -310,11 +364,15 @@ def baseline(name: str, config: Mapping[str, Any]) -> Policy:
     kind = config.get("type", "pid")
     if kind == "pid":
         return Pid(PidSpec.model_validate(config), name)
+    if kind in ("lqr", "mpc"):
+        return ModelBased(kind, config["design"], name)
     if kind == "constant":
         return FixedPolicy(name, float(config["value"]))
     if kind == "python":
         return PythonPolicy(name, _import(str(config["callable"]), f"evaluation.baselines.{name}"))
-    raise ConfigError(f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, constant or python")
+    raise ConfigError(
+        f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, lqr, mpc, constant or python"
+    )
 
 
 def _import(path: str, key: str) -> Callable[..., Any]:
