@@ -22,7 +22,7 @@ each component before it starts.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -37,12 +37,14 @@ _log = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class Link:
-    """One connection as array positions: ``outputs[source][i] -> inputs[target][j]``."""
+    """One connection as array positions: ``outputs[source][i] -> inputs[target][j]``, through
+    ``convert`` (unit conversion and SSP transformation) where the connection has one."""
 
     source: str
     i: int
     target: str
     j: int
+    convert: Callable[[float], float] | None = None
 
 
 class Master:
@@ -73,7 +75,8 @@ class Master:
         u = self.inputs[name]
         for link in self._into[name]:
             if ready is None or link.source in ready:
-                u[link.j] = self.outputs[link.source][link.i]
+                y = self.outputs[link.source][link.i]
+                u[link.j] = y if link.convert is None else link.convert(y)
         return u
 
     def initialize(self, values: Mapping[str, Mapping[str, Any]], inputs: Mapping[str, FloatArray]) -> None:
