@@ -58,6 +58,13 @@ class SystemSection(_Strict):
     algorithm: Literal["jacobi", "gauss_seidel"] = "jacobi"
     iteration: IterationSection | None = None
     order: list[str] = Field(default=[], description="Gauss-Seidel order; default: from the graph")
+    feedthrough_outputs: Literal["held", "updated"] = Field(
+        default="held",
+        description="held: outputs at t+H as the FMUs computed them in the step, with the inputs "
+        "held at their values of t (what libcosim, Ecos and FMPy report); updated: after the "
+        "exchange, components with direct feedthrough get the inputs of t+H and their outputs are "
+        "read again, so every output at t+H is of that one instant (in-process components only)",
+    )
 
     @field_validator("components")
     @classmethod

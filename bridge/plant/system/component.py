@@ -8,12 +8,13 @@ an experiment: a macro step of ``H`` is ``n`` FMU steps of the component's own s
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
 from bridge.fmu import Model, read_model_info
+from bridge.plant.base import FloatArray
 from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
 
@@ -55,3 +56,10 @@ class FmuComponent(FmuInstancePlant):
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         return {**self.component.parameters, **values}
+
+    def settle(self, inputs: Sequence[float]) -> FloatArray:
+        """Set the inputs at the current communication point and read the outputs again, without
+        a step: direct feedthrough outputs then follow the inputs of this instant."""
+        self._write(inputs)
+        outputs: FloatArray = self._read()
+        return outputs

@@ -94,6 +94,7 @@ class SystemDescription:
     max_iterations: int = 1
     tolerance: float = 1e-10
     order: tuple[str, ...] = ()
+    feedthrough_outputs: Literal["held", "updated"] = "held"
     step_size_s: float | None = None  # an SSP's default experiment step, if it gives one
     source: Path | None = None
     units: dict[str, Unit] = field(default_factory=dict)  # an SSD's unit definitions by name
@@ -176,6 +177,7 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         max_iterations=iteration.max_iterations if iteration else 1,
         tolerance=iteration.tolerance if iteration else 1e-10,
         order=tuple(section.order),
+        feedthrough_outputs=section.feedthrough_outputs,
         step_size_s=base.step_size_s if base else None,
         source=experiment.source,
         units=base.units if base else {},

@@ -143,7 +143,10 @@ class SystemPlant(Plant):
         else:  # order-free: components here step while those in nodes do, then nodes are awaited
             order = sorted(ins, key=lambda n: system.components[n].node is not None)
         self._plant_list = list(self.plants.values())
-        self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
+        through = [n for n, f in self.feedthrough.items() if f]
+        self.master = Master(
+            system, self.plants, self.links, order, init_order(system, self.feedthrough), settle=through
+        )
 
     # -- the plant interface -----------------------------------------------------------------------
     @property
