@@ -150,7 +150,12 @@ def check_system_cmd(  # noqa: PLR0917 (typer options)
 
     exp = _experiment(experiment, step_size)
     plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix))
-    with FmuEnv(exp, plant=plant) as env:
+    try:
+        env = FmuEnv(exp, plant=plant)
+    except BaseException:
+        plant.close()
+        raise
+    with env:
         plant = env.plant
         _, info = env.reset(seed=0)
         for _ in range(steps):
