@@ -84,5 +84,7 @@ class SystemSection(_Strict):
 
 
 def is_system_file(fmu: str) -> bool:
-    """Whether ``model.fmu`` names an SSP archive or an SSD file rather than one FMU."""
-    return fmu.lower().endswith(SYSTEM_SUFFIXES)
+    """Whether ``model.fmu`` names an SSP archive, an SSD file or OSP's system structure
+    (``*OspSystemStructure*.xml``) rather than one FMU."""
+    name = fmu.lower().replace("\\", "/").rpartition("/")[2]
+    return name.endswith(SYSTEM_SUFFIXES) or (name.endswith(".xml") and "ospsystemstructure" in name)

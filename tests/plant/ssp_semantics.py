@@ -112,3 +112,51 @@ def write(path: Path, text: str, fmus: dict[str, Path] | None = None) -> Path:
         for name, fmu in fmus.items():
             archive.write(fmu, name)
     return path
+
+
+def osp_dir(directory: Path, *, torque_factor: float | None = None, extra: str = "") -> Path:
+    """The motor and load as OSP's ``OspSystemStructure.xml`` with the FMUs beside it; the torque
+    through a LinearTransformation function when ``torque_factor`` is given (offset 0.01)."""
+    import shutil
+
+    directory.mkdir(parents=True, exist_ok=True)
+    shutil.copy(example_fmu("dcmotor", "2.0", "cs"), directory / "dcmotor.fmu")
+    shutil.copy(example_fmu("gearload", "2.0", "cs"), directory / "gearload.fmu")
+
+    def initial(values: dict[str, float]) -> str:
+        inner = "".join(
+            f'<InitialValue variable="{k}"><Real value="{v!r}"/></InitialValue>' for k, v in values.items()
+        )
+        return f"<InitialValues>{inner}</InitialValues>"
+
+    def variable(simulator: str, name: str) -> str:
+        return f'<Variable simulator="{simulator}" name="{name}"/>'
+
+    def signal(end: str, simulator: str, name: str) -> str:
+        inner = f'<Signal function="gain" name="{end}"/>{variable(simulator, name)}'
+        return f"<SignalConnection>{inner}</SignalConnection>"
+
+    torque = (
+        signal("in", "load", "torque") + signal("out", "motor", "load_torque")
+        if torque_factor is not None
+        else f"<VariableConnection>{variable('motor', 'load_torque')}{variable('load', 'torque')}"
+        "</VariableConnection>"
+    )
+    functions = (
+        f'<Functions><LinearTransformation name="gain" factor="{torque_factor!r}" offset="0.01"/></Functions>'
+        if torque_factor is not None
+        else ""
+    )
+    text = (
+        '<?xml version="1.0" encoding="UTF-8"?>\n'
+        '<OspSystemStructure xmlns="http://opensimulationplatform.com/MSMI/OSPSystemStructure" version="0.1">'
+        "<StartTime>0.0</StartTime><BaseStepSize>0.001</BaseStepSize><Algorithm>fixedStep</Algorithm>"
+        f'<Simulators><Simulator name="motor" source="dcmotor.fmu">{initial(MOTOR)}</Simulator>'
+        f'<Simulator name="load" source="gearload.fmu">{initial(LOAD)}</Simulator></Simulators>'
+        f"{functions}<Connections>"
+        f"<VariableConnection>{variable('motor', 'omega')}{variable('load', 'omega_in')}</VariableConnection>"
+        f"{torque}{extra}</Connections></OspSystemStructure>\n"
+    )
+    path = directory / "OspSystemStructure.xml"
+    path.write_text(text)
+    return path

@@ -20,7 +20,7 @@ from bridge.experiment.config import parse_experiment
 from bridge.fmu import read_model_info
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import example_fmu
-from tests.plant.ssp_semantics import component, connection, connector, motor_load, ssd, unit, write
+from tests.plant.ssp_semantics import component, connection, connector, motor_load, osp_dir, ssd, unit, write
 
 NAMES = ["motor.omega", "motor.current", "load.omega", "load.torque"]
 H, STEPS = 1e-3, 300
@@ -47,10 +47,16 @@ def libcosim(ssp: Path) -> np.ndarray:
     pytest.importorskip("libcosimpy", reason="libcosimpy is not installed (pip install libcosimpy)")
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+    log_output_level(CosimLogLevel.ERROR)
+    return _observe(CosimExecution.from_ssp_file(str(ssp), step_size=round(H * 1e9)))
+
+
+def _observe(execution: Any) -> np.ndarray:
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
 
     log_output_level(CosimLogLevel.ERROR)
-    execution = CosimExecution.from_ssp_file(str(ssp), step_size=round(H * 1e9))
     fmus = {"motor": example_fmu("dcmotor", "2.0", "cs"), "load": example_fmu("gearload", "2.0", "cs")}
     refs = {
         n: {v.name: v.value_reference for v in read_model_info(f).variables.values()} for n, f in fmus.items()
@@ -292,3 +298,41 @@ def test_every_connection_element_of_ssp_reaches_the_description(tmp_path: Path)
     assert system.units["rpm"].base == (0, 0, -1, 0, 0, 0, 0, 1)
     assert system.duration_s == pytest.approx(0.4)
     assert ssd([], []).startswith("<?xml")
+
+
+def libcosim_osp(osp: Path) -> np.ndarray:
+    """libcosim reading the OSP file itself; the outputs after each macro step."""
+    pytest.importorskip("libcosimpy", reason="libcosimpy is not installed (pip install libcosimpy)")
+    from libcosimpy.CosimExecution import CosimExecution
+
+    return _observe(CosimExecution.from_osp_config_file(str(osp)))
+
+
+@pytest.mark.parametrize("factor", [None, 0.5])
+def test_an_osp_system_structure_equals_its_ssp_and_libcosim(tmp_path: Path, factor: float | None) -> None:
+    """The same system as OspSystemStructure.xml and as .ssp: one trajectory, bit for bit, and
+    libcosim's reading of the OSP file within 1e-9 (the torque through a LinearTransformation
+    function, or connected directly)."""
+    osp = osp_dir(tmp_path / "osp", torque_factor=factor)
+    torque = f'<ssc:LinearTransformation factor="{factor!r}" offset="0.01"/>' if factor is not None else ""
+    from_osp = ours(osp, tmp_path)
+    from_ssp = ours(write(tmp_path / "same.ssp", motor_load(torque=torque)), tmp_path)
+    np.testing.assert_array_equal(from_osp, from_ssp)
+    same(from_osp, libcosim_osp(osp))
+
+
+def test_osp_elements_not_read_are_refused(tmp_path: Path) -> None:
+    group = (
+        '<VariableGroupConnection><VariableGroup simulator="motor" name="shaft"/>'
+        '<VariableGroup simulator="load" name="shaft"/></VariableGroupConnection>'
+    )
+    osp = osp_dir(tmp_path / "g", extra=group)
+    with pytest.raises(ConfigError, match="VariableGroupConnection is not supported") as info:
+        ours(osp, tmp_path)
+    assert str(osp) in str(info.value)
+    summed = osp_dir(tmp_path / "s", torque_factor=0.5)
+    summed.write_text(
+        summed.read_text().replace('<LinearTransformation name="gain"', '<Sum name="gain" inputCount="1"')
+    )
+    with pytest.raises(ConfigError, match="'gain': Sum functions are not supported"):
+        ours(summed, tmp_path)

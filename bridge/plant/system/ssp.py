@@ -57,7 +57,12 @@ _TYPES: dict[str, Callable[[str], Any]] = {
 
 
 def read_ssp(path: Path) -> SystemDescription:
-    """The system of an ``.ssp`` archive (``SystemStructure.ssd`` inside) or an ``.ssd`` file."""
+    """The system of an ``.ssp`` archive (``SystemStructure.ssd`` inside), an ``.ssd`` file, or
+    OSP's ``OspSystemStructure.xml`` (:mod:`bridge.plant.system.osp`)."""
+    from bridge.plant.system.osp import is_osp_file, read_osp
+
+    if is_osp_file(path):
+        return read_osp(path)
     if path.suffix.lower() == ".ssp":
         root = _extract(path)
         ssd = root / "SystemStructure.ssd"
