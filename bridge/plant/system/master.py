@@ -24,13 +24,16 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from bridge.errors import ConfigError
 from bridge.plant.base import FloatArray, Plant
 from bridge.plant.system.description import SystemDescription
+
+if TYPE_CHECKING:
+    from bridge.plant.system.native_master import NativeMaster
 
 _log = logging.getLogger(__name__)
 
@@ -75,6 +78,8 @@ class Master:
             self._into[link.target].append(link)
         self.last_iterations = 0
         self.unconverged_steps = 0
+        self.native: NativeMaster | None = None
+        self._native_checked = False
 
     def _gather(self, name: str, ready: set[str] | None = None) -> FloatArray:
         u = self.inputs[name]
@@ -86,7 +91,17 @@ class Master:
 
     def initialize(self, values: Mapping[str, Mapping[str, Any]], inputs: Mapping[str, FloatArray]) -> None:
         """Reset every component with its ``values`` and ``inputs`` (start values, then the values
-        of connected outputs as they become known at ``t0``)."""
+        of connected outputs as they become known at ``t0``); then the native macro step, where it
+        applies (:mod:`bridge.plant.system.native_master`), takes the new instances."""
+        self._initialize(values, inputs)
+        if not self._native_checked:
+            from bridge.plant.system.native_master import native_master
+
+            self.native, self._native_checked = native_master(self), True
+        if self.native is not None:
+            self.native.refresh()
+
+    def _initialize(self, values: Mapping[str, Mapping[str, Any]], inputs: Mapping[str, FloatArray]) -> None:
         for name, u in inputs.items():
             self.inputs[name] = np.array(u, dtype=np.float64)
         ready: set[str] = set()
@@ -108,6 +123,9 @@ class Master:
         """One macro step from ``t`` to ``t + H`` (with fixed-point iteration where configured);
         then, with ``feedthrough_outputs: updated``, the feedthrough components' outputs again
         from the inputs of ``t + H``."""
+        if self.native is not None:
+            self.native.step()
+            return
         self._step()
         for name in self.settle_order:  # sources before consumers: values of t + H flow on
             u = self._gather(name)
