@@ -29,7 +29,10 @@ _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 def check_safe_name(value: str) -> str:
     """``value`` if it is a safe file-name part, else a ValueError saying what is allowed."""
     if len(value) > MAX_NAME_CHARS:
-        raise ValueError(f"a name of {len(value):,} characters; at most {MAX_NAME_CHARS} are allowed")
+        raise ValueError(
+            f"a name of {len(value):,} characters; use at most {MAX_NAME_CHARS} letters, digits, '.', "
+            "'_' and '-' (it becomes part of file names)"
+        )
     if not _NAME.fullmatch(value):
         raise ValueError(
             f"{_shown(value)} is not a plain name: use letters, digits, '.', '_' and '-', starting "
