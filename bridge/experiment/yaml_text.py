@@ -100,7 +100,11 @@ def _check_depth(text: str, file: Path | str) -> bool:
                 depth -= 1
             elif isinstance(event, AliasEvent):
                 aliases = True
-    except yaml.YAMLError:
+    except yaml.YAMLError as exc:
+        if "maximum nesting depth" in str(exc):  # libyaml 0.2.5+ stops at its own depth limit
+            raise ConfigError(
+                f"{file}: nested more than {MAX_DEPTH} levels deep; experiment files need a few levels"
+            ) from None
         return True
     finally:
         loader.dispose()
