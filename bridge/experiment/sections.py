@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from bridge.experiment.control import ControlDesign
+from bridge.experiment.safe import check_own_module
 from bridge.experiment.strict import FiniteFloat, PositiveFloat, Strict, invalid
 
 Count = Annotated[int, Field(ge=1, le=10**12)]
@@ -23,6 +24,7 @@ def check_import_path(value: str) -> str:
     module, sep, attr = value.partition(":")
     if not sep or not module or not attr:
         raise ValueError(f"expected 'module:function', got {value!r}")
+    check_own_module(module)
     return value
 
 
@@ -129,7 +131,10 @@ class BaselineSection(Strict):
         if self.limits is not None:
             check_ordered("limits", *self.limits)
         if self.callable is not None:
-            check_import_path(self.callable)
+            try:
+                check_import_path(self.callable)
+            except ValueError as exc:
+                raise invalid("callable", str(exc)) from None
         return self
 
     def settings(self) -> dict[str, Any]:

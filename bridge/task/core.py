@@ -22,7 +22,8 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
-from bridge.experiment.config import Experiment, known_references, scenario_inputs
+from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
+from bridge.experiment.safe import check_own_module
 from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
 from bridge.task.observe import ObservationBuilder
@@ -39,6 +40,10 @@ class NonFiniteOutputs(BridgeError):
 def load_callable(path: str, key: str) -> Callable[..., Any]:
     """Import ``module:function`` named at config ``key``."""
     module_name, _, attr = path.partition(":")
+    try:
+        check_own_module(module_name)  # before the import: importing runs the module's code
+    except ValueError as exc:
+        raise ConfigError(f"{key}: {exc}") from None
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
