@@ -105,7 +105,9 @@ class AgentNode:
         layout = cdr.JointStateLayout.of(names)
 
         def publish(inputs: list[float], step: int) -> None:
-            publisher.publish(layout.pack(time.time_ns(), inputs[: len(names)]))
+            # stamped with the observation it answers (a robot's clock, or the FMU's simulation time)
+            stamp = self._last_stamp if self._last_stamp >= 0 else time.time_ns()
+            publisher.publish(layout.pack(stamp, inputs[: len(names)]))
 
         return publish
 
