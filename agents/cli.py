@@ -162,6 +162,7 @@ def agent_run_cmd(
     import signal
     import threading
 
+    from agents.deploy import deployed_checkpoint
     from agents.deploy_io import AgentNode
     from bridge.net.transport import ZenohOptions, session_mode
 
@@ -178,6 +179,7 @@ def agent_run_cmd(
     listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
     mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
     options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
+    console.print(f"agent deploys {deployed_checkpoint(model, runtime)}", highlight=False)
     agent = AgentNode(model, config, settings, options)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -192,6 +194,20 @@ def agent_run_cmd(
         f"{summary['missing_events']:.0f} missing-observation events; inference latency median "
         f"{summary['latency_median_us']:.0f} us, p99 {summary['latency_p99_us']:.0f} us"
     )
+    _leave_now()
+
+
+def _leave_now() -> None:
+    """Exit at once, everything being closed: unloading torch and stable-baselines3 at interpreter
+    shutdown takes seconds on a busy machine, and a stopped agent should be gone within one."""
+    import logging
+    import os
+    import sys
+
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def agent_settings(

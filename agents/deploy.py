@@ -76,6 +76,32 @@ def deployment_experiment(run_or_model: Path, config: Path | None) -> tuple[Expe
     return experiment.model_copy(update={"noise": Noise()}), path
 
 
+def deployed_checkpoint(run_or_model: Path, runtime: str) -> str:
+    """Which file ``agent run`` deploys, and what is known of it: ``best_model.zip`` (the best
+    periodic evaluation: its mean reward and step) before the final ``model.zip``."""
+    import json
+
+    if runtime == "onnx":
+        from agents.runtime import onnx_file
+
+        return f"checkpoint {onnx_file(run_or_model)} (ONNX export)"
+    from agents.policies import _model_file
+
+    path = _model_file(run_or_model)
+    run_dir = path.parent
+    if path.name == "best_model.zip" and (run_dir / "evaluations.npz").is_file():
+        with np.load(run_dir / "evaluations.npz") as data:
+            means = data["results"].mean(axis=1)
+            best = int(np.argmax(means))
+            return (
+                f"checkpoint {path} (best evaluation: mean reward {means[best]:.1f} at step "
+                f"{int(data['timesteps'][best]):,} of {len(means)} evaluations)"
+            )
+    run_file = run_dir / "run.json"
+    steps = json.loads(run_file.read_text()).get("timesteps") if run_file.is_file() else None
+    return f"checkpoint {path}" + (f" (final model after {steps:,} steps)" if steps else "")
+
+
 def model_info_for(
     experiment: Experiment, run_dir: Path, node_description: dict[str, Any] | None
 ) -> ModelInfo:

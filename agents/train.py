@@ -320,7 +320,6 @@ def _train_in(
     residual: dict[str, Any] | None,
     progress: bool,
 ) -> TrainResult:
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecNormalize
 
@@ -335,26 +334,42 @@ def _train_in(
         )
     model = _new_model(settings, env, run_dir)
     model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard", "log"]))
-    per_env = max(1, settings.n_envs)
-    callbacks = CallbackList(
-        [
-            CheckpointCallback(
-                max(settings.checkpoint_every // per_env, 1),
-                str(run_dir / "checkpoints"),
-                save_vecnormalize=bool(settings.normalize),
-            ),
-            EvalCallback(
-                eval_env,
-                n_eval_episodes=settings.eval_episodes,
-                eval_freq=max(settings.eval_every // per_env, 1),
-                best_model_save_path=str(run_dir),
-                log_path=str(run_dir),
-                deterministic=True,
-                verbose=0,
-            ),
-        ]
-    )
+    callbacks = _callbacks(settings, eval_env, run_dir)
     return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=True)
+
+
+def _callbacks(settings: TrainingSettings, eval_env: Any, run_dir: Path) -> Any:
+    """Checkpoints and periodic evaluation; the best evaluated model goes to ``best_model.zip``.
+
+    A resumed run carries on with the evaluations it has (``evaluations.npz``): ``best_model.zip``
+    is replaced only by a model that evaluates better than the best one so far."""
+    import numpy as np
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+
+    per_env = max(1, settings.n_envs)
+    evaluation = EvalCallback(
+        eval_env,
+        n_eval_episodes=settings.eval_episodes,
+        eval_freq=max(settings.eval_every // per_env, 1),
+        best_model_save_path=str(run_dir),
+        log_path=str(run_dir),
+        deterministic=True,
+        verbose=0,
+    )
+    earlier = run_dir / "evaluations.npz"
+    if earlier.is_file():
+        with np.load(earlier) as data:
+            evaluation.evaluations_timesteps = [int(t) for t in data["timesteps"]]
+            evaluation.evaluations_results = [list(r) for r in data["results"]]
+            evaluation.evaluations_length = [list(n) for n in data["ep_lengths"]]
+        if evaluation.evaluations_results:
+            evaluation.best_mean_reward = max(float(np.mean(r)) for r in evaluation.evaluations_results)
+    checkpoints = CheckpointCallback(
+        max(settings.checkpoint_every // per_env, 1),
+        str(run_dir / "checkpoints"),
+        save_vecnormalize=bool(settings.normalize),
+    )
+    return CallbackList([checkpoints, evaluation])
 
 
 def _learn(
@@ -464,13 +479,19 @@ def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainRe
         settings = TrainingSettings.model_validate({**info["settings"], **given})
     except ValidationError as exc:
         raise ConfigError(f"--resume {run_dir}: invalid training settings: {exc}") from None
-    env = build_vec_env(settings, experiment, experiment_path, info.get("residual"), settings.seed + 1)
+    residual = info.get("residual")
+    env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed + 1)
+    eval_env = build_eval_env(env, settings, experiment, experiment_path, residual)
     if (run_dir / "vecnormalize.pkl").is_file():
         env = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), env)
+        eval_env = VecNormalize(  # its statistics follow the training env's at each evaluation
+            eval_env, training=False, norm_reward=False, **settings.normalize_kwargs(eval_env=True)
+        )
     model = load_model(run_dir / "model.zip", info["algo"])
     model.set_env(env)
     from stable_baselines3.common.logger import configure
 
     model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard", "log"]))
     info.setdefault("resumed", []).append({"at": int(model.num_timesteps), "timesteps": settings.timesteps})
-    return _learn(model, settings.timesteps, None, run_dir, info, progress=progress, reset=False)
+    callbacks = _callbacks(settings, eval_env, run_dir)
+    return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=False)

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
-from bridge.experiment.config import Distribution, Experiment, known_references, scenario_inputs
+from bridge.experiment.config import Experiment, known_references, scenario_inputs
 from bridge.experiment.safe import check_own_module
 from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
