@@ -104,6 +104,15 @@ class NativeMaster:
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
         self._gauss_seidel = int(master.system.algorithm == "gauss_seidel")
+        address = ctypes.addressof
+        self._args = (
+            ctypes.c_void_p(address(self._comps)),
+            len(self._names),
+            ctypes.c_void_p(address(self._links)),
+            self._n_links,
+            self._gauss_seidel,
+            ctypes.c_void_p(address(self._status)),
+        )
 
     def refresh(self) -> None:
         """Re-read the instances' addresses and the master's arrays (after a reset)."""
@@ -114,6 +123,7 @@ class NativeMaster:
             c.major, c.set_real, c.get_real = h["major"], h["set_real"], h["get_real"]
             c.do_step, c.bool_status, c.component = h["do_step"], h["bool_status"], h["component"]
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
+            c.k = model.step_index  # kept here from now on; each step hands it to the model
             c.n_in, c.in_vr = 0, None
             if inputs is not None:
                 vrs, c.n_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0)
@@ -125,23 +135,20 @@ class NativeMaster:
 
     def step(self) -> None:
         """One macro step; the component's own error where one fails (as the Python master)."""
-        plants, comps = self._plants, self._comps
-        for name, plant, c in zip(self._names, plants, comps):
+        plants, comps, status = self._plants, self._comps, self._status
+        for name, plant in zip(self._names, plants):
             if not plant.model.steppable:  # the Python path raises the model's own refusal
                 plant.step(self.master.inputs[name].tolist())
-            c.k = plant.model.step_index
-        failed = self._call(
-            self._comps, len(comps), self._links, self._n_links, self._gauss_seidel, self._status
-        )
+        failed = self._call(*self._args)
         stepped = len(comps)
         if failed:
             stepped = failed - 1
-            if self._status[stepped] == NONFINITE and not self._gauss_seidel:
+            if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
         for position in range(stepped):
-            plants[position].native_done(comps[position].k, self._status[position] == TERMINATED)
+            plants[position].native_done(comps[position].k, status[position] == TERMINATED)
         if failed:
-            self._fail(plants[failed - 1], self._status[failed - 1], comps[failed - 1].k)
+            self._fail(plants[failed - 1], status[failed - 1], comps[failed - 1].k)
 
     def _fail(self, plant: FmuComponent, status: int, k: int) -> None:
         name = self._names[self._plants.index(plant)]
