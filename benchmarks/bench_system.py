@@ -33,9 +33,9 @@ from bridge.plant.system.plant import SystemPlant
 H = 1e-3
 
 
-def system_plant(directory: Path, *, native: bool = True) -> SystemPlant:
+def system_plant(directory: Path, *, native: bool = True, sample: int = 1) -> SystemPlant:
     data = {
-        "model": {"step_size": H, "episode_duration": 1e4},
+        "model": {"step_size": H, "sampling_time": sample * H, "episode_duration": 1e4},
         "system": {
             "components": {
                 "motor": {"fmu": "example:dcmotor", "feedthrough": False, "parameters": {"voltage": 12.0}},
@@ -105,6 +105,7 @@ def in_process(args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         plant = system_plant(Path(tmp))
         python_plant = system_plant(Path(tmp), native=False)
+        plant10 = system_plant(Path(tmp), sample=10)
         motor, load = raw_pair()
         ecos, why = ecos_simulation()
         state = {"omega": 0.0, "torque": 0.0, "t": 0.0}
@@ -112,6 +113,10 @@ def in_process(args: argparse.Namespace) -> None:
         def system(steps: int) -> None:
             for _ in range(steps):
                 plant.step([0.0])
+
+        def system10(steps: int) -> None:
+            for _ in range(steps // 10):
+                plant10.step([0.0])
 
         def python_master(steps: int) -> None:
             for _ in range(steps):
@@ -131,7 +136,7 @@ def in_process(args: argparse.Namespace) -> None:
                 torque, _ = g.getReal(g_out)
             state.update(omega=omega, torque=torque, t=t)
 
-        candidates = {"system": system, "python": python_master, "raw": raw}
+        candidates = {"system": system, "system10": system10, "python": python_master, "raw": raw}
         if ecos is not None:
             step = ecos.step  # type: ignore[attr-defined]
 
@@ -144,42 +149,44 @@ def in_process(args: argparse.Namespace) -> None:
 
             candidates.update(ecos_each=ecos_each, ecos_all=ecos_all)
         rates = interleaved(candidates, args.steps, args.repeats)
-        for closable in (plant, python_plant, motor, load):
+        for closable in (plant, plant10, python_plant, motor, load):
             closable.close()
         if ecos is not None:
             ecos.terminate()  # type: ignore[attr-defined]
+    report(rates, why)
+
+
+def report(rates: dict[str, float], ecos_missing: str) -> None:
+    """The table of :func:`in_process` and whether the targets are met."""
     raw_rate = rates["raw"]
-    rows = [
-        ("raw FMPy loop (2 FMUs)", fmt_us(raw_rate), "1.00", ""),
-        (
-            "SystemPlant, Jacobi, native master",
-            fmt_us(rates["system"]),
-            f"{raw_rate / rates['system']:.2f}",
-            "",
-        ),
-        (
-            "SystemPlant, Jacobi, Python master",
-            fmt_us(rates["python"]),
-            f"{raw_rate / rates['python']:.2f}",
-            "",
-        ),
-    ]
-    if ecos is not None:
-        for key, label in (
-            ("ecos_each", "Ecos loop, step(1) per macro step"),
-            ("ecos_all", "Ecos loop, step(n)"),
+    named = (
+        ("SystemPlant, Jacobi, native master", "system"),
+        ("native master, samples of 10 macro steps", "system10"),
+        ("SystemPlant, Jacobi, Python master", "python"),
+    )
+    rows = [("raw FMPy loop (2 FMUs)", fmt_us(raw_rate), "1.00", "")]
+    rows += [(label, fmt_us(rates[key]), f"{raw_rate / rates[key]:.2f}", "") for label, key in named]
+    if not ecos_missing:
+        for key, label, ours in (
+            ("ecos_each", "Ecos loop, step(1) per macro step", "system"),
+            ("ecos_all", "Ecos loop, step(n)", "system10"),
         ):
-            faster = rates[key] / rates["system"]
+            faster = rates[key] / rates[ours]
             rows.append((label, fmt_us(rates[key]), f"{raw_rate / rates[key]:.2f}", f"{faster:.2f}"))
-    print(table(rows, ("in-process macro step", "us/step", "x raw", "x faster than native master")))
+    print(
+        table(rows, ("in-process macro step", "us/step", "x raw", "x faster than ours (per call / batched)"))
+    )
     ratio = raw_rate / rates["system"]
     print(f"target <= 1.3x raw: {'met' if ratio <= 1.3 else 'NOT met'}")
-    if ecos is None:
-        print(f"Ecos: {why}")
+    if ecos_missing:
+        print(f"Ecos: {ecos_missing}")
     else:
-        ecos_best = max(rates["ecos_each"], rates["ecos_all"])
-        met = "met" if rates["system"] >= ecos_best else "NOT met"
-        print(f"target: native master no slower than Ecos's loop: {met}")
+        for ours, theirs, what in (
+            ("system", "ecos_each", "a macro step a call"),
+            ("system10", "ecos_all", "many a call"),
+        ):
+            met = "met" if rates[ours] >= rates[theirs] else "NOT met"
+            print(f"target: native master no slower than Ecos's loop, {what}: {met}")
 
 
 if __name__ == "__main__":

@@ -124,7 +124,7 @@ class Master:
         then, with ``feedthrough_outputs: updated``, the feedthrough components' outputs again
         from the inputs of ``t + H``."""
         if self.native is not None:
-            self.native.step()
+            self.native.run(1)
             return
         self._step()
         for name in self.settle_order:  # sources before consumers: values of t + H flow on

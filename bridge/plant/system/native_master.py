@@ -73,15 +73,9 @@ def _library() -> Any:
     except (BridgeError, OSError) as exc:
         _log.warning("native system master unavailable, stepping in Python instead: %s", exc)
         return None
-    function = library.master_step
-    function.argtypes = [
-        ctypes.c_void_p,
-        ctypes.c_int,
-        ctypes.c_void_p,
-        ctypes.c_int,
-        ctypes.c_int,
-        ctypes.c_void_p,
-    ]
+    function = library.master_run
+    p, i = ctypes.c_void_p, ctypes.c_int
+    function.argtypes = [p, i, p, i, i, p, i, p]
     function.restype = ctypes.c_int
     return function
 
@@ -104,6 +98,7 @@ class NativeMaster:
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
         self._gauss_seidel = int(master.system.algorithm == "gauss_seidel")
+        self._accounts = [(p, p.model, c) for p, c in zip(self._plants, self._comps)]
         address = ctypes.addressof
         self._args = (
             ctypes.c_void_p(address(self._comps)),
@@ -113,6 +108,9 @@ class NativeMaster:
             self._gauss_seidel,
             ctypes.c_void_p(address(self._status)),
         )
+        self._done = ctypes.c_int(0)
+        self._done_ref = ctypes.byref(self._done)
+        self.done = 0  # macro steps the last call completed
 
     def refresh(self) -> None:
         """Re-read the instances' addresses and the master's arrays (after a reset)."""
@@ -133,20 +131,32 @@ class NativeMaster:
             c.u, c.y = u.ctypes.data, y.ctypes.data
             c.out_vr, c.n_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0)
 
-    def step(self) -> None:
-        """One macro step; the component's own error where one fails (as the Python master)."""
+    def run(self, count: int) -> None:
+        """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its
+        ``terminated`` is set); :attr:`done` says how many completed, also when one fails, which
+        raises the component's own error (as the Python master)."""
         plants, comps, status = self._plants, self._comps, self._status
         for name, plant in zip(self._names, plants):
             if not plant.model.steppable:  # the Python path raises the model's own refusal
+                self.done = 0
                 plant.step(self.master.inputs[name].tolist())
-        failed = self._call(*self._args)
-        stepped = len(comps)
+        failed = self._call(*self._args, count, self._done_ref)
+        self.done = done = self._done.value
+        if not failed and not any(status):  # the hot path: every component stepped with OK
+            for plant, model, c in self._accounts:
+                model.step_index = c.k
+                plant.sample += done
+            return
+        stepped = len(comps)  # components that took part in the last macro step tried
         if failed:
             stepped = failed - 1
             if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
-        for position in range(stepped):
-            plants[position].native_done(comps[position].k, status[position] == TERMINATED)
+        for position, (plant, model, c) in enumerate(self._accounts):
+            model.step_index = c.k
+            plant.sample += done - (1 if not failed else 0)
+            if position < stepped:
+                plant.native_done(c.k, status[position] == TERMINATED)
         if failed:
             self._fail(plants[failed - 1], status[failed - 1], comps[failed - 1].k)
 
