@@ -336,3 +336,30 @@ def test_osp_elements_not_read_are_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(ConfigError, match="'gain': Sum functions are not supported"):
         ours(summed, tmp_path)
+
+
+MOTOR_J = '<ssv:Parameter name="J"><ssv:Real value="0.002"/></ssv:Parameter>'
+GRAM_M2 = unit("g.m2", factor=1e-3, kg=1, m=2) + unit("kg.m2", kg=1, m=2)
+
+
+def test_a_bound_value_in_another_unit_is_converted_and_matches_libcosim(tmp_path: Path) -> None:
+    """The motor's inertia bound as 2 g.m2 (ssv:Real unit): the run of 0.002 kg.m2, as libcosim
+    computes it from the value in the FMU's own unit."""
+    text = motor_load(units=GRAM_M2)
+    assert MOTOR_J in text
+    grams = text.replace(MOTOR_J, MOTOR_J.replace('value="0.002"', 'value="2.0" unit="g.m2"'))
+    converted = ours(write(tmp_path / "grams.ssp", grams), tmp_path)
+    same(converted, libcosim(write(tmp_path / "si.ssp", motor_load())))
+    from bridge.plant.system.ssp import read_ssp
+
+    assert read_ssp(tmp_path / "grams.ssp").components["motor"].parameters["J"] == pytest.approx(
+        0.002, rel=1e-15
+    )
+
+
+def test_a_bound_value_of_another_quantity_is_refused(tmp_path: Path) -> None:
+    text = motor_load(units=GRAM_M2 + unit("m", m=1))
+    bad = text.replace(MOTOR_J, MOTOR_J.replace('value="0.002"', 'value="2.0" unit="m"'))
+    refused(
+        tmp_path, bad, "component 'motor': parameter binding 'J'", "'m'", "'kg.m2'", "different quantities"
+    )

@@ -23,6 +23,7 @@ import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,14 @@ _TYPES: dict[str, Callable[[str], Any]] = {
     "Boolean": lambda v: v.lower() in ("true", "1"),
     "String": str,
 }
+
+
+@dataclass
+class _Read:
+    """What the reading collects beyond the description: units of bound values, unit definitions."""
+
+    definitions: dict[str, Unit]
+    value_units: dict[str, dict[str, str]] = field(default_factory=dict)  # component -> name -> unit
 
 
 def read_ssp(path: Path) -> SystemDescription:
@@ -95,11 +104,13 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
     if system is None:
         raise ConfigError(f"{ssd.name}: no ssd:System element; is this an SSP 1.0 file? [{origin}]")
     _refuse_unread(system, origin)
+    found = _Read(_units(top, origin))
     components = {}
     for element in _children(system, "Elements"):
-        component = _component(element, root, origin)
+        component = _component(element, root, origin, found)
         components[component.name] = component
-    for name, value in _bindings(system, root, origin).items():
+    system_units: dict[str, str] = {}
+    for name, value in _bindings(system, root, origin, found, system_units).items():
         comp, _, var = name.partition(".")
         if comp not in components or not var:
             raise ConfigError(
@@ -107,6 +118,9 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
                 f"components: {list(components)} [{origin}]"
             )
         components[comp].parameters[var] = value
+        if name in system_units:
+            found.value_units.setdefault(comp, {})[var] = system_units[name]
+    _convert_bound_values(components, found, origin)
     connections = tuple(_connections(system, components, origin))
     step, duration = None, None
     experiment = top.find(f"{SSD}DefaultExperiment")
@@ -123,7 +137,7 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
         connections=connections,
         step_size_s=step,
         source=origin,
-        units=_units(top, origin),
+        units=found.definitions,
         duration_s=duration,
     )
 
@@ -184,9 +198,32 @@ def _refuse_unread(system: ET.Element, origin: Path) -> None:
         )
 
 
-def _units(top: ET.Element, origin: Path) -> dict[str, Unit]:
+def _convert_bound_values(components: dict[str, Component], found: _Read, origin: Path) -> None:
+    """Bound values given in another unit than their variable's, converted (SSP's unit rules)."""
+    from bridge.fmu import read_model_info
+    from bridge.plant.system.transform import convert_value
+
+    for name, units in found.value_units.items():
+        component = components[name]
+        info = read_model_info(component.fmu)
+        for var_name, unit in units.items():
+            var = info.variables.get(var_name)
+            if var is None:
+                continue  # check_system names the unknown parameter
+            what = f"component {name!r}: parameter binding {var_name!r}"
+            try:
+                value = convert_value(
+                    float(component.parameters[var_name]), unit, var, info, found.definitions, what=what
+                )
+            except ConfigError as exc:
+                raise ConfigError(f"{exc} [{origin}]") from None
+            component.parameters[var_name] = value
+
+
+def _units(top: ET.Element, origin: Path, ns: str = SSD) -> dict[str, Unit]:
     units = {}
-    for unit in _children(top, "Units"):
+    box = top.find(f"{ns}Units")
+    for unit in list(box) if box is not None else []:
         base = unit.find(f"{SSC}BaseUnit")
         name = unit.attrib.get("name", "")
         if base is None or not name:
@@ -210,7 +247,7 @@ def _local(tag: str) -> str:
     return tag.rpartition("}")[2]
 
 
-def _component(element: ET.Element, root: Path, origin: Path) -> Component:
+def _component(element: ET.Element, root: Path, origin: Path, found: _Read) -> Component:
     name = element.attrib.get("name", "?")
     if element.tag == f"{SSD}System":
         raise ConfigError(f"nested system {name!r}: only flat systems of FMUs are supported [{origin}]")
@@ -232,7 +269,10 @@ def _component(element: ET.Element, root: Path, origin: Path) -> Component:
             f"component {name!r}: its FMU {source!r} is missing {inside}; add the file or fix the "
             f"component's source attribute [{origin}]"
         )
-    parameters = _bindings(element, root, origin)
+    value_units: dict[str, str] = {}
+    parameters = _bindings(element, root, origin, found, value_units)
+    if value_units:
+        found.value_units[name] = value_units
     implementation = element.attrib.get("implementation", "any")
     if implementation not in _IMPLEMENTATION:
         raise ConfigError(
@@ -257,7 +297,11 @@ def _connector_units(element: ET.Element) -> dict[str, str]:
     return units
 
 
-def _bindings(element: ET.Element, root: Path, origin: Path) -> dict[str, Any]:
+def _bindings(
+    element: ET.Element, root: Path, origin: Path, found: _Read, units: dict[str, str]
+) -> dict[str, Any]:
+    """The bound values by name; ``units`` receives the unit of each value that declares one, and
+    ``found`` the unit definitions of the parameter sets."""
     values: dict[str, Any] = {}
     owner = f"{_local(element.tag)} {element.attrib.get('name', '?')!r}"
     for binding in _children(element, "ParameterBindings"):
@@ -286,6 +330,10 @@ def _bindings(element: ET.Element, root: Path, origin: Path) -> dict[str, Any]:
         for parameter in parameter_set.iter(f"{SSV}Parameter"):
             name = parameter.attrib["name"].removeprefix(prefix)
             values[name] = _value(parameter, name, origin)
+            real = parameter.find(f"{SSV}Real")
+            if real is not None and real.attrib.get("unit"):
+                units[name] = real.attrib["unit"]
+        found.definitions.update(_units(parameter_set, origin, SSV))
     return values
 
 
