@@ -8,11 +8,11 @@ connections between components with their transformation (``ssc:LinearTransforma
 ``ssc:BooleanMappingTransformation``, ``ssc:IntegerMappingTransformation``,
 ``ssc:EnumerationMappingTransformation``) and ``suppressUnitConversion``, the unit definitions
 (``ssd:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as ``.ssv`` files, and
-the default experiment. What this reader cannot honour is refused, naming the element, the file
-and the reason, never skipped: nested systems, signal dictionaries and their references,
-parameter mappings (``.ssm``), components that are not FMUs, parameter bindings of another type, a
-transformation on a connection to the system's own connectors. Annotations and geometry are
-ignored, as the standard allows.
+the default experiment, parameter mappings (inline or ``.ssm``: :mod:`.ssm`). What this reader
+cannot honour is refused, naming the element, the file and the reason, never skipped: nested
+systems, signal dictionaries and their references, components that are not FMUs, parameter
+bindings of another type, a transformation on a connection to the system's own connectors.
+Annotations and geometry are ignored, as the standard allows.
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from bridge.plant.system.description import (
     Transform,
     Unit,
 )
+from bridge.plant.system.ssm import apply, read_mapping
 
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
@@ -305,12 +306,7 @@ def _bindings(
     values: dict[str, Any] = {}
     owner = f"{_local(element.tag)} {element.attrib.get('name', '?')!r}"
     for binding in _children(element, "ParameterBindings"):
-        if binding.find(f"{SSD}ParameterMapping") is not None:
-            raise ConfigError(
-                f"{owner}: ssd:ParameterMapping (an .ssm parameter mapping) is not supported: the "
-                f"mapped names and transformations would not reach the FMU; bind the values under "
-                f"the FMU's own names (ssd:ParameterValues or an .ssv file) [{origin}]"
-            )
+        mapping = read_mapping(binding, root, origin, owner, _transform)
         kind = binding.attrib.get("type", "application/x-ssp-parameter-set")
         if kind != "application/x-ssp-parameter-set":
             raise ConfigError(
@@ -327,12 +323,26 @@ def _bindings(
             continue
         if parameter_set is None:
             continue
+        names = set()
         for parameter in parameter_set.iter(f"{SSV}Parameter"):
-            name = parameter.attrib["name"].removeprefix(prefix)
-            values[name] = _value(parameter, name, origin)
+            full = parameter.attrib["name"]
+            names.add(full)
+            value = _value(parameter, full, origin)
             real = parameter.find(f"{SSV}Real")
-            if real is not None and real.attrib.get("unit"):
-                units[name] = real.attrib["unit"]
+            unit = real.attrib.get("unit") if real is not None else None
+            if mapping is not None and full in mapping:
+                name, value, unit = apply(mapping[full], full, value, unit, where=(owner, origin))
+            else:
+                name = full.removeprefix(prefix)
+            values[name] = value
+            if unit:
+                units[name] = unit
+        unknown = sorted(set(mapping or {}) - names)
+        if unknown:
+            raise ConfigError(
+                f"{owner}: parameter mapping entries {unknown} name no parameter of the parameter set "
+                f"{parameter_set.attrib.get('name', '')!r}; parameters: {sorted(names)} [{origin}]"
+            )
         found.definitions.update(_units(parameter_set, origin, SSV))
     return values
 
