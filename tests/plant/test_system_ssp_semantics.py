@@ -20,7 +20,17 @@ from bridge.experiment.config import parse_experiment
 from bridge.fmu import read_model_info
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import example_fmu
-from tests.plant.ssp_semantics import component, connection, connector, motor_load, osp_dir, ssd, unit, write
+from tests.plant.ssp_semantics import (
+    NS,
+    component,
+    connection,
+    connector,
+    motor_load,
+    osp_dir,
+    ssd,
+    unit,
+    write,
+)
 
 NAMES = ["motor.omega", "motor.current", "load.omega", "load.torque"]
 H, STEPS = 1e-3, 300
@@ -313,20 +323,52 @@ def test_parameter_mapping_entries_that_cannot_apply_are_refused(tmp_path: Path)
     refused(tmp_path, with_unit, "half_voltage -> voltage", "'V'", "suppressUnitConversion")
 
 
-def test_signal_dictionaries_are_refused_by_name(tmp_path: Path) -> None:
-    dictionary = '<ssd:SignalDictionaries><ssd:SignalDictionary name="bus"/></ssd:SignalDictionaries>'
-    refused(
-        tmp_path,
-        motor_load().replace("</ssd:Connections>", f"</ssd:Connections>{dictionary}"),
-        "ssd:SignalDictionaries",
+SSB = 'xmlns:ssb="http://ssp-standard.org/SSP1/SystemStructureSignalDictionary"'
+PLAIN_CONNECTIONS = connection("motor", "omega", "load", "omega_in") + connection(
+    "load", "torque", "motor", "load_torque"
+)
+
+
+def through_bus(*, entries: tuple[str, ...] = ("speed", "torque"), extra: str = "") -> str:
+    """The motor and load connected through a signal dictionary "shaft" (reference "bus")."""
+    text = motor_load()
+    assert PLAIN_CONNECTIONS in text
+    routed = "".join(
+        connection(*ends)
+        for ends in (
+            ("motor", "omega", "bus", "speed"),
+            ("bus", "speed", "load", "omega_in"),
+            ("load", "torque", "bus", "torque"),
+            ("bus", "torque", "motor", "load_torque"),
+        )
     )
-    reference = '<ssd:SignalDictionaryReference name="busref" dictionary="bus"/>'
+    text = text.replace(PLAIN_CONNECTIONS, routed + extra)
+    defined = "".join(f'<ssb:DictionaryEntry name="{e}"><ssc:Real/></ssb:DictionaryEntry>' for e in entries)
+    shaft = f'<ssd:SignalDictionary name="shaft">{defined}</ssd:SignalDictionary>'
+    dictionaries = f"<ssd:SignalDictionaries>{shaft}</ssd:SignalDictionaries>"
+    reference = '<ssd:SignalDictionaryReference name="bus" dictionary="shaft"><ssd:Connectors>'
+    reference += connector("speed", "inout") + connector("torque", "inout")
+    reference += "</ssd:Connectors></ssd:SignalDictionaryReference>"
+    text = text.replace("</ssd:Connections>", f"</ssd:Connections>{dictionaries}")
+    text = text.replace("<ssd:Elements>", f"<ssd:Elements>{reference}")
+    return text.replace(f"{NS}>", f"{NS} {SSB}>", 1)
+
+
+def test_signals_through_a_dictionary_equal_direct_connections_and_libcosim(tmp_path: Path) -> None:
+    routed = ours(write(tmp_path / "bus.ssp", through_bus()), tmp_path)
+    plain = write(tmp_path / "plain.ssp", motor_load())
+    np.testing.assert_array_equal(routed, ours(plain, tmp_path))
+    same(routed, libcosim(plain))
+
+
+def test_signal_dictionary_misuse_is_refused(tmp_path: Path) -> None:
     refused(
-        tmp_path,
-        motor_load().replace("<ssd:Elements>", f"<ssd:Elements>{reference}"),
-        "'busref'",
-        "SignalDictionaryReference",
+        tmp_path, through_bus(entries=("speed",)), "'torque' is not an entry of signal dictionary 'shaft'"
     )
+    twice = connection("motor", "current", "bus", "speed")
+    refused(tmp_path, through_bus(extra=twice), "entry 'speed': 2 connections produce it")
+    unknown = through_bus().replace('dictionary="shaft"', 'dictionary="shaf"')
+    refused(tmp_path, unknown, "reference 'bus': dictionary 'shaf' is not defined")
 
 
 def test_a_transformation_to_a_system_connector_is_refused(tmp_path: Path) -> None:

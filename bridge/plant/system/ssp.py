@@ -8,9 +8,10 @@ connections between components with their transformation (``ssc:LinearTransforma
 ``ssc:BooleanMappingTransformation``, ``ssc:IntegerMappingTransformation``,
 ``ssc:EnumerationMappingTransformation``) and ``suppressUnitConversion``, the unit definitions
 (``ssd:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as ``.ssv`` files, and
-the default experiment, parameter mappings (inline or ``.ssm``: :mod:`.ssm`). What this reader
+the default experiment, parameter mappings (inline or ``.ssm``: :mod:`.ssm`), signal dictionaries
+and the connections through their references (:mod:`.ssb`). What this reader
 cannot honour is refused, naming the element, the file and the reason, never skipped: nested
-systems, signal dictionaries and their references, components that are not FMUs, parameter
+systems, components that are not FMUs, parameter
 bindings of another type, a transformation on a connection to the system's own connectors.
 Annotations and geometry are ignored, as the standard allows.
 """
@@ -37,6 +38,7 @@ from bridge.plant.system.description import (
     Transform,
     Unit,
 )
+from bridge.plant.system.ssb import Bus, read_dictionaries
 from bridge.plant.system.ssm import apply, read_mapping
 
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
@@ -104,10 +106,13 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
     system = top.find(f"{SSD}System")
     if system is None:
         raise ConfigError(f"{ssd.name}: no ssd:System element; is this an SSP 1.0 file? [{origin}]")
-    _refuse_unread(system, origin)
     found = _Read(_units(top, origin))
+    bus = Bus(read_dictionaries(system, root, origin))
     components = {}
     for element in _children(system, "Elements"):
+        if element.tag == f"{SSD}SignalDictionaryReference":
+            bus.add_reference(element, origin)
+            continue
         component = _component(element, root, origin, found)
         components[component.name] = component
     system_units: dict[str, str] = {}
@@ -122,7 +127,7 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
         if name in system_units:
             found.value_units.setdefault(comp, {})[var] = system_units[name]
     _convert_bound_values(components, found, origin)
-    connections = tuple(_connections(system, components, origin))
+    connections = tuple(_connections(system, components, bus, origin))
     step, duration = None, None
     experiment = top.find(f"{SSD}DefaultExperiment")
     if experiment is not None:
@@ -188,17 +193,6 @@ def _whole(duration_s: float, step_s: float) -> float:
     return max(1, round(duration_s / step_s)) * step_s
 
 
-def _refuse_unread(system: ET.Element, origin: Path) -> None:
-    """Elements of a system this reader does not implement: refused by name, never skipped."""
-    name = system.attrib.get("name", "?")
-    if system.find(f"{SSD}SignalDictionaries") is not None:
-        raise ConfigError(
-            f"system {name!r}: ssd:SignalDictionaries are not supported (signal dictionaries pass "
-            f"signals through dictionary entries, which this master does not route); connect the "
-            f"components' connectors directly [{origin}]"
-        )
-
-
 def _convert_bound_values(components: dict[str, Component], found: _Read, origin: Path) -> None:
     """Bound values given in another unit than their variable's, converted (SSP's unit rules)."""
     from bridge.fmu import read_model_info
@@ -252,11 +246,6 @@ def _component(element: ET.Element, root: Path, origin: Path, found: _Read) -> C
     name = element.attrib.get("name", "?")
     if element.tag == f"{SSD}System":
         raise ConfigError(f"nested system {name!r}: only flat systems of FMUs are supported [{origin}]")
-    if element.tag == f"{SSD}SignalDictionaryReference":
-        raise ConfigError(
-            f"element {name!r}: ssd:SignalDictionaryReference is not supported (signal dictionaries "
-            f"are not routed by this master); connect the components' connectors directly [{origin}]"
-        )
     if element.tag != f"{SSD}Component":
         raise ConfigError(f"element {name!r} ({element.tag}) is not an ssd:Component [{origin}]")
     kind = element.attrib.get("type", "application/x-fmu-sharedlibrary")
@@ -362,7 +351,9 @@ def _value(parameter: ET.Element, name: str, origin: Path) -> Any:
     raise ConfigError(f"parameter {name!r}: no Real, Integer, Boolean or String value [{origin}]")
 
 
-def _connections(system: ET.Element, components: dict[str, Component], origin: Path) -> list[Connection]:
+def _connections(
+    system: ET.Element, components: dict[str, Component], bus: Bus, origin: Path
+) -> list[Connection]:
     found = []
     for element in _children(system, "Connections"):
         a, b = element.attrib.get("startElement"), element.attrib.get("endElement")
@@ -377,22 +368,18 @@ def _connections(system: ET.Element, components: dict[str, Component], origin: P
                     f"it to a connection between components [{origin}]"
                 )
             continue  # a system-level connector: the variables are reached as component.variable
+        suppress = element.attrib.get("suppressUnitConversion", "false").lower() in ("true", "1")
+        connection = Connection(Endpoint(a, y or ""), Endpoint(b, u or ""), transform, suppress)
+        if bus.add(connection, origin):
+            continue  # through a signal dictionary: routed below
         for side in (a, b):
             if side not in components:
                 raise ConfigError(
                     f"connection {text}: {side!r} is not a component; "
                     f"components: {list(components)} [{origin}]"
                 )
-        suppress = element.attrib.get("suppressUnitConversion", "false").lower() in ("true", "1")
-        found.append(
-            Connection(
-                Endpoint(a, element.attrib["startConnector"]),
-                Endpoint(b, element.attrib["endConnector"]),
-                transform,
-                suppress,
-            )
-        )
-    return found
+        found.append(connection)
+    return found + bus.routed(origin)
 
 
 def _transform(element: ET.Element, text: str, origin: Path) -> Transform | None:
