@@ -156,16 +156,21 @@ def _float(text: str, key: str, origin: Path) -> float:
 
 
 def ssp_experiment(
-    path: Path, *, step_size_s: float | None = None, duration_s: float | None = None
+    path: Path,
+    *,
+    step_size_s: float | None = None,
+    duration_s: float | None = None,
+    system: dict[str, Any] | None = None,
 ) -> Experiment:
-    """An experiment that runs the system of ``path`` (an .ssp/.ssd) as it is: no actions, every
-    numeric output of every component observed, the macro step and duration of its
-    DefaultExperiment unless given."""
+    """An experiment that runs the system of ``path`` (an .ssp/.ssd/OSP file) as it is: no actions,
+    every numeric output of every component observed, the macro step and duration of its
+    DefaultExperiment unless given; ``system`` is a ``system:`` section to merge (e.g. a
+    component's ``feedthrough: false``, ``iteration``)."""
     from bridge.experiment.config import parse_experiment
     from bridge.fmu import read_model_info
 
-    system = read_ssp(path)
-    step = step_size_s or system.step_size_s
+    description = read_ssp(path)
+    step = step_size_s or description.step_size_s
     if step is None:
         raise ConfigError(
             f"{path.name} gives no step size (ssd:DefaultExperiment annotation stepSize or OSP's "
@@ -173,18 +178,20 @@ def ssp_experiment(
         )
     outputs = [
         f"{name}.{element}"
-        for name, component in system.components.items()
+        for name, component in description.components.items()
         for var in read_model_info(component.fmu).by_causality("output")
         if var.is_numeric
         for element in var.element_names()
     ]
-    duration = duration_s or system.duration_s or step
-    data = {
+    duration = duration_s or description.duration_s or step
+    data: dict[str, Any] = {
         "name": path.stem,
         "model": {"fmu": str(path), "step_size": step, "episode_duration": _whole(duration, step)},
         "observations": {"outputs": outputs, "scale": "none"},
         "reward": {"terms": [{"alive": 0.0}]},
     }
+    if system:
+        data["system"] = system
     return parse_experiment(data, source=path)
 
 
