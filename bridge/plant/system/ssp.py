@@ -107,27 +107,10 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
     if system is None:
         raise ConfigError(f"{ssd.name}: no ssd:System element; is this an SSP 1.0 file? [{origin}]")
     found = _Read(_units(top, origin))
-    bus = Bus(read_dictionaries(system, root, origin))
-    components = {}
-    for element in _children(system, "Elements"):
-        if element.tag == f"{SSD}SignalDictionaryReference":
-            bus.add_reference(element, origin)
-            continue
-        component = _component(element, root, origin, found)
-        components[component.name] = component
-    system_units: dict[str, str] = {}
-    for name, value in _bindings(system, root, origin, found, system_units).items():
-        comp, _, var = name.partition(".")
-        if comp not in components or not var:
-            raise ConfigError(
-                f"parameter binding {name!r} of the system names no component.variable; "
-                f"components: {list(components)} [{origin}]"
-            )
-        components[comp].parameters[var] = value
-        if name in system_units:
-            found.value_units.setdefault(comp, {})[var] = system_units[name]
+    bus = Bus({})
+    components: dict[str, Component] = {}
+    connections = tuple(_read_system(system, "", root, origin, found, bus, components) + bus.routed(origin))
     _convert_bound_values(components, found, origin)
-    connections = tuple(_connections(system, components, bus, origin))
     step, duration = None, None
     experiment = top.find(f"{SSD}DefaultExperiment")
     if experiment is not None:
@@ -146,6 +129,53 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
         units=found.definitions,
         duration_s=duration,
     )
+
+
+def _read_system(  # noqa: PLR0917 (one recursive reader)
+    system: ET.Element,
+    prefix: str,
+    root: Path,
+    origin: Path,
+    found: _Read,
+    bus: Bus,
+    components: dict[str, Component],
+) -> list[Connection]:
+    """The components of ``system`` into ``components`` and its direct connections; a nested
+    system's components are named ``system/component`` and its connectors route like a signal
+    dictionary's entries (:class:`.ssb.Bus`)."""
+    bus.dictionaries.update(read_dictionaries(system, root, origin))
+    connections: list[Connection] = []
+    for element in _children(system, "Elements"):
+        name = prefix + element.attrib.get("name", "?")
+        if element.tag == f"{SSD}SignalDictionaryReference":
+            bus.add_reference(element, origin, prefix)
+        elif element.tag == f"{SSD}System":
+            connectors = [c.attrib.get("name", "") for c in _children(element, "Connectors")]
+            bus.add_system(name, connectors)
+            connections += _read_system(element, f"{name}/", root, origin, found, bus, components)
+        else:
+            component = _component(element, root, origin, found, prefix)
+            components[component.name] = component
+    _system_bindings(system, prefix, root, origin, found, components)
+    return connections + _connections(system, components, bus, origin, prefix)
+
+
+def _system_bindings(  # noqa: PLR0917
+    system: ET.Element, prefix: str, root: Path, origin: Path, found: _Read, components: dict[str, Component]
+) -> None:
+    """A system's own parameter bindings: ``component.variable`` of its components."""
+    units: dict[str, str] = {}
+    for name, value in _bindings(system, root, origin, found, units).items():
+        comp, _, var = name.partition(".")
+        comp = prefix + comp
+        if comp not in components or not var:
+            raise ConfigError(
+                f"parameter binding {name!r} of system {system.attrib.get('name', '?')!r} names no "
+                f"component.variable; components: {list(components)} [{origin}]"
+            )
+        components[comp].parameters[var] = value
+        if name in units:
+            found.value_units.setdefault(comp, {})[var] = units[name]
 
 
 def _float(text: str, key: str, origin: Path) -> float:
@@ -249,10 +279,8 @@ def _local(tag: str) -> str:
     return tag.rpartition("}")[2]
 
 
-def _component(element: ET.Element, root: Path, origin: Path, found: _Read) -> Component:
-    name = element.attrib.get("name", "?")
-    if element.tag == f"{SSD}System":
-        raise ConfigError(f"nested system {name!r}: only flat systems of FMUs are supported [{origin}]")
+def _component(element: ET.Element, root: Path, origin: Path, found: _Read, prefix: str = "") -> Component:
+    name = prefix + element.attrib.get("name", "?")
     if element.tag != f"{SSD}Component":
         raise ConfigError(f"element {name!r} ({element.tag}) is not an ssd:Component [{origin}]")
     kind = element.attrib.get("type", "application/x-fmu-sharedlibrary")
@@ -359,11 +387,14 @@ def _value(parameter: ET.Element, name: str, origin: Path) -> Any:
 
 
 def _connections(
-    system: ET.Element, components: dict[str, Component], bus: Bus, origin: Path
+    system: ET.Element, components: dict[str, Component], bus: Bus, origin: Path, prefix: str = ""
 ) -> list[Connection]:
+    """The connections of ``system``; those through signal dictionaries and nested systems' own
+    connectors go to ``bus``, which routes them. A connection to the top system's own connectors
+    is left out (the task reaches the component's variable by name)."""
     found = []
     for element in _children(system, "Connections"):
-        a, b = element.attrib.get("startElement"), element.attrib.get("endElement")
+        a, b = _element_name(element, "start", prefix), _element_name(element, "end", prefix)
         y, u = element.attrib.get("startConnector"), element.attrib.get("endConnector")
         text = f"{a or ''}.{y} -> {b or ''}.{u}"
         transform = _transform(element, text, origin)
@@ -386,7 +417,15 @@ def _connections(
                     f"components: {list(components)} [{origin}]"
                 )
         found.append(connection)
-    return found + bus.routed(origin)
+    return found
+
+
+def _element_name(connection: ET.Element, end: str, prefix: str) -> str | None:
+    """The flat name of a connection end's element; a nested system's own connector: the system."""
+    name = connection.attrib.get(f"{end}Element")
+    if name:
+        return prefix + name
+    return prefix[:-1] or None  # "" at the top: the system's own connector
 
 
 def _transform(element: ET.Element, text: str, origin: Path) -> Transform | None:
