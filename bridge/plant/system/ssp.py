@@ -2,17 +2,17 @@
 
 Why not a library: ``pyssp-standard`` (PyPI) is marked alpha and brings ``xmlschema`` and ``pint``
 for what is here a read of a handful of elements, and FMPy's own SSD reader would pull the FMU
-runtime into a module that only describes. What is read: the top-level system's components
-(``ssd:Component`` with an FMU ``source`` and its ``implementation``), their connectors' units,
-connections between components with their transformation (``ssc:LinearTransformation``,
+runtime into a module that only describes. What is read: the system's components (``ssd:Component``
+with an FMU ``source`` and its ``implementation``), nested systems (flattened: ``system/component``),
+their connectors' units, connections with their transformation (``ssc:LinearTransformation``,
 ``ssc:BooleanMappingTransformation``, ``ssc:IntegerMappingTransformation``,
 ``ssc:EnumerationMappingTransformation``) and ``suppressUnitConversion``, the unit definitions
-(``ssd:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as ``.ssv`` files, and
-the default experiment, parameter mappings (inline or ``.ssm``: :mod:`.ssm`), signal dictionaries
-and the connections through their references (:mod:`.ssb`). What this reader
-cannot honour is refused, naming the element, the file and the reason, never skipped: nested
-systems, components that are not FMUs, parameter
-bindings of another type, a transformation on a connection to the system's own connectors.
+(``ssd:Units``, ``ssv:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as
+``.ssv`` files, with units, parameter mappings (inline or ``.ssm``: :mod:`.ssm`), signal
+dictionaries and the connections through their references and through nested systems' connectors
+(:mod:`.ssb`), and the default experiment. What this reader cannot honour is refused, naming the
+element, the file and the reason, never skipped: components that are not FMUs, parameter bindings
+of another type, a transformation on a connection to the top system's own connectors.
 Annotations and geometry are ignored, as the standard allows.
 """
 
