@@ -59,7 +59,7 @@ def _experiment(
     """An experiment file, or an .ssp/.ssd/OSP file run as it is (every output observed, no
     actions), with the components ``no_feedthrough`` names and ``iterations`` applied."""
     if is_system_file(str(path)):
-        from bridge.plant.system.ssp import ssp_experiment
+        from bridge.plant.system.runfile import ssp_experiment
 
         system: dict[str, Any] = {}
         if no_feedthrough:
