@@ -61,6 +61,14 @@ class AgentSection(_Strict):
     observations: list[str] = Field(min_length=1)
     reward: dict[str, Any] = Field(description="as the experiment's reward: section (terms, expression)")
 
+    @field_validator("reward")
+    @classmethod
+    def _reward(cls, value: dict[str, Any]) -> dict[str, Any]:
+        from bridge.experiment.config import RewardSection  # the experiment's own section
+
+        RewardSection.model_validate(value)  # its errors, under system.agents.NAME.reward
+        return value
+
 
 class SystemSection(_Strict):
     """Components, connections and the master algorithm (``jacobi`` or ``gauss_seidel``)."""
