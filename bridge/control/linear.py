@@ -12,17 +12,16 @@ the states, so the FMU must offer model exchange (every example model with state
 
 from __future__ import annotations
 
-import ctypes
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from bridge.errors import ConfigError
 from bridge.fmu.model import Model
+from bridge.fmu.states import ContinuousStates, state_names
 
 Matrix = NDArray[np.float64]
 
@@ -69,20 +68,6 @@ class LinearModel:
         return replace(self, a=phi[:n, :n], b=phi[:n, n : n + m], f0=phi[:n, -1], dt=dt)
 
 
-def state_names(model: Model) -> list[str]:
-    """The FMU's continuous states in the order of its state vector."""
-    from fmpy import read_model_description
-
-    md = read_model_description(str(model.info.path))
-    names = [u.variable.derivative.name for u in md.derivatives if u.variable.derivative is not None]
-    if len(names) != model.info.number_of_states:
-        raise ConfigError(
-            f"{model.info.model_name}: the model description names {len(names)} state derivatives "
-            f"but declares {model.info.number_of_states} continuous states"
-        )
-    return names
-
-
 def linearize(
     fmu: str | Path,
     *,
@@ -122,16 +107,8 @@ def linearize(
         state_values = {k: v for k, v in point.items() if k in every}
         settings = {k: v for k, v in point.items() if k not in every and k not in inputs}
         model.initialize(settings)
-        fmu_obj: Any = model._backend.fmu  # the FMPy object: model exchange's state calls
-        n_all = len(every)
-        x_all = np.zeros(n_all)
-        dx_all = np.zeros(n_all)
-        x_ptr = x_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        dx_ptr = dx_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        get_dx = (
-            fmu_obj.getContinuousStateDerivatives if model.info.fmi_major == 3 else fmu_obj.getDerivatives
-        )
-        fmu_obj.getContinuousStates(x_ptr, n_all)
+        vector = ContinuousStates(model)
+        x_all = vector.get()
         for name, value in state_values.items():
             x_all[every.index(name)] = value
         base_x = x_all.copy()
@@ -139,12 +116,11 @@ def linearize(
         index = [every.index(s) for s in chosen]
 
         def evaluate(x: Matrix, u: Matrix) -> tuple[Matrix, Matrix]:
-            x_all[:] = x
-            fmu_obj.setContinuousStates(x_ptr, n_all)
+            vector.set(x)
             model.set(dict(zip(inputs, (float(v) for v in u))))
-            get_dx(dx_ptr, n_all)
+            dx = vector.derivatives()
             values = model.get(outputs) if outputs else {}
-            return dx_all[index].copy(), np.array([float(values[o]) for o in outputs])
+            return dx[index], np.array([float(values[o]) for o in outputs])
 
         f0, y0 = evaluate(base_x, u0)
         nominal_x = np.array([_nominal(model, s) for s in chosen])

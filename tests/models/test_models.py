@@ -309,7 +309,8 @@ def test_generated_c_value_references_match_model_description(
     )
     capabilities = description.coSimulation or description.modelExchange
     if version != "1.0":
-        assert capabilities.canGetAndSetFMUstate
+        # a process-wide static cannot be saved per instance, so global_state says it cannot
+        assert capabilities.canGetAndSetFMUstate == (name != "global_state")
         assert description.defaultExperiment.stopTime is not None
 
 
@@ -711,6 +712,7 @@ def test_model_names_and_variants() -> None:
         "dcmotor",
         "feedthrough",
         "gearload",
+        "global_state",
         "modelica_names",
         "motor_gearload",
         "pi_controller",
@@ -732,13 +734,15 @@ def test_model_names_and_variants() -> None:
     assert by_model["gearload"] == {("2.0", "cs"), ("3.0", "cs"), ("2.0", "me")}
     assert by_model["pi_controller"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["motor_gearload"] == {("2.0", "cs")}
-    assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["vehicle"] == {(v, i) for v in ("2.0", "3.0") for i in ("cs", "me")}
+    assert by_model["global_state"] == {("2.0", "cs")}
     assert by_model["modelica_names"] == {("2.0", "cs"), ("2.0", "me"), ("3.0", "cs")}
     assert by_model["feedthrough"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, modelica_names, motor_gearload, "
+    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, global_state, modelica_names, "
+    names += "motor_gearload, "
     names += "pi_controller, stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
