@@ -319,12 +319,15 @@ def evaluate_cmd(
     paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))
     rows = summary(result)
     columns = headline_columns(rows)
-    table = Table("agent", "scenario", "episodes", *columns, "end", title=f"evaluation ({config.name})")
+    table = Table(
+        "agent", "scenario", "episodes", "seeds", *columns, "end", title=f"evaluation ({config.name})"
+    )
     for row in rows:
         table.add_row(
             row["agent"],
             row["scenario"],
             str(row["episodes"]),
+            row["seeds"],
             *(f"{row.get(c, float('nan')):.4g}" for c in columns),
             row["end"],
         )
