@@ -120,7 +120,7 @@ def _actions(inputs: list[Variable], tunables: list[Variable]) -> list[str]:
     if not candidates:
         return [
             "# The FMU has no inputs and no tunable parameters: this experiment only observes it.",
-            "# check, simulate, node, record and evaluate --policy zero work on it;",
+            "# check, simulate, node, record and `evaluate zero --config <this file>` work on it;",
             "# training needs something to act on (an input or a tunable parameter).",
             "actions:",
             "  inputs: []",
