@@ -7,7 +7,6 @@ from typing import Annotated, Any
 
 import typer
 from rich.console import Console
-from rich.table import Table
 
 console = Console()
 
@@ -381,16 +380,19 @@ def evaluate_cmd(
     paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))
     rows = summary(result)
     columns = headline_columns(rows)
-    table = Table("agent", "scenario", "episodes", *columns, "end", title=f"evaluation ({config.name})")
-    for row in rows:
-        table.add_row(
-            row["agent"],
-            row["scenario"],
-            str(row["episodes"]),
-            *(f"{row.get(c, float('nan')):.4g}" for c in columns),
-            row["end"],
-        )
-    console.print(table)
+    from bridge.cli.inspect import print_rows
+
+    cells = [
+        [row["agent"], row["scenario"], str(row["episodes"]), row["seeds"],
+         *(f"{row.get(c, float('nan')):.4g}" for c in columns), row["end"]]
+        for row in rows
+    ]  # fmt: skip
+    print_rows(
+        console,
+        ["agent", "scenario", "episodes", "seeds", *columns, "end"],
+        cells,
+        f"evaluation ({config.name})",
+    )
     console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
     for recording in result.recordings:
         console.print(f"recording: {recording}")
@@ -399,38 +401,42 @@ def evaluate_cmd(
 def compare_cmd(
     runs: Annotated[list[Path], typer.Argument(help="Run directories from `fmu-bridge train`.")],
     plot: Annotated[Path | None, typer.Option(help="Write learning curves to this PNG.")] = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the rows as JSON.")] = False,
 ) -> None:
     """Training runs side by side: settings, time, and evaluation results during training."""
+    import json
+    import math
+
     from agents.compare import compare_runs
+    from bridge.cli.inspect import print_rows
 
     rows, curves = compare_runs(runs)
-    table = Table(
-        "run",
-        "algo",
-        "seed",
-        "timesteps",
-        "wall [s]",
-        "steps/s",
-        "best eval",
-        "last eval",
-        "status",
-        title="training runs",
-    )
-    for r in rows:
-        table.add_row(
-            r["run"],
-            r["algo"],
-            str(r["seed"]),
-            f"{r['timesteps']:,}",
-            f"{r['wall_time_s']:.0f}",
-            f"{r['steps_per_s']:,.0f}",
-            f"{r['best_eval']:.1f}",
-            f"{r['last_eval']:.1f}",
-            r["status"],
-        )
-    console.print(table)
+    if as_json:
+        plain = [
+            {k: None if isinstance(v, float) and math.isnan(v) else v for k, v in r.items()} for r in rows
+        ]
+        print(json.dumps(plain, indent=2))  # plain JSON for programs: NaN (no evaluation yet) is null
+    else:
+        columns = [
+            "run",
+            "algo",
+            "seed",
+            "timesteps",
+            "wall [s]",
+            "steps/s",
+            "best eval",
+            "last eval",
+            "status",
+        ]
+        cells = [
+            [r["run"], r["algo"], str(r["seed"]), f"{r['timesteps']:,}", f"{r['wall_time_s']:.0f}",
+             f"{r['steps_per_s']:,.0f}", f"{r['best_eval']:.1f}", f"{r['last_eval']:.1f}", r["status"]]
+            for r in rows
+        ]  # fmt: skip
+        print_rows(console, columns, cells, "training runs")
     if plot is not None:
         from agents.compare import plot_curves
 
         plot_curves(curves, plot)
-        console.print(f"learning curves: {plot}")
+        if not as_json:
+            console.print(f"learning curves: {plot}")

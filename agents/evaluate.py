@@ -25,6 +25,7 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 
 _log = logging.getLogger(__name__)
+NOMINAL = "nominal"  # the scenario of an experiment that defines none (the sampler's name)
 
 
 @dataclass
@@ -67,6 +68,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
     """One episode of ``policy``; the trace holds every task signal in physical units."""
     task = env.unwrapped.task
     obs, info = env.reset(seed=seed, options={"scenario": scenario} if scenario else None)
+    name = info.get("scenario") or scenario or NOMINAL
     policy.reset(task, seed)
     times, rows, inputs, rewards = [info["time_s"]], [list(task.signal_dict().values())], [], []
     terminated, reason = False, None
@@ -88,7 +90,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
         rewards=np.array(rewards),
         reason=reason,
         terminated=terminated,
-        scenario=info.get("scenario", scenario or ""),
+        scenario=name,
     )
 
 
@@ -190,10 +192,11 @@ def evaluate(
         for spec, name in zip(agents, names)
         for sc in (chosen or [None])
     ]
-    result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
+    # no scenarios defined: every episode is the sampler's "nominal" one
+    result = EvaluationResult(rows=[], agents=names, scenarios=[c or NOMINAL for c in chosen] or [NOMINAL])
     for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch, progress)):
         result.rows += rows
-        result.traces[(cell.agent_name, cell.scenario or "")] = traces
+        result.traces[(cell.agent_name, cell.scenario or NOMINAL)] = traces
         if recording is not None:
             result.recordings.append(recording)
     return result

@@ -139,7 +139,7 @@ def _traces(
                 rewards=r[:length, i],
                 reason=reasons[i],
                 terminated=bool(terminated[i]),
-                scenario=infos[i].get("scenario", ""),
+                scenario=infos[i].get("scenario") or "nominal",
             )
         )
     return traces

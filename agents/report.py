@@ -35,14 +35,30 @@ def summary(result: EvaluationResult) -> list[dict[str, Any]]:
         metrics = aggregate([{k: v for k, v in r.items() if k not in ("episode", "seed")} for r in rows])
         reasons = sorted({r["reason"] for r in rows if r["reason"]})
         out.append(
-            {"agent": agent, "scenario": scenario, "episodes": len(rows), **metrics, "end": ",".join(reasons)}
+            {
+                "agent": agent,
+                "scenario": scenario,
+                "episodes": len(rows),
+                "seeds": _seeds([int(r["seed"]) for r in rows if "seed" in r]),
+                **metrics,
+                "end": ",".join(reasons),
+            }
         )
     return out
 
 
+def _seeds(seeds: list[int]) -> str:
+    """``1000-1019`` for consecutive seeds, else the list."""
+    if not seeds:
+        return ""
+    if seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return str(seeds[0]) if len(seeds) == 1 else f"{seeds[0]}-{seeds[-1]}"
+    return ",".join(map(str, seeds))
+
+
 def headline_columns(rows: list[dict[str, Any]], limit: int = 6) -> list[str]:
     keys = (
-        [k for k in rows[0] if k not in ("agent", "scenario", "episodes", "end", "terminated")]
+        [k for k in rows[0] if k not in ("agent", "scenario", "episodes", "seeds", "end", "terminated")]
         if rows
         else []
     )
@@ -96,7 +112,7 @@ def _fmt(value: Any) -> str:
 
 
 def _markdown(title: str, rows: list[dict[str, Any]], plots: list[Path], result: EvaluationResult) -> str:
-    columns = ["agent", "scenario", "episodes", *headline_columns(rows, limit=10), "end"]
+    columns = ["agent", "scenario", "episodes", "seeds", *headline_columns(rows, limit=10), "end"]
     lines = [f"# {title}", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     lines += ["| " + " | ".join(_fmt(r.get(c, "")) for c in columns) + " |" for r in rows]
     lines += ["", "Means over episodes; every agent saw the same seeds on the same scenarios.", ""]
@@ -110,8 +126,10 @@ class PlotSpec:
     """What the time-series plots show: tracking pairs, further signals, units, agent colours."""
 
     def __init__(self, tracking: list[tuple[str, str]], signals: list[str], units: dict[str, str],
-                 agents: list[str]) -> None:  # fmt: skip
+                 agents: list[str], bounds: dict[str, tuple[float | None, float | None]] | None = None,
+                 ) -> None:  # fmt: skip
         self.tracking, self.signals, self.units = tracking, signals, units
+        self.bounds = bounds or {}  # termination bounds, drawn as lines
         self.colours = {a: tuple(c / 255 for c in rgb) for a, rgb in agent_colours(agents).items()}
 
     @classmethod
@@ -126,7 +144,8 @@ class PlotSpec:
             chosen = outputs + inputs
         tracked = {o for o, _ in tracking}
         signals = [n for n in chosen if n not in tracked]
-        return cls(tracking, signals, _units(experiment), list(result.agents))
+        bounds = dict(experiment.termination.bounds) if experiment else {}
+        return cls(tracking, signals, _units(experiment), list(result.agents), bounds)
 
     def label(self, name: str) -> str:
         unit = self.units.get(name)
@@ -155,37 +174,100 @@ def _units(experiment: Experiment | None) -> dict[str, str]:
     return {v.name: v.unit for v in info.variables.values() if v.unit}
 
 
+ZOOM_SAMPLES = 50  # an input with more samples also gets a panel of its first ones (steps stay readable)
+
+
 def _plots(result: EvaluationResult, rows: list[dict[str, Any]], out_dir: Path, spec: PlotSpec) -> list[Path]:
     try:
-        from matplotlib.figure import Figure
+        import matplotlib  # noqa: F401
     except ImportError:  # plots are optional: the tables carry the numbers
         return []
     paths = []
-    metrics = headline_columns(rows, limit=4)
-    if metrics:
-        fig = Figure(figsize=(4 * len(metrics), 3.2), layout="constrained")
-        for ax, metric in zip(fig.subplots(1, len(metrics), squeeze=False)[0], metrics):
-            _bars(ax, rows, metric, result.agents, result.scenarios, spec=spec)
+    fig = metrics_figure(rows, result, spec)
+    if fig is not None:
         paths.append(out_dir / "metrics.png")
         fig.savefig(paths[-1], dpi=110)
     for scenario in result.scenarios:
-        panels = len(spec.tracking) + len(spec.signals)
-        if not panels:
-            continue
-        fig = Figure(figsize=(9, 1.0 + 1.9 * panels), layout="constrained")
-        axes = fig.subplots(panels, 1, sharex=True, squeeze=False)[:, 0]
-        for i, agent in enumerate(result.agents):
-            traces = result.traces.get((agent, scenario))
-            if traces:
-                _series(axes, traces[0], agent, spec, first=i == 0)
-        for ax in axes:
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7, loc="best")
-        axes[0].set_title(f"scenario {scenario or 'nominal'}: first episode (seed as in the table)")
-        axes[-1].set_xlabel("simulation time [s]")
-        paths.append(out_dir / f"trace_{scenario or 'nominal'}.png")
-        fig.savefig(paths[-1], dpi=110)
+        fig = trace_figure(result, scenario, spec)
+        if fig is not None:
+            paths.append(out_dir / f"trace_{scenario or 'nominal'}.png")
+            fig.savefig(paths[-1], dpi=110)
     return paths
+
+
+def metrics_figure(rows: list[dict[str, Any]], result: EvaluationResult, spec: PlotSpec) -> Any:
+    """Bars of the headline metrics per scenario and agent, units on the axes, one legend."""
+    from matplotlib.figure import Figure
+
+    metrics = headline_columns(rows, limit=4)
+    if not metrics:
+        return None
+    fig = Figure(figsize=(4 * len(metrics), 3.4), layout="constrained")
+    axes = fig.subplots(1, len(metrics), squeeze=False)[0]
+    for ax, metric in zip(axes, metrics):
+        _bars(ax, rows, metric, result.agents, result.scenarios, spec=spec)
+    _one_legend(fig, axes)
+    return fig
+
+
+def trace_figure(result: EvaluationResult, scenario: str, spec: PlotSpec) -> Any:
+    """Each agent's first episode: tracked outputs with their references, further signals, inputs
+    as steps (with a panel of their first samples when there are many), termination bounds as lines."""
+    from matplotlib.figure import Figure
+
+    panels = len(spec.tracking) + len(spec.signals)
+    if not panels:
+        return None
+    first = next((t[0] for a in result.agents if (t := result.traces.get((a, scenario)))), None)
+    zooms = [
+        n
+        for n in spec.signals
+        if first is not None and n in first.inputs and len(first.inputs[n]) > ZOOM_SAMPLES
+    ]
+    fig = Figure(figsize=(9, 1.2 + 1.9 * (panels + len(zooms))), layout="constrained")
+    axes = fig.subplots(panels + len(zooms), 1, squeeze=False)[:, 0]
+    main, zoomed = axes[:panels], dict(zip(zooms, axes[panels:]))
+    for ax in main[1:]:
+        ax.sharex(main[0])
+    for i, agent in enumerate(result.agents):
+        traces = result.traces.get((agent, scenario))
+        if traces:
+            _series(main, traces[0], agent, spec, first=i == 0)
+            for name, ax in zoomed.items():
+                trace = traces[0]
+                if name in trace.inputs:
+                    n = ZOOM_SAMPLES
+                    u = trace.inputs[name]
+                    held = np.append(u[:n], u[n - 1])  # the last sample held to its end
+                    ax.step(trace.time_s[: n + 1], held, where="post", color=spec.colours[agent], label=agent)
+                    ax.set_ylabel(spec.label(name), fontsize=8)
+                    ax.set_title(f"{name}: the first {n} samples", fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    seed = next(
+        (r["seed"] for r in result.rows if r.get("scenario") == scenario and r.get("episode") == 0), None
+    )
+    main[0].set_title(
+        f"scenario {scenario}: each agent's first episode" + (f" (seed {seed})" if seed is not None else "")
+    )
+    main[-1].set_xlabel("simulation time [s]")
+    for ax in zoomed.values():
+        ax.set_xlabel("simulation time [s]")
+    _one_legend(fig, axes)
+    return fig
+
+
+def _one_legend(fig: Any, axes: Any) -> None:
+    """One legend for the figure: every label once, whichever panel drew it."""
+    handles: dict[str, Any] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(label, handle)
+    if handles:
+        columns = min(len(handles), 5)
+        fig.legend(
+            list(handles.values()), list(handles), loc="outside upper center", ncols=columns, fontsize=7
+        )
 
 
 def _bars(
@@ -212,15 +294,23 @@ def _bars(
     )
     ax.set_title(metric, fontsize=9)
     ax.set_ylabel(_metric_unit(metric, spec), fontsize=8)
-    ax.legend(fontsize=6)
+
+
+_HEADLINE_UNITS = {"return": "sum of rewards", "length": "samples", "success": "fraction of episodes"}
 
 
 def _metric_unit(metric: str, spec: PlotSpec) -> str:
-    """The unit of a metric column such as ``lateral_error.iae`` (IAE: unit x s)."""
+    """The axis label of a metric column with its unit, e.g. ``lateral_error.iae [m.s]`` (IAE: unit x s)."""
+    if metric in _HEADLINE_UNITS:
+        return f"{metric} [{_HEADLINE_UNITS[metric]}]"
     signal, _, kind = metric.rpartition(".")
     unit = spec.units.get(signal)
+    fixed = {"overshoot_pct": "%", "violations": "samples", "violation_time_s": "s", "rise_time_s": "s",
+             "settling_time_s": "s"}  # fmt: skip
+    if kind in fixed:
+        return f"{metric} [{fixed[kind]}]"
     if not unit:
-        return metric
+        return f"{metric} [{signal} units]" if signal else metric
     per_kind = {
         "iae": f"{unit}.s",
         "iae_held": f"{unit}.s",
@@ -228,8 +318,12 @@ def _metric_unit(metric: str, spec: PlotSpec) -> str:
         "ise": f"({unit})2.s",
         "rmse": unit,
         "max_error": unit,
+        "effort_abs": f"{unit}.samples",
+        "effort_sq": f"({unit})2.samples",
+        "total_variation": unit,
+        "steady_state_error": unit,
     }
-    return f"{metric} [{per_kind.get(kind, unit)}]" if kind in per_kind else metric
+    return f"{metric} [{per_kind.get(kind, unit)}]"
 
 
 def _series(axes: Any, trace: Any, agent: str, spec: PlotSpec, first: bool) -> None:
@@ -242,6 +336,8 @@ def _series(axes: Any, trace: Any, agent: str, spec: PlotSpec, first: bool) -> N
                     linewidth=1.2, label=f"reference {reference}")  # fmt: skip
         ax.plot(t, trace.signals[output], color=colour, linewidth=1.2, label=agent)
         ax.set_ylabel(spec.label(output), fontsize=8)
+        if first:
+            _bound_lines(ax, output, spec)
         k += 1
     for name in spec.signals:
         ax = axes[k]
@@ -250,4 +346,12 @@ def _series(axes: Any, trace: Any, agent: str, spec: PlotSpec, first: bool) -> N
         elif name in trace.signals:
             ax.plot(t, trace.signals[name], color=colour, linewidth=1.0, label=agent)
         ax.set_ylabel(spec.label(name), fontsize=8)
+        if first:
+            _bound_lines(ax, name, spec)
         k += 1
+
+
+def _bound_lines(ax: Any, name: str, spec: PlotSpec) -> None:
+    for bound in spec.bounds.get(name, (None, None)):
+        if bound is not None:
+            ax.axhline(float(bound), color="0.35", linestyle=":", linewidth=1.0, label="termination bound")

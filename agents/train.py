@@ -155,7 +155,11 @@ def prepare_run_dir(
 ) -> Path:
     if run_dir is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
-        run_dir = Path("runs") / f"{experiment.name}-{experiment.version}-{settings.algo.lower()}-{stamp}"
+        from bridge.recording.env_recorder import slug
+
+        run_dir = Path("runs") / slug(
+            f"{experiment.name}-{experiment.version}-{settings.algo.lower()}-{stamp}"
+        )
     if run_dir.exists() and any(run_dir.iterdir()):
         raise ConfigError(
             f"run directory {run_dir} exists and is not empty; choose another --run-dir or --resume it"

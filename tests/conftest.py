@@ -104,6 +104,13 @@ def pythonfmu_heater3(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def pythonfmu_longrun2(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu's export of tests/data/slaves/LongRun2.py: a default experiment of 1e8 s at 0.01 s."""
+    pytest.importorskip("pythonfmu")
+    return _pythonfmu_build("pythonfmu", DATA / "slaves" / "LongRun2.py", tmp_path_factory.mktemp("longrun2"))
+
+
+@pytest.fixture(scope="session")
 def eta_ctrl_fmus() -> dict[str, Path]:
     """Dymola-exported FMI 2.0 FMUs shipped in eta-ctrl's source distribution (fetched once, cached)."""
     cache = _cache_dir() / "eta-ctrl"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import warnings
 from collections.abc import Callable
 from importlib.metadata import entry_points
@@ -88,40 +89,62 @@ def _few_steps(env: FmuEnv, steps: int, console: Console) -> None:
     console.print(table)
 
 
-def scenario_report(path: Path, *, sample: int, seed: int, console: Console) -> None:
+def scenario_data(path: Path, *, sample: int, seed: int) -> dict[str, Any]:
+    """The scenarios of an experiment, its schedule and ``sample`` drawn episodes, as plain data."""
     experiment = load_experiment(path)
     info = check_experiment(experiment, model_info_for(experiment))
     task = Task(experiment, info.variables, timing(experiment, info))
-    table = Table("scenario", "use", "description", "parameters", "references", "inputs")
     sampler = task.sampler
+    scenarios = []
     for name in sampler.names:
         sc = experiment.scenarios.get(name)
         use = "evaluation" if name in sampler.evaluation else "training" if name in sampler.training else "-"
-        table.add_row(
-            name,
-            use,
-            sc.description if sc else "",
-            str(dict(sc.parameters)) if sc else "",
-            ", ".join(sc.references) if sc else "",
-            ", ".join(sc.inputs) if sc else "",
+        scenarios.append(
+            {
+                "scenario": name,
+                "use": use,
+                "description": sc.description if sc else "",
+                "parameters": {k: float(v) for k, v in sc.parameters.items()} if sc else {},
+                "references": list(sc.references) if sc else [],
+                "inputs": list(sc.inputs) if sc else [],
+            }
         )
-    console.print(table)
-    console.print(f"schedule: {experiment.schedule.mode}")
+    episodes = []
+    rng = np.random.default_rng(seed)
+    for i in range(sample):
+        d = describe(task.new_episode(rng))
+        episodes.append(
+            {
+                "episode": i,
+                "scenario": d["scenario"],
+                "drawn": {k: float(v) for k, v in d["drawn"].items()},
+                "references": {k: [float(a), float(b)] for k, (a, b) in d["references"].items()},
+            }
+        )
+    return {"scenarios": scenarios, "schedule": experiment.schedule.mode, "seed": seed, "episodes": episodes}
+
+
+def scenario_report(path: Path, *, sample: int, seed: int, console: Console, as_json: bool = False) -> None:
+    """``fmu-bridge scenarios``: a table where it fits (names never cut when piped), or JSON."""
+    from bridge.cli.inspect import print_rows
+
+    data = scenario_data(path, sample=sample, seed=seed)
+    if as_json:
+        print(json.dumps(data, indent=2))  # plain: for programs, never wrapped or coloured
+        return
+    columns = ["scenario", "use", "description", "parameters", "references", "inputs"]
+    rows = [
+        [sc["scenario"], sc["use"], sc["description"], str(sc["parameters"]) if sc["parameters"] else "",
+         ", ".join(sc["references"]), ", ".join(sc["inputs"])]
+        for sc in data["scenarios"]
+    ]  # fmt: skip
+    print_rows(console, columns, rows)
+    console.print(f"schedule: {data['schedule']}")
     if sample:
-        rng = np.random.default_rng(seed)
-        drawn = Table(
-            "episode",
-            "scenario",
-            "drawn values",
-            "references (t0 -> end)",
-            title=f"{sample} sampled episodes (seed {seed})",
-        )
-        for i in range(sample):
-            d = describe(task.new_episode(rng))
-            drawn.add_row(
-                str(i),
-                d["scenario"],
-                ", ".join(f"{k}={v:.4g}" for k, v in d["drawn"].items()),
-                ", ".join(f"{k}: {a:g} -> {b:g}" for k, (a, b) in d["references"].items()),
-            )
-        console.print(drawn)
+        drawn = [
+            [str(e["episode"]), e["scenario"], ", ".join(f"{k}={v:.4g}" for k, v in e["drawn"].items()),
+             ", ".join(f"{k}: {a:g} -> {b:g}" for k, (a, b) in e["references"].items())]
+            for e in data["episodes"]
+        ]  # fmt: skip
+        columns = ["episode", "scenario", "drawn values", "references (t0 -> end)"]
+        print_rows(console, columns, drawn, f"{sample} sampled episodes (seed {seed})")

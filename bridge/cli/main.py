@@ -191,7 +191,13 @@ def simulate(
     experiment: ExperimentArg,
     version: VersionOpt = None,
     scenario: Annotated[str | None, typer.Option(help="Force this scenario for every episode.")] = None,
-    policy: Annotated[str, typer.Option(help="zero | random | constant:VALUE")] = "zero",
+    policy: Annotated[
+        str,
+        typer.Option(
+            help="zero (0 on FMU inputs, the start value on tunable parameters) | random | constant:VALUE "
+            "(physical, applied exactly; clipped to the input's bounds with a warning)"
+        ),
+    ] = "zero",
     episodes: Annotated[int, typer.Option(min=1)] = 1,
     seed: Annotated[int | None, typer.Option()] = 0,
     record: Annotated[
@@ -260,11 +266,12 @@ def scenarios(
     experiment: ExperimentArg,
     sample: Annotated[int, typer.Option(help="Draw this many episodes and show what each gets.")] = 0,
     seed: Annotated[int, typer.Option()] = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the scenarios and samples as JSON.")] = False,
 ) -> None:
     """Show the scenarios of an experiment and, with --sample, what episodes will get."""
     from bridge.cli.check import scenario_report
 
-    scenario_report(experiment, sample=sample, seed=seed, console=console)
+    scenario_report(experiment, sample=sample, seed=seed, console=console, as_json=as_json)
 
 
 @app.command()

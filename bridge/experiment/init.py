@@ -89,13 +89,77 @@ def observations_for(scalars: Sequence[Variable]) -> tuple[list[Variable], str]:
     return rest, "# The FMU has no outputs or locals: observing its parameters (constant signals)."
 
 
-def _header(info: ModelInfo, shown: Path) -> list[str]:
+#: Samples per episode ``init`` aims at: a long default experiment is sampled more coarsely (and,
+#: beyond what a sample can span, shortened) so the written experiment passes ``check``.
+TARGET_SAMPLES = 10_000
+MAX_STEPS_PER_SAMPLE = 10_000  # FMU steps per sample before init shortens the episode instead
+
+
+def episode_timing(info: ModelInfo) -> tuple[float, float, float, list[str]]:
+    """(step size, sampling time, episode duration) for ``init``, and comment lines saying what was
+    chosen and why, from the FMU's default experiment (step size, start and stop time).
+
+    The step is the declared one (else 1/1000 of the declared duration, else 0.01 s); the sampling
+    time is the step, or the smallest whole multiple of it giving at most TARGET_SAMPLES samples per
+    episode; the episode is the default experiment's duration, shortened to TARGET_SAMPLES samples of
+    MAX_STEPS_PER_SAMPLE steps when even that sampling cannot cover it. Every choice stays within
+    the limits ``check`` applies (MAX_SAMPLES samples per episode and steps per sample).
+    """
     de = info.default_experiment
-    step = de.step_size_s or 0.01
     start = de.start_time_s or 0.0
-    duration = (de.stop_time_s or start + 10.0) - start
-    if not duration > 0:
-        duration = 10.0
+    declared = (de.stop_time_s - start) if de.stop_time_s is not None else None
+    duration = declared if declared is not None and declared > 0 and math.isfinite(declared) else None
+    notes: list[str] = []
+    if de.step_size_s and de.step_size_s > 0 and math.isfinite(de.step_size_s):
+        step = de.step_size_s
+    else:
+        step = _nice(duration / 1000) if duration else 0.01
+        notes.append(
+            f"# step_size {step:g} s is a GUESS: the FMU declares none"
+            + (f" (1/1000 of its default experiment, {duration:g} s)" if duration else "")
+        )
+    if duration is None:
+        duration = 1000 * step if not de.step_size_s else max(10.0, step)
+        notes.append(
+            f"# episode_duration {duration:g} s: the FMU declares no stop time; set the one you need"
+        )
+    duration = max(duration, step)
+    steps = duration / step
+    per_sample = max(1, math.ceil(steps / TARGET_SAMPLES - 1e-9))
+    if per_sample > MAX_STEPS_PER_SAMPLE:
+        per_sample = MAX_STEPS_PER_SAMPLE
+        shortened = _clean(TARGET_SAMPLES * per_sample * step)
+        notes.append(
+            f"# episode_duration: the default experiment runs {duration:g} s, {steps:.3g} FMU steps of "
+            f"{step:g} s; shortened to {shortened:g} s ({TARGET_SAMPLES:,} samples of {per_sample:,} steps)"
+        )
+        duration = shortened
+    sampling = _clean(per_sample * step)
+    if per_sample > 1:
+        notes.append(
+            f"# sampling_time {sampling:g} s = {per_sample:,} FMU steps: at most {TARGET_SAMPLES:,} samples "
+            f"per episode of {duration:g} s (sample faster for finer control, up to the step size)"
+        )
+    return step, sampling, _clean(duration), notes
+
+
+def _nice(value: float) -> float:
+    """``value`` rounded down to 1, 2 or 5 times a power of ten (a step size a person would pick)."""
+    exponent = math.floor(math.log10(value))
+    for mantissa in (5, 2, 1):
+        if mantissa * 10.0**exponent <= value:
+            return _clean(mantissa * 10.0**exponent)
+    return _clean(10.0**exponent)
+
+
+def _clean(value: float) -> float:
+    """``value`` without float noise (``0.30000000000000004`` -> ``0.3``)."""
+    return float(f"{value:.12g}")
+
+
+def _header(info: ModelInfo, shown: Path) -> list[str]:
+    step, sampling, duration, notes = episode_timing(info)
+    start = info.default_experiment.start_time_s or 0.0
     return [
         f"# Experiment for {' '.join(info.model_name.split())} (FMI {info.fmi_version}, "
         f"{'/'.join(i.upper() for i in info.interfaces)})",
@@ -104,9 +168,9 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
         "",
         "model:",
         f"  fmu: {q(str(shown))}",
-        f"  step_size: {step!r}          # FMU step, s"
-        + ("" if de.step_size_s else "  (GUESS: the FMU declares none)"),
-        f"  sampling_time: {step!r}      # one agent sample; a whole multiple of step_size",
+        *[f"  {note}" for note in notes],
+        f"  step_size: {step!r}          # FMU step, s",
+        f"  sampling_time: {sampling!r}      # one agent sample; a whole multiple of step_size",
         f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
         *([f"  start_time: {start!r}"] if start else []),
         "  reset_policy: auto          # restore | reset | reinstantiate | auto",
@@ -120,7 +184,7 @@ def _actions(inputs: list[Variable], tunables: list[Variable]) -> list[str]:
     if not candidates:
         return [
             "# The FMU has no inputs and no tunable parameters: this experiment only observes it.",
-            "# check, simulate, node, record and evaluate --policy zero work on it;",
+            "# check, simulate, node, record and `evaluate zero --config <this file>` work on it;",
             "# training needs something to act on (an input or a tunable parameter).",
             "actions:",
             "  inputs: []",

@@ -83,8 +83,9 @@ def _check_depth(text: str, file: Path | str, loader_class: Any = _Loader) -> bo
 
     A YAML syntax error is left for the composer to report. libyaml scans a flow collection's
     tokens ahead to its own nesting limit (1000 levels in newer releases) before the first event,
-    so a deeper file fails there with libyaml's wording; it is scanned again with PyYAML's own
-    (iterative, 1024-character lookahead) loader, so the limit and its message are always ours.
+    so a deeper file fails there with libyaml's wording; the text up to where it failed is scanned
+    again with PyYAML's own (iterative, 1024-character lookahead) loader, so the limit and its
+    message are always ours.
     """
     loader = loader_class(text)
     depth, aliases = 0, False
@@ -103,9 +104,12 @@ def _check_depth(text: str, file: Path | str, loader_class: Any = _Loader) -> bo
                 depth -= 1
             elif isinstance(event, AliasEvent):
                 aliases = True
-    except yaml.YAMLError:
+    except yaml.YAMLError as exc:
         if loader_class is not yaml.SafeLoader:
-            return _check_depth(text, file, yaml.SafeLoader)
+            # only the text up to where libyaml stopped: PyYAML's scanner is slow on deep flow nesting
+            mark = getattr(exc, "problem_mark", None)
+            end = mark.index + 1 if mark is not None and mark.index is not None else len(text)
+            return _check_depth(text[:end], file, yaml.SafeLoader)
         return True
     finally:
         loader.dispose()

@@ -18,6 +18,7 @@ import atexit
 import datetime
 import logging
 import os
+import re
 import unicodedata
 import weakref
 from pathlib import Path
@@ -283,6 +284,12 @@ def _close_ref(ref: weakref.ReferenceType[RecordMcap]) -> None:
             _log.error("finishing the recording failed: %s", exc)
 
 
+def slug(text: str) -> str:
+    """``text`` as a file name that needs no quoting: letters, digits, ``.``, ``_`` and ``-`` kept,
+    every other run of characters (spaces, ``:``, ``/``) one ``-`` (``"ball tty" -> "ball-tty"``)."""
+    return re.sub(r"[^A-Za-z0-9._]+", "-", text).strip("-.") or "run"
+
+
 def default_run_name(env: gym.Env[Any, Any]) -> str:
     experiment = getattr(getattr(env.unwrapped, "task", None), "experiment", None)
     name = getattr(experiment, "name", "run")
@@ -328,12 +335,14 @@ def record_env(
 ) -> RecordMcap:
     """Wrap ``env`` to record into ``directory/<run_name>.mcap`` (a free name is chosen).
 
-    ``run_name`` defaults to ``<experiment>-<local time>``; ``agent`` and ``seed`` go into the
+    ``run_name`` defaults to ``<experiment>-<local time>``, made a plain file name by :func:`slug`;
+    ``agent`` and ``seed`` go into the
     metadata (every episode's own seed is in its start event).
     """
     folder = Path(directory)
-    base = run_name or default_run_name(env)
-    check_run_name(base, folder)
+    if run_name:
+        check_run_name(run_name, folder)  # a path, '..' or control characters: refused, not mangled
+    base = slug(run_name or default_run_name(env))
     path = folder / f"{base}.mcap"
     counter = 1
     while path.exists() or path.with_name(path.name + ".part").exists():

@@ -102,6 +102,7 @@ CORPUS: dict[str, tuple[Callable[[pytest.FixtureRequest], Path], bool]] = {
     "pythonfmu3_heater3 (FMI 3.0 CS, Enumeration input)": (_fixture("pythonfmu_heater3"), True),
     "pythonfmu3_arrays3 (FMI 3.0 CS, arrays)": (_fixture("arrays3_fmu"), True),
     "pythonfmu_names2 (FMI 2.0 CS, locals only, Modelica names)": (_fixture("names2"), False),
+    "pythonfmu_longrun2 (FMI 2.0 CS, a 1e8 s default experiment)": (_fixture("pythonfmu_longrun2"), True),
     "jmodelica_cs10 (FMI 1.0 CS, no inputs)": (_fixture("pyfmi_fmus", "jmodelica_cs10"), False),
     "jmodelica_me10 (FMI 1.0 ME, no inputs)": (_fixture("pyfmi_fmus", "jmodelica_me10"), False),
     "jmodelica_cs20 (FMI 2.0 CS, tunable parameter)": (_fixture("pyfmi_fmus", "jmodelica_cs20"), True),
@@ -162,6 +163,49 @@ def test_train_a_few_hundred_steps_unedited(
     }
     result = train(config, overrides=overrides, run_dir=tmp_path / "run", progress=False)
     assert result.timesteps >= 256 and result.model_path.is_file()
+
+
+@pytest.mark.parametrize("entry", list(CORPUS))
+def test_no_value_init_writes_is_refused(entry: str, request: pytest.FixtureRequest, tmp_path: Path) -> None:
+    """Every value init writes, those it suggests in comments included (the FMU's parameter
+    defaults, written commented out), passes ``check`` when used."""
+    from bridge.env.plants import model_info_for
+    from bridge.experiment.validate import check_experiment
+
+    get, _ = CORPUS[entry]
+    config = _init(get(request), tmp_path)
+    text = config.read_text()
+    data = yaml.safe_load(text)
+    suggested: dict[str, object] = {}
+    lines = text.splitlines()
+    if "  parameters: {}" in " ".join(lines):
+        start = next(i for i, line in enumerate(lines) if line.startswith("  parameters: {}"))
+        for line in lines[start + 1 :]:
+            if not line.startswith(("  #   ", "                              #")):
+                break
+            if line.startswith("  #   "):  # '  #   "name": value  # description'
+                ((name, value),) = yaml.safe_load("{" + line[6:].split("  #")[0] + "}").items()
+                suggested[name] = value
+    assert suggested or "  parameters: {}" not in text
+    data["model"]["parameters"] = {**(data["model"].get("parameters") or {}), **suggested}
+    edited = tmp_path / "with_suggestions.yaml"
+    edited.write_text(yaml.safe_dump(data))
+    experiment = load_experiment(edited)
+    check_experiment(experiment, model_info_for(experiment))
+    samples = experiment.model.episode_duration / experiment.model.sampling_time
+    assert 1 <= samples <= 10_000 + 1e-6, "init aims at an episode of at most 10,000 samples"
+
+
+def test_a_very_long_default_experiment_gets_a_runnable_episode_with_a_comment(
+    pythonfmu_longrun2: Path, tmp_path: Path
+) -> None:
+    text = _init(pythonfmu_longrun2, tmp_path).read_text()
+    model = yaml.safe_load(text)["model"]
+    assert (model["step_size"], model["sampling_time"], model["episode_duration"]) == (0.01, 100.0, 1e6)
+    assert "the default experiment runs 1e+08 s" in text and "shortened to 1e+06 s" in text
+    assert "# sampling_time 100 s = 10,000 FMU steps" in text
+    checked = runner.invoke(app, ["check", str(tmp_path / "experiment.yaml"), "--steps", "1"])
+    assert checked.exit_code == 0, checked.output
 
 
 @pytest.mark.parametrize("entry", [name for name, (_, acts) in CORPUS.items() if not acts])

@@ -80,7 +80,9 @@ def test_deep_nesting_is_rejected_quickly_and_never_crashes_the_parser(text: str
     started = time.perf_counter()
     with pytest.raises(ConfigError, match=rf"nested more than {MAX_DEPTH} levels deep"):
         parse_yaml(text)
-    assert time.perf_counter() - started < 5.0  # libyaml composes recursively in C: depth is checked first
+    # a guard against a hang or a crash (libyaml composes recursively in C: depth is checked first),
+    # not a speed measure: a loaded machine gets a wide margin (a quiet one takes well under a second)
+    assert time.perf_counter() - started < 60.0
 
 
 def test_a_huge_or_binary_file_is_a_config_error(tmp_path: Path) -> None:
