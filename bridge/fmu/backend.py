@@ -2,8 +2,9 @@
 
 The adapters speak FMI (camelCase, value references, status codes) so nothing above
 ``bridge.fmu`` has to. Set-up calls go through FMPy's checked wrappers; the per-step calls
-(get/set/doStep) use the raw ctypes functions FMPy has already bound, with preallocated
-arguments, which is what keeps stepping cheaper than FMPy's own convenience API.
+(get/set/doStep) and the restore of a reset (set FMU state) use the raw ctypes functions FMPy
+has already bound, with preallocated arguments, which is what keeps stepping and resetting
+cheaper than FMPy's own convenience API. Status codes come from ``bridge.fmu.abi``.
 """
 
 from __future__ import annotations

@@ -69,6 +69,11 @@ class Model:
             ``"euler"``: fixed steps of ``step_size_s / solver_substeps`` in native code
             (``bridge.fmu.fixed_step``; FMI 2.0/3.0).
         solver_substeps: fixed-step integration steps per FMU step.
+        instance_name: the FMU instance's name (default: ``<model name>#<counter>``).
+
+    The model keeps the only clock of its instance: :attr:`step_index` ``k`` (time
+    ``t0 + k * h``), advanced by :meth:`advance` and, in place, by the native steppers of this
+    package (``bridge.fmu.sample``, ``bridge.fmu.batch``).
     """
 
     def __init__(
