@@ -17,6 +17,7 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
     app.command("compare")(compare_cmd)
+    app.command("tune")(tune_cmd)
     agent_app = typer.Typer(
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
     )
@@ -27,6 +28,47 @@ def register(app: typer.Typer) -> None:
     export_app.command("fmu")(export_fmu_cmd)
     agent_app.add_typer(export_app, name="export")
     app.add_typer(agent_app, name="agent")
+
+
+def tune_cmd(
+    config: Annotated[Path, typer.Argument(help="The experiment YAML file.")],
+    baseline: Annotated[str, typer.Argument(help="A baseline of evaluation.baselines.")],
+    param: Annotated[
+        list[str], typer.Option("--param", help="A positive value to tune: kp, design.q.NAME (repeat).")
+    ],
+    iterations: Annotated[int, typer.Option(help="Objective evaluations (Nelder-Mead).")] = 100,
+    seeds: Annotated[int, typer.Option(help="Episodes per training scenario (seeds 1000..).")] = 2,
+    penalty: Annotated[float, typer.Option(help="held_iae: added per episode ending early.")] = 100.0,
+    objective: Annotated[
+        str, typer.Option(help="held_iae (tracking) or return (minus the task's episode return).")
+    ] = "held_iae",
+    write: Annotated[
+        Path | None,
+        typer.Option(help="Write the experiment with the tuned values here (default: CONFIG.tuned.yaml)."),
+    ] = None,
+    out: Annotated[Path | None, typer.Option(help="tuning.json (default: beside that file).")] = None,
+    version: Annotated[str | None, typer.Option()] = None,
+) -> None:
+    """Tune a baseline's gains or weights on the training scenarios (held IAE; see agents/tune.py)."""
+    import json
+
+    from agents.tune import tune, write_experiment
+
+    result = tune(
+        config, baseline, param, iterations=iterations, seeds=seeds, penalty=penalty, objective=objective,
+        version=version,
+        log=console.print,
+    )  # fmt: skip
+    target = write_experiment(config, result, write or config.with_suffix(".tuned.yaml"))
+    report = out or target.with_suffix(".tuning.json")
+    report.write_text(json.dumps(result.as_dict(), indent=1))
+    best = ", ".join(f"{k} = {v:.5g}" for k, v in zip(result.parameters, result.best))
+    console.print(f"objective: {result.objective}")
+    console.print(
+        f"{result.start_objective:.4f} -> {result.best_objective:.4f} "
+        f"({len(result.evaluations)} evaluations, {result.wall_time_s:.0f} s): {best}"
+    )
+    console.print(f"experiment: {target}; tuning record: {report}")
 
 
 ZenohModeOpt = Annotated[
@@ -109,13 +151,18 @@ def agent_run_cmd(
     zenoh_mode: ZenohModeOpt = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID (ros2 transport).")] = None,
     runtime: Annotated[
-        str, typer.Option(help="torch (stable-baselines3) or onnx (onnxruntime, no torch needed).")
+        str,
+        typer.Option(
+            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed) or baseline "
+            "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
+        ),
     ] = "torch",
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
     import signal
     import threading
 
+    from agents.deploy import deployed_checkpoint
     from agents.deploy_io import AgentNode
     from bridge.net.transport import ZenohOptions, session_mode
 
@@ -132,6 +179,7 @@ def agent_run_cmd(
     listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
     mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
     options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
+    console.print(f"agent deploys {deployed_checkpoint(model, runtime)}", highlight=False)
     agent = AgentNode(model, config, settings, options)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -146,6 +194,20 @@ def agent_run_cmd(
         f"{summary['missing_events']:.0f} missing-observation events; inference latency median "
         f"{summary['latency_median_us']:.0f} us, p99 {summary['latency_p99_us']:.0f} us"
     )
+    _leave_now()
+
+
+def _leave_now() -> None:
+    """Exit at once, everything being closed: unloading torch and stable-baselines3 at interpreter
+    shutdown takes seconds on a busy machine, and a stopped agent should be gone within one."""
+    import logging
+    import os
+    import sys
+
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
 
 
 def agent_settings(
@@ -164,8 +226,8 @@ def agent_settings(
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    if runtime not in ("torch", "onnx"):
-        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch or onnx")
+    if runtime not in ("torch", "onnx", "baseline"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
     ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings
@@ -207,6 +269,14 @@ def train_cmd(
         str | None,
         typer.Option(help="Residual RL over an evaluation baseline: BASELINE:SCALE (e.g. pid:0.1)."),
     ] = None,
+    fmu: Annotated[
+        str,
+        typer.Option(
+            "--fmu",
+            help="How the run folder's experiment names the FMU: absolute (its absolute path) or copy "
+            "(a copy in the run folder, so the run outlives the original).",
+        ),
+    ] = "absolute",
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
 
@@ -235,7 +305,13 @@ def train_cmd(
             "zenoh_mode": zenoh_mode,
         }
     result = train(
-        experiment, overrides=overrides, run_dir=run_dir, resume=resume, version=version, progress=progress
+        experiment,
+        overrides=overrides,
+        run_dir=run_dir,
+        resume=resume,
+        version=version,
+        progress=progress,
+        fmu=fmu,
     )
     console.print(
         f"trained {result.timesteps:,} steps in {result.wall_time_s:.1f} s "
@@ -283,20 +359,23 @@ def evaluate_cmd(
     import time
 
     from agents.evaluate import evaluate
+    from agents.progress import episode_bar
     from agents.report import headline_columns, summary, write
 
     out = out or Path("runs") / f"eval-{time.strftime('%Y%m%d-%H%M%S')}"
-    result = evaluate(
-        agents,
-        config,
-        version=version,
-        scenarios=scenarios,
-        episodes=episodes,
-        workers=workers,
-        seed=seed,
-        record_dir=Path("recordings") / out.name if record and not batch else None,
-        batch=batch,
-    )
+    with episode_bar() as progress:
+        result = evaluate(
+            agents,
+            config,
+            version=version,
+            scenarios=scenarios,
+            episodes=episodes,
+            workers=workers,
+            seed=seed,
+            record_dir=Path("recordings") / out.name if record and not batch else None,
+            batch=batch,
+            progress=progress,
+        )
     from bridge.experiment.config import load_experiment
 
     paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))

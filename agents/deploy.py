@@ -46,7 +46,7 @@ class DeploySettings:
     scenario: str | None = None
     domain_id: int | None = None
     namespace: str = "/"
-    runtime: Literal["torch", "onnx"] = "torch"
+    runtime: Literal["torch", "onnx", "baseline"] = "torch"
 
 
 @dataclass
@@ -74,6 +74,32 @@ def deployment_experiment(run_or_model: Path, config: Path | None) -> tuple[Expe
         raise ConfigError(f"no experiment for {run_or_model}: pass --config experiment.yaml")
     experiment = load_experiment(path)
     return experiment.model_copy(update={"noise": Noise()}), path
+
+
+def deployed_checkpoint(run_or_model: Path, runtime: str) -> str:
+    """Which file ``agent run`` deploys, and what is known of it: ``best_model.zip`` (the best
+    periodic evaluation: its mean reward and step) before the final ``model.zip``."""
+    import json
+
+    if runtime == "onnx":
+        from agents.runtime import onnx_file
+
+        return f"checkpoint {onnx_file(run_or_model)} (ONNX export)"
+    from agents.policies import _model_file
+
+    path = _model_file(run_or_model)
+    run_dir = path.parent
+    if path.name == "best_model.zip" and (run_dir / "evaluations.npz").is_file():
+        with np.load(run_dir / "evaluations.npz") as data:
+            means = data["results"].mean(axis=1)
+            best = int(np.argmax(means))
+            return (
+                f"checkpoint {path} (best evaluation: mean reward {means[best]:.1f} at step "
+                f"{int(data['timesteps'][best]):,} of {len(means)} evaluations)"
+            )
+    run_file = run_dir / "run.json"
+    steps = json.loads(run_file.read_text()).get("timesteps") if run_file.is_file() else None
+    return f"checkpoint {path}" + (f" (final model after {steps:,} steps)" if steps else "")
 
 
 def model_info_for(
@@ -130,7 +156,10 @@ class DeployedAgent:
 
     def _warm_up(self) -> None:
         """The first inference of a torch model is slow (allocations, kernel choice): do it before
-        observations arrive, so the first real action is on time. One thread: lower latency."""
+        observations arrive, so the first real action is on time. One thread: lower latency.
+        A baseline has nothing to warm up (and acts only within an episode: its controller state)."""
+        if self.settings.runtime == "baseline":
+            return
         if self.settings.runtime == "torch":  # the onnx runtime must work without torch
             import torch
 

@@ -30,12 +30,13 @@ class AgentNode:
         session: Any = None,
     ) -> None:
         self.settings = settings
-        self._own = session is None
-        self._session = session if session is not None else open_session(options)
+        # rclpy needs no Zenoh session (and so no router): it speaks the machine's RMW
+        self._own = session is None and settings.transport != "rclpy"
+        self._session = open_session(options) if self._own else session
         self._declared: list[Any] = []
         self._ros: Any = None  # the ROS node (ros2/rclpy transports), made by _ros_publisher
         experiment, _ = deployment_experiment(model, config)
-        policy = load_policy(model, settings.runtime)
+        policy = load_policy(model, settings.runtime, experiment)
         description = self._node_description() if settings.transport == "zenoh" else None
         run_dir = model if model.is_dir() else model.parent
         info = model_info_for(experiment, run_dir, description)
@@ -52,7 +53,7 @@ class AgentNode:
             keys = proto.Keys(settings.prefix, settings.node)
             self._declared.append(self._session.declare_subscriber(keys.outputs, self._on_frame))
         else:
-            topic = settings.observation_topic or f"/{settings.node}/outputs"
+            topic = settings.observation_topic or self._node_topic("outputs")
             ros: Any = self._ros  # created by _ros_publisher above
             ros.create_subscription(topic, "sensor_msgs/msg/JointState", self._on_joint_state)
         self._episode = 0
@@ -91,22 +92,32 @@ class AgentNode:
 
     # -- ROS 2 view ----------------------------------------------------------------------------------
     def _ros_publisher(self, experiment: Any) -> Any:
-        from bridge.net.ros2.view import RosViewSettings, open_backend_node, qos_profile
+        from bridge.net.ros2.view import RosViewSettings, open_backend_node, qos_profile, ros_node_name
 
         backend: Literal["zenoh", "rclpy"] = "rclpy" if self.settings.transport == "rclpy" else "zenoh"
         view = RosViewSettings(
             domain_id=self.settings.domain_id, namespace=self.settings.namespace, backend=backend
         )
-        self._ros = open_backend_node(self._session, view, f"{self.settings.node.replace('-', '_')}_agent")
-        topic = self.settings.action_topic or f"/{self.settings.node}/actions"
+        self._ros = open_backend_node(self._session, view, f"{ros_node_name(self.settings.node)}_agent")
+        topic = self.settings.action_topic or self._node_topic("actions")
         publisher = self._ros.create_publisher(topic, "sensor_msgs/msg/JointState", qos_profile(view))
         names = list(experiment.actions.inputs)
         layout = cdr.JointStateLayout.of(names)
 
         def publish(inputs: list[float], step: int) -> None:
-            publisher.publish(layout.pack(time.time_ns(), inputs[: len(names)]))
+            # stamped with the observation it answers (a robot's clock, or the FMU's simulation time)
+            stamp = self._last_stamp if self._last_stamp >= 0 else time.time_ns()
+            publisher.publish(layout.pack(stamp, inputs[: len(names)]))
 
         return publish
+
+    def _node_topic(self, topic: str) -> str:
+        """``/<namespace>/<node>/<topic>``, named as the FMU node is served (``worker-1`` -> ``worker_1``)."""
+        from bridge.net.ros2.names import normalize_namespace
+        from bridge.net.ros2.view import ros_node_name
+
+        namespace = normalize_namespace(self.settings.namespace).rstrip("/")
+        return f"{namespace}/{ros_node_name(self.settings.node)}/{topic}"
 
     def _on_joint_state(self, payload: bytes, info: Any) -> None:
         message = cdr.decode_joint_state(payload)
@@ -138,5 +149,5 @@ class AgentNode:
             undeclare(entity)
         if self._ros is not None:
             self._ros.close()
-        if self._own:
+        if self._own and self._session is not None:
             self._session.close()

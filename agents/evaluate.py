@@ -10,7 +10,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -103,8 +103,10 @@ class Cell:
     record_dir: Path | None
 
 
-def run_cell(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], Path | None]:
-    """Worker entry point: every episode of one agent on one scenario."""
+def run_cell(
+    cell: Cell, on_episode: Callable[[], None] | None = None
+) -> tuple[list[dict[str, Any]], list[Trace], Path | None]:
+    """Worker entry point: every episode of one agent on one scenario (``on_episode`` after each)."""
     experiment = load_experiment(cell.experiment, version=cell.version)
     policy = make_policy(cell.agent, baseline_settings(experiment), name=cell.agent_name)
     spec = metric_spec(experiment)
@@ -126,6 +128,8 @@ def run_cell(cell: Cell) -> tuple[list[dict[str, Any]], list[Trace], Path | None
                 }
             )
             traces.append(trace)
+            if on_episode is not None:
+                on_episode()
     finally:
         env.close()
     return rows, traces, recording
@@ -157,11 +161,14 @@ def evaluate(
     seed: int = 0,
     record_dir: Path | None = None,
     batch: bool = False,
+    progress: Callable[[int, int], None] | None = None,
 ) -> EvaluationResult:
     """Evaluate every agent on every scenario for ``episodes`` seeded episodes.
 
     ``batch``: run all episodes of a cell at once in a batch env (``agents.evaluate_batch``):
-    the same seeds and results, a large grid in seconds; no recordings."""
+    the same seeds and results, a large grid in seconds; no recordings. ``progress(done, total)``
+    is called with the episodes done (after each episode in this process, after each agent and
+    scenario with worker processes or a batch)."""
     if batch and record_dir is not None:
         raise ConfigError("evaluate --batch does not record episodes; pass --no-record (or drop --batch)")
     experiment = load_experiment(experiment_path, version=version)
@@ -184,7 +191,7 @@ def evaluate(
         for sc in (chosen or [None])
     ]
     result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
-    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch)):
+    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch, progress)):
         result.rows += rows
         result.traces[(cell.agent_name, cell.scenario or "")] = traces
         if recording is not None:
@@ -193,18 +200,41 @@ def evaluate(
 
 
 def _map(
-    cells: list[Cell], workers: int, batch: bool = False
+    cells: list[Cell],
+    workers: int,
+    batch: bool = False,
+    progress: Callable[[int, int], None] | None = None,
 ) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
+    total = sum(len(c.seeds) for c in cells)
+    done = 0
+
+    def tick(episodes: int = 1) -> None:
+        nonlocal done
+        done += episodes
+        if progress is not None:
+            progress(done, total)
+
+    if progress is not None:
+        progress(0, total)
     run: Any = run_cell
     if batch:
         from agents.evaluate_batch import run_cell_batch
 
         run = run_cell_batch
     if workers <= 1 or len(cells) == 1:
-        return [run(c) for c in cells]
+        results = []
+        for c in cells:
+            results.append(run(c) if batch else run_cell(c, tick))
+            if batch:
+                tick(len(c.seeds))
+        return results
     context = multiprocessing.get_context("spawn")  # a fresh process per worker: no inherited FMU state
     with ProcessPoolExecutor(max_workers=min(workers, len(cells)), mp_context=context) as pool:
-        return list(pool.map(run, cells))
+        results = []
+        for c, result in zip(cells, pool.map(run, cells)):
+            results.append(result)
+            tick(len(c.seeds))
+        return results
 
 
 def _named(agents: Sequence[str]) -> tuple[list[str], list[str]]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import importlib
 import json
+import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,8 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from bridge.errors import ConfigError
 from bridge.task.core import Task
+
+_log = logging.getLogger(__name__)
 
 ALGOS = ("PPO", "SAC", "TD3", "A2C", "DQN")
 
@@ -107,10 +110,64 @@ class Pid:
             self._integral += step
         return u
 
-    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+    def inputs(self, signals: Mapping[str, float]) -> list[float]:
+        """Physical values of every action input: the controlled one from the PID, the rest as they are."""
         inputs = [signals[name] for name in self._task.action_inputs]
         inputs[self._index] = self.control(signals)
-        return self._task.action_for_inputs(inputs)
+        return inputs
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self._task.action_for_inputs(self.inputs(signals))
+
+
+class ModelBased:
+    """An ``lqr`` or ``mpc`` baseline: designed from the FMU linearised through model exchange
+    (``bridge.control``), once per policy, at the first reset."""
+
+    def __init__(self, kind: str, design: Mapping[str, Any], name: str) -> None:
+        from bridge.experiment.control import ControlDesign
+
+        self.kind, self.name = kind, name
+        self.design = ControlDesign.model_validate(design)
+        self.controller: Any = None
+        self._experiment: Any = None
+
+    def reset(self, task: Task, seed: int | None) -> None:
+        if self.controller is None or self._experiment is not task.experiment:
+            from bridge.control.controller import LinearController
+
+            cls: Any = LinearController
+            if self.kind == "mpc":
+                from bridge.control.mpc import Mpc
+
+                cls = Mpc
+            stray = [n for n in self.design.inputs if n not in task.action_inputs]
+            if stray:
+                raise ConfigError(
+                    f"baseline {self.name}: inputs {stray} are not action inputs {list(task.action_inputs)}"
+                )
+            controller = cls(self.design, task.experiment, task.timing.sampling_time_s, self.name)
+            controller.check_signals(task.signal_names)
+            mapping = task.action_mapping
+            limits = {}
+            if mapping.kind == "continuous":
+                limits = {
+                    n: (c - h, c + h) for n, c, h in zip(task.action_inputs, mapping.centre, mapping.half)
+                }
+            controller.build(limits)
+            self.controller, self._experiment = controller, task.experiment
+        self._task = task
+        self._index = [task.action_inputs.index(n) for n in self.design.inputs]
+        self.controller.reset()
+
+    def inputs(self, signals: Mapping[str, float]) -> list[float]:
+        inputs = [signals[name] for name in self._task.action_inputs]
+        for i, value in zip(self._index, self.controller.control(signals)):
+            inputs[i] = value
+        return inputs
+
+    def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
+        return self._task.action_for_inputs(self.inputs(signals))
 
 
 def discrete_levels(task: Task) -> dict[str, list[float]] | None:
@@ -185,6 +242,7 @@ class Sb3Policy:
         model_file = _model_file(path)
         self.name = name or (run_dir.name if path.is_dir() else path.stem)
         self.run = _run_info(run_dir)
+        _check_status(self.run, run_dir)
         algo = self.run.get("algo")
         self.model = load_model(model_file, algo)
         self._obs_rms = None
@@ -232,6 +290,29 @@ def _model_file(path: Path) -> Path:
         f"{path} holds no model: expected best_model.zip or model.zip (a run directory from "
         "`fmu-bridge train`) or a .zip saved by stable-baselines3"
     )
+
+
+def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
+    """Refuse a run whose training failed; say so for one interrupted or never finished."""
+    status = run.get("status")
+    if status == "failed":
+        raise ConfigError(
+            f"the training of run {run_dir.name} failed ({run.get('error', 'no error recorded')}), so "
+            "its model is not a trained agent; fix the cause and train again, or continue it with "
+            f"`fmu-bridge train --resume` [{run_dir}]"
+        )
+    if status == "interrupted":
+        _log.warning(
+            "run %s was interrupted after %s timesteps: its model is only partly trained",
+            run_dir.name,
+            run.get("timesteps", "?"),
+        )
+    elif status == "running":
+        _log.warning(
+            "run %s says its training is still running (or its process was killed): the model may be "
+            "untrained or partly trained",
+            run_dir.name,
+        )
 
 
 def _run_info(run_dir: Path) -> dict[str, Any]:
@@ -283,11 +364,15 @@ def baseline(name: str, config: Mapping[str, Any]) -> Policy:
     kind = config.get("type", "pid")
     if kind == "pid":
         return Pid(PidSpec.model_validate(config), name)
+    if kind in ("lqr", "mpc"):
+        return ModelBased(kind, config["design"], name)
     if kind == "constant":
         return FixedPolicy(name, float(config["value"]))
     if kind == "python":
         return PythonPolicy(name, _import(str(config["callable"]), f"evaluation.baselines.{name}"))
-    raise ConfigError(f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, constant or python")
+    raise ConfigError(
+        f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, lqr, mpc, constant or python"
+    )
 
 
 def _import(path: str, key: str) -> Callable[..., Any]:

@@ -13,17 +13,18 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
-from agents.policies import Pid, PidSpec
+from agents.policies import ModelBased, Pid, baseline
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment
 from bridge.experiment.sections import ResidualSection
 from bridge.task.core import Task
 
+Baseline = Pid | ModelBased
 
-def physical_inputs(baseline: Pid, task: Task, signals: Mapping[str, float]) -> list[float]:
-    inputs = [signals[name] for name in task.action_inputs]
-    inputs[task.action_inputs.index(baseline.spec.input)] = baseline.control(signals)
-    return inputs
+
+def physical_inputs(baseline: Baseline, task: Task, signals: Mapping[str, float]) -> list[float]:
+    del task
+    return baseline.inputs(signals)
 
 
 def combine(task: Task, baseline: Any, signals: Mapping[str, float], residual: Any, scale: float) -> Any:
@@ -32,9 +33,15 @@ def combine(task: Task, baseline: Any, signals: Mapping[str, float], residual: A
     return task.action_for_inputs(base + scale * np.clip(np.asarray(residual, dtype=np.float64), -1.0, 1.0))
 
 
-def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Pid:
+def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Baseline:
     del experiment
-    return Pid(PidSpec.model_validate(residual["config"]), str(residual["baseline"]))
+    return _baseline(residual)
+
+
+def _baseline(residual: Mapping[str, Any]) -> Baseline:
+    made = baseline(str(residual["baseline"]), residual["config"])
+    assert isinstance(made, (Pid, ModelBased))
+    return made
 
 
 def residual_setup(experiment: Experiment, residual: ResidualSection) -> dict[str, Any]:
@@ -48,9 +55,10 @@ def residual_setup(experiment: Experiment, residual: ResidualSection) -> dict[st
         )
     if experiment.actions.type != "continuous":
         raise ConfigError("training.residual needs continuous actions (actions.type: continuous)")
-    if baselines[name].type != "pid":
+    if baselines[name].type not in ("pid", "lqr", "mpc"):
         raise ConfigError(
-            f"training.residual.baseline: {name!r} is a {baselines[name].type} baseline; use a pid"
+            f"training.residual.baseline: {name!r} is a {baselines[name].type} baseline; "
+            "use a pid, lqr or mpc"
         )
     return {"baseline": name, "config": baselines[name].settings(), "scale": residual.scale}
 
@@ -62,7 +70,7 @@ class ResidualWrapper(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self._residual = residual
         self._scale = float(residual["scale"])
-        self._baseline = Pid(PidSpec.model_validate(residual["config"]), str(residual["baseline"]))
+        self._baseline = _baseline(residual)
         self._task: Task = env.unwrapped.task  # type: ignore[attr-defined]
         n = len(self._task.action_inputs)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)

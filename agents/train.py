@@ -8,10 +8,12 @@ TensorBoard logs. ``--resume RUN`` continues a run's step count.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import shutil
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -144,7 +146,12 @@ def build_eval_env(
 
 
 def prepare_run_dir(
-    settings: TrainingSettings, experiment: Experiment, path: Path, run_dir: Path | None
+    settings: TrainingSettings,
+    experiment: Experiment,
+    path: Path,
+    run_dir: Path | None,
+    *,
+    fmu: str = "absolute",
 ) -> Path:
     if run_dir is None:
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -154,8 +161,89 @@ def prepare_run_dir(
             f"run directory {run_dir} exists and is not empty; choose another --run-dir or --resume it"
         )
     run_dir.mkdir(parents=True, exist_ok=True)
-    shutil.copy(path, run_dir / "experiment.yaml")
+    write_run_experiment(path, run_dir, fmu=fmu)
     return run_dir
+
+
+_PATH_KEYS = ("fmu", "file")  # model.fmu, system.components.*.fmu, csv profiles' file
+
+
+def write_run_experiment(path: Path, run_dir: Path, *, fmu: str = "absolute") -> Path:
+    """The run folder's copy of the experiment at ``path``, self-contained: every relative file it
+    names (the FMU, system components, csv profiles) is rewritten as an absolute path, so the run
+    resumes, evaluates and deploys from any folder. With ``fmu="copy"`` the model's FMU is copied
+    into the run folder and named by its file name instead (the run then outlives the original).
+
+    The text is kept (comments and all) with only those values replaced; where a value cannot be
+    replaced in place, the data is written out without the comments.
+    """
+    if fmu not in ("absolute", "copy"):
+        raise ConfigError(f"--fmu {fmu!r}: expected absolute or copy")
+    import yaml
+
+    text = path.read_text()
+    data = yaml.safe_load(text)
+    base = path.resolve().parent
+    replace: dict[str, str] = {}
+    for spec in _relative_paths(data):
+        replace[spec] = str((base / Path(spec).expanduser()).resolve())
+    model = data.get("model") if isinstance(data, dict) else None
+    model_fmu = model.get("fmu") if isinstance(model, dict) else None
+    if fmu == "copy" and isinstance(model_fmu, str) and not model_fmu.startswith("example:"):
+        source = Path(replace.get(model_fmu, model_fmu)).expanduser()
+        if not source.is_file():
+            raise ConfigError(
+                f"--fmu copy: model.fmu {model_fmu!r} is not a file (looked at {source}) [{path}]"
+            )
+        shutil.copy(source, run_dir / source.name)
+        replace[model_fmu] = source.name
+    for spec, new in replace.items():
+        text = _with_value(text, spec, new)
+    if yaml.safe_load(text) != _substituted(data, replace):
+        header = f"# {path.name} with its file paths made absolute (comments were not kept)\n"
+        text = header + yaml.safe_dump(_substituted(data, replace), sort_keys=False)
+    target = run_dir / "experiment.yaml"
+    target.write_text(text)
+    return target
+
+
+def _with_value(text: str, spec: str, new: str) -> str:
+    """``text`` with the YAML value ``spec`` of a path key (plain or quoted) replaced by ``new``."""
+    import re
+
+    keys = "|".join(_PATH_KEYS)
+    pattern = rf"(?m)((?:^|[\s{{,])(?:{keys}):\s*)(['\"]?){re.escape(spec)}\2(?=\s*(?:[,}}#]|$))"
+    replacement = json.dumps(new)
+    return re.sub(pattern, lambda m: m.group(1) + replacement, text)
+
+
+def _relative_paths(data: Any) -> list[str]:
+    found: list[str] = []
+    if isinstance(data, dict):
+        for key, value in data.items():
+            if key in _PATH_KEYS and isinstance(value, str) and _is_relative_file(value):
+                found.append(value)
+            else:
+                found += _relative_paths(value)
+    elif isinstance(data, list):
+        for item in data:
+            found += _relative_paths(item)
+    return found
+
+
+def _is_relative_file(spec: str) -> bool:
+    return not spec.startswith("example:") and not Path(spec).expanduser().is_absolute()
+
+
+def _substituted(data: Any, replace: dict[str, str]) -> Any:
+    if isinstance(data, dict):
+        return {
+            k: replace.get(v, v) if k in _PATH_KEYS and isinstance(v, str) else _substituted(v, replace)
+            for k, v in data.items()
+        }
+    if isinstance(data, list):
+        return [_substituted(item, replace) for item in data]
+    return data
 
 
 def train(
@@ -166,22 +254,75 @@ def train(
     resume: Path | None = None,
     version: str | None = None,
     progress: bool = True,
+    fmu: str = "absolute",
 ) -> TrainResult:
-    """Train an agent; returns where everything went."""
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
-    from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import VecNormalize
-
+    """Train an agent; returns where everything went. The run folder's experiment names its files
+    by absolute path, or (``fmu="copy"``) holds a copy of the FMU (see :func:`write_run_experiment`)."""
     if resume is not None:
         return _resume(resume, overrides or {}, progress)
     if experiment_path is None:
         raise ConfigError("train: give an experiment file, or resume= a run directory")
     experiment = load_experiment(experiment_path, version=version)
+    refuse_untrainable(experiment)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
     residual = _residual(experiment, settings)
-    run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
+    run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir, fmu=fmu)
     info = _run_info(settings, experiment, residual)
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    with _marked(run_dir, info):
+        return _train_in(
+            run_dir,
+            info,
+            settings=settings,
+            experiment=experiment,
+            experiment_path=experiment_path,
+            residual=residual,
+            progress=progress,
+        )
+
+
+def refuse_untrainable(experiment: Experiment) -> None:
+    """A ConfigError (exit 2) for an experiment no agent can learn from: nothing to act on."""
+    where = f" [{experiment.source}]" if experiment.source else ""
+    if not experiment.actions.inputs:
+        raise ConfigError(
+            "train: the experiment has no actions (actions.inputs is empty), so there is nothing for "
+            "an agent to learn; add an FMU input or a tunable parameter to actions.inputs (see "
+            "`fmu-bridge inspect` for the FMU's inputs), or use `fmu-bridge simulate` to run an "
+            f"observation-only experiment{where}"
+        )
+    # an empty observation is refused by the experiment's own validation (observations: ...)
+
+
+@contextlib.contextmanager
+def _marked(run_dir: Path, info: dict[str, Any]) -> Iterator[None]:
+    """run.json says ``failed`` (with the error) or ``interrupted`` when training does not finish."""
+    try:
+        yield
+    except KeyboardInterrupt:
+        info["status"] = "interrupted"
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        raise
+    except BaseException as exc:
+        info["status"] = "failed"
+        info["error"] = f"{type(exc).__name__}: {exc}"
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        raise
+
+
+def _train_in(
+    run_dir: Path,
+    info: dict[str, Any],
+    *,
+    settings: TrainingSettings,
+    experiment: Experiment,
+    experiment_path: Path,
+    residual: dict[str, Any] | None,
+    progress: bool,
+) -> TrainResult:
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.vec_env import VecNormalize
+
     # the variables the Task was built from: a deployed agent needs them, not the FMU
     (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed)
@@ -193,26 +334,42 @@ def train(
         )
     model = _new_model(settings, env, run_dir)
     model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard", "log"]))
-    per_env = max(1, settings.n_envs)
-    callbacks = CallbackList(
-        [
-            CheckpointCallback(
-                max(settings.checkpoint_every // per_env, 1),
-                str(run_dir / "checkpoints"),
-                save_vecnormalize=bool(settings.normalize),
-            ),
-            EvalCallback(
-                eval_env,
-                n_eval_episodes=settings.eval_episodes,
-                eval_freq=max(settings.eval_every // per_env, 1),
-                best_model_save_path=str(run_dir),
-                log_path=str(run_dir),
-                deterministic=True,
-                verbose=0,
-            ),
-        ]
-    )
+    callbacks = _callbacks(settings, eval_env, run_dir)
     return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=True)
+
+
+def _callbacks(settings: TrainingSettings, eval_env: Any, run_dir: Path) -> Any:
+    """Checkpoints and periodic evaluation; the best evaluated model goes to ``best_model.zip``.
+
+    A resumed run carries on with the evaluations it has (``evaluations.npz``): ``best_model.zip``
+    is replaced only by a model that evaluates better than the best one so far."""
+    import numpy as np
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+
+    per_env = max(1, settings.n_envs)
+    evaluation = EvalCallback(
+        eval_env,
+        n_eval_episodes=settings.eval_episodes,
+        eval_freq=max(settings.eval_every // per_env, 1),
+        best_model_save_path=str(run_dir),
+        log_path=str(run_dir),
+        deterministic=True,
+        verbose=0,
+    )
+    earlier = run_dir / "evaluations.npz"
+    if earlier.is_file():
+        with np.load(earlier) as data:
+            evaluation.evaluations_timesteps = [int(t) for t in data["timesteps"]]
+            evaluation.evaluations_results = [list(r) for r in data["results"]]
+            evaluation.evaluations_length = [list(n) for n in data["ep_lengths"]]
+        if evaluation.evaluations_results:
+            evaluation.best_mean_reward = max(float(np.mean(r)) for r in evaluation.evaluations_results)
+    checkpoints = CheckpointCallback(
+        max(settings.checkpoint_every // per_env, 1),
+        str(run_dir / "checkpoints"),
+        save_vecnormalize=bool(settings.normalize),
+    )
+    return CallbackList([checkpoints, evaluation])
 
 
 def _learn(
@@ -225,17 +382,29 @@ def _learn(
     progress: bool,
     reset: bool,
 ) -> TrainResult:
+    from stable_baselines3.common.callbacks import CallbackList
+
+    from agents.progress import announce, train_progress
+
     start = time.perf_counter()
     info["status"] = "running"
     (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    really = announce(model, timesteps)
+    if progress:
+        bar = train_progress(really)
+        callbacks = CallbackList([callbacks, bar]) if callbacks is not None else bar
     try:
         model.learn(
-            total_timesteps=timesteps, callback=callbacks, progress_bar=progress, reset_num_timesteps=reset
+            total_timesteps=timesteps, callback=callbacks, progress_bar=False, reset_num_timesteps=reset
         )
         info["status"] = "done"
     except KeyboardInterrupt:
         info["status"] = "interrupted"
         _log.warning("training interrupted: saving the model so far")
+    except BaseException as exc:
+        info["status"] = "failed"
+        info["error"] = f"{type(exc).__name__}: {exc}"
+        raise
     finally:
         wall = time.perf_counter() - start
         info["wall_time_s"] = info.get("wall_time_s", 0.0) + wall
@@ -310,13 +479,19 @@ def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainRe
         settings = TrainingSettings.model_validate({**info["settings"], **given})
     except ValidationError as exc:
         raise ConfigError(f"--resume {run_dir}: invalid training settings: {exc}") from None
-    env = build_vec_env(settings, experiment, experiment_path, info.get("residual"), settings.seed + 1)
+    residual = info.get("residual")
+    env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed + 1)
+    eval_env = build_eval_env(env, settings, experiment, experiment_path, residual)
     if (run_dir / "vecnormalize.pkl").is_file():
         env = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), env)
+        eval_env = VecNormalize(  # its statistics follow the training env's at each evaluation
+            eval_env, training=False, norm_reward=False, **settings.normalize_kwargs(eval_env=True)
+        )
     model = load_model(run_dir / "model.zip", info["algo"])
     model.set_env(env)
     from stable_baselines3.common.logger import configure
 
     model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard", "log"]))
     info.setdefault("resumed", []).append({"at": int(model.num_timesteps), "timesteps": settings.timesteps})
-    return _learn(model, settings.timesteps, None, run_dir, info, progress=progress, reset=False)
+    callbacks = _callbacks(settings, eval_env, run_dir)
+    return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=False)

@@ -5,9 +5,11 @@ On a ROS 2 Jazzy machine with fmu-bridge installed in the same Python environmen
     ros2 launch launch_scripts/fmu_agent.launch.py run:=runs/cartpole-ppo \\
         experiment:=examples/cartpole_balance.yaml backend:=rclpy rate:=1.0
 
-``backend:=rclpy`` runs both as rclpy nodes on the machine's RMW; ``backend:=zenoh`` speaks the
-rmw_zenoh wire format directly (then start ``ros2 run rmw_zenoh_cpp rmw_zenohd`` first and export
-RMW_IMPLEMENTATION=rmw_zenoh_cpp for the ros2 CLI). See docs/ros2.md.
+``backend:=rclpy`` (the default) runs both as rclpy nodes on the machine's RMW and needs no Zenoh
+router: the agent opens no Zenoh session, the FMU node's own one is a peer. ``backend:=zenoh``
+speaks the rmw_zenoh wire format directly: start ``ros2 run rmw_zenoh_cpp rmw_zenohd`` first, pass
+``router:=tcp/127.0.0.1:7447`` and export RMW_IMPLEMENTATION=rmw_zenoh_cpp for the ros2 CLI.
+See docs/ros2.md.
 
 Where launch_ros is installed both are launch_ros ``Node`` actions, so a namespace pushed by an
 enclosing launch file (``PushRosNamespace``), remappings and parameters reach them: ``fmu-bridge``
@@ -16,13 +18,29 @@ reads the ``--ros-args`` that ``Node`` appends. Without launch_ros they are plai
 
 from typing import Any
 
-from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, ExecuteProcess
-from launch.substitutions import LaunchConfiguration, PythonExpression
+
+def commands(
+    run: str,
+    experiment: str,
+    *,
+    name: str = "plant",
+    backend: str = "rclpy",
+    rate: str = "1.0",
+    router: str = "",
+) -> dict[str, list[str]]:
+    """The two ``fmu-bridge`` command lines (without the program name) the launch file starts."""
+    connect = ["--connect", router] if router else []
+    transport = "rclpy" if backend == "rclpy" else "ros2"
+    node = ["node", experiment, "--name", name, "--mode", "realtime", "--rate", rate, "--ros"]
+    node += ["--ros-backend", backend, *connect]
+    agent = ["agent", "run", run, "--config", experiment, "--node", name, "--transport", transport, *connect]
+    return {"fmu_node": node, "fmu_agent": agent}
 
 
-def _process(name: str, arguments: list[Any]) -> Any:
+def _process(name: str, arguments: list[str]) -> Any:
     """A ROS node action where launch_ros exists (namespace, remaps, parameters honoured)."""
+    from launch.actions import ExecuteProcess
+
     try:
         from launch_ros.actions import Node
     except ImportError:
@@ -30,14 +48,18 @@ def _process(name: str, arguments: list[Any]) -> Any:
     return Node(executable="fmu-bridge", name=name, arguments=arguments, output="screen")
 
 
-def generate_launch_description() -> LaunchDescription:
-    run = LaunchConfiguration("run")
-    experiment = LaunchConfiguration("experiment")
-    name = LaunchConfiguration("name")
-    backend = LaunchConfiguration("backend")
-    rate = LaunchConfiguration("rate")
-    router = LaunchConfiguration("router")
-    transport = PythonExpression(["'rclpy' if '", backend, "' == 'rclpy' else 'ros2'"])
+def generate_launch_description() -> Any:
+    from launch import LaunchDescription
+    from launch.actions import DeclareLaunchArgument, OpaqueFunction
+    from launch.substitutions import LaunchConfiguration
+
+    def start(context: Any) -> list[Any]:
+        values = {
+            key: LaunchConfiguration(key).perform(context)
+            for key in ("run", "experiment", "name", "backend", "rate", "router")
+        }
+        return [_process(name, arguments) for name, arguments in commands(**values).items()]
+
     return LaunchDescription(
         [
             DeclareLaunchArgument("run", description="run directory or model .zip from fmu-bridge train"),
@@ -48,41 +70,10 @@ def generate_launch_description() -> LaunchDescription:
                 "rate", default_value="1.0", description="real-time factor of the FMU node"
             ),
             DeclareLaunchArgument(
-                "router", default_value="tcp/127.0.0.1:7447", description="Zenoh router endpoint"
+                "router",
+                default_value="",
+                description="Zenoh router (backend:=zenoh, e.g. tcp/127.0.0.1:7447); none by default",
             ),
-            _process(
-                "fmu_node",
-                [
-                    "node",
-                    experiment,
-                    "--name",
-                    name,
-                    "--mode",
-                    "realtime",
-                    "--rate",
-                    rate,
-                    "--ros",
-                    "--ros-backend",
-                    backend,
-                    "--connect",
-                    router,
-                ],
-            ),
-            _process(
-                "fmu_agent",
-                [
-                    "agent",
-                    "run",
-                    run,
-                    "--config",
-                    experiment,
-                    "--node",
-                    name,
-                    "--transport",
-                    transport,
-                    "--connect",
-                    router,
-                ],
-            ),
+            OpaqueFunction(function=start),
         ]
     )

@@ -1,21 +1,47 @@
-"""docs/reliability.md from the counts the fuzz and fault tests write to docs/reliability/*.json.
+"""docs/reliability.md from the counts the fuzz and fault tests write as they run.
 
-The tests write their counts as they run; at the end of a test session ``conftest.py`` calls
-``write()`` so the document always shows the last run's figures. ``python tests/reliability_table.py``
-does the same by hand.
+A test run writes only to temporary folders: the counts go to :func:`counts_dir` (a temporary
+folder of the run) and, at the end of the session, ``conftest.py`` renders the table beside them.
+The tracked files are rewritten only on request: with ``FMU_BRIDGE_WRITE_RELIABILITY=1`` the
+counts go to ``docs/reliability/*.json`` and the table to ``docs/reliability.md``;
+``python tests/reliability_table.py`` renders the table from the committed counts.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
+WRITE_DOCS = "FMU_BRIDGE_WRITE_RELIABILITY"  # "1": the run rewrites the tracked counts and table
+RUN_DIR = "FMU_BRIDGE_RELIABILITY_DIR"  # the temporary folder of this run (shared with subprocesses)
+
+
+def to_docs() -> bool:
+    """Whether this run was asked to rewrite the tracked counts and table under docs/."""
+    return os.environ.get(WRITE_DOCS) == "1"
+
+
+def counts_dir() -> Path:
+    """Where the fuzz and fault tests write their counts (docs/reliability/ only on request)."""
+    if to_docs():
+        path = DOCS / "reliability"
+    else:
+        if not os.environ.get(RUN_DIR):
+            os.environ[RUN_DIR] = tempfile.mkdtemp(prefix="fmu-bridge-reliability-")
+        path = Path(os.environ[RUN_DIR])
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
 HEADER = """# Reliability: hostile input and faults, counted
 
 Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
-counts); regenerate with `pytest` or `python tests/reliability_table.py`. Every row asserts, in its
+counts); regenerate with `FMU_BRIDGE_WRITE_RELIABILITY=1 pytest -q` (a plain test run writes its
+counts and this table to a temporary folder) or `python tests/reliability_table.py`. Every row asserts, in its
 test, that there were zero tracebacks, zero hangs and nothing silently wrong.
 
 | test | what was thrown at it | outcome | tracebacks | hangs | silently wrong |
@@ -70,16 +96,20 @@ ROWS = {"experiment_fuzz.json": _experiments, "recording_fuzz.json": _recordings
 def render() -> str:
     rows = []
     for name, row in ROWS.items():
-        path = DOCS / "reliability" / name
+        path = counts_dir() / name
         if path.is_file():
             rows.append(row(json.loads(path.read_text())))
     faults = (DOCS / "reliability" / "faults.md").read_text()  # the fault-injection table, by hand
     return HEADER + "\n".join(rows) + "\n\n" + faults
 
 
-def write() -> None:
-    (DOCS / "reliability.md").write_text(render())
+def write() -> Path:
+    """The table, in docs/ on request, else beside this run's counts; the path written."""
+    target = DOCS / "reliability.md" if to_docs() else counts_dir() / "reliability.md"
+    target.write_text(render())
+    return target
 
 
 if __name__ == "__main__":
-    write()
+    os.environ[WRITE_DOCS] = "1"  # by hand: the table from the committed counts
+    print(write())

@@ -24,3 +24,23 @@ def load_after_5(step: int, time_s: float, signals: dict[str, Any]) -> dict[str,
 def half_voltage(obs: Any, signals: dict[str, float]) -> Any:
     """A scripted policy: always +12 V on a +-24 V motor (action 0.5)."""
     return np.array([0.5], dtype=np.float32)
+
+
+class _Counter:
+    calls = 0
+
+
+def fails_after_200(signals: dict[str, float]) -> float:
+    """A reward that breaks mid-training (a crash inside the run)."""
+    _Counter.calls += 1
+    if _Counter.calls > 200:
+        raise RuntimeError("the reward broke at its 201st call")
+    return 0.0
+
+
+def interrupts_after_200(signals: dict[str, float]) -> float:
+    """A reward during which Ctrl-C arrives mid-training."""
+    _Counter.calls += 1
+    if _Counter.calls > 200:
+        raise KeyboardInterrupt
+    return 0.0

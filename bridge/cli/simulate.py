@@ -1,12 +1,19 @@
 """Open-loop episodes of an experiment: ``fmu-bridge simulate`` and the quick checks of ``check``.
 
-Policies here are fixed rules (no learning): ``zero`` (the action whose physical value is
-nearest 0), ``random`` (seeded samples of the action space) and ``constant:V`` (the physical
-value V on every action input).
+Policies here are fixed rules (no learning): ``zero`` (no change: 0 on every FMU input and the
+FMU's start value on every tunable parameter), ``random`` (seeded samples of the action space) and
+``constant:V`` (the physical value V on every action input).
+
+A physical value reaches the FMU exactly (an :class:`~bridge.task.core.ExactAction` carries it past
+the action mapping); a value outside an input's bounds, or between the levels of a discrete
+action, is changed to the nearest allowed value with one warning naming the value, the bound and the
+variable. A model without actions takes only ``zero`` (nothing is applied).
 """
 
 from __future__ import annotations
 
+import logging
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,9 +22,11 @@ import gymnasium as gym
 import numpy as np
 
 from bridge.errors import ConfigError
-from bridge.task.core import Task
+from bridge.experiment.validate import action_bounds
+from bridge.task.core import ExactAction, Task
 
 Policy = Callable[[Any], Any]
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -31,28 +40,82 @@ class EpisodeResult:
     final_outputs: dict[str, float] = field(default_factory=dict)
 
 
-def physical_action(task: Task, value: float) -> Any:
-    """The action whose physical input value is nearest ``value`` on every action input."""
-    return task.action_for_inputs([value] * len(task.action_inputs))
+def zero_values(task: Task) -> list[float]:
+    """``zero``: 0 on each FMU input, the start value on each tunable parameter (no change)."""
+    values = []
+    for name in task.action_inputs:
+        var = task.variables[name]
+        start = var.start if isinstance(var.start, int | float) else 0.0
+        values.append(float(start) if var.causality == "parameter" else 0.0)
+    return values
+
+
+def physical_action(task: Task, values: list[float], policy: str = "constant") -> Any:
+    """The action that applies the physical ``values`` (one per action input) exactly; a value the
+    action space cannot apply is changed to the nearest one it can, with one warning per input."""
+    mapping = task.action_mapping
+    names = task.action_inputs
+    if mapping.kind == "continuous":
+        applied = []
+        for i, (name, value) in enumerate(zip(names, values)):
+            low, high = action_bounds(task.experiment, task.variables[name])
+            low = mapping.centre[i] - mapping.half[i] if low is None else float(low)
+            high = mapping.centre[i] + mapping.half[i] if high is None else float(high)
+            target = min(max(value, low), high)
+            if target != value:
+                bound = "maximum" if value > high else "minimum"
+                _warn(policy, name, value, f"outside its bounds [{low:g}, {high:g}]: its {bound} {target:g}")
+            applied.append(target)
+        return ExactAction(task.action_for_inputs(applied), applied)
+    if mapping.kind == "discrete":
+        rows = np.asarray(mapping.table, dtype=np.float64)
+        index = int(np.argmin(np.abs(rows - np.asarray(values)).sum(axis=1)))
+        for j, name in enumerate(names):
+            if rows[index, j] != values[j]:
+                column = sorted(set(rows[:, j].tolist()))
+                _warn(policy, name, values[j], f"not one of its levels {column}: {rows[index, j]:g}")
+        return index
+    picks = []
+    for name, value, levels in zip(names, values, mapping.levels):
+        k = int(np.argmin(np.abs(levels - value)))
+        if levels[k] != value:
+            _warn(policy, name, value, f"not one of its levels {levels.tolist()}: {levels[k]:g}")
+        picks.append(k)
+    return np.array(picks)
+
+
+def _warn(policy: str, name: str, value: float, what: str) -> None:
+    _log.warning("--policy %s: %g on %s is %s is applied instead", policy, value, name, what)
 
 
 def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
     """A fixed policy from its name: ``zero``, ``random`` or ``constant:V``."""
+    if spec not in ("zero", "random") and not spec.startswith("constant:"):
+        raise ConfigError(f"--policy {spec!r} is unknown; use zero, random or constant:VALUE")
+    if not task.action_inputs:
+        if spec != "zero":
+            raise ConfigError(
+                f"--policy {spec}: the experiment has no actions (actions.inputs is empty), so there is "
+                "nothing to apply it to; leave --policy out (zero: nothing applied), or add an FMU input "
+                "or tunable parameter to actions.inputs"
+            )
+        nothing = task.action_for_inputs([])
+        return lambda obs: nothing
     if spec == "zero":
-        action = physical_action(task, 0.0)
+        action = physical_action(task, zero_values(task), "zero")
         return lambda obs: action
     if spec == "random":
         space = task.action_space
         space.seed(seed)
         return lambda obs: space.sample()
-    if spec.startswith("constant:"):
-        try:
-            value = float(spec.partition(":")[2])
-        except ValueError:
-            raise ConfigError(f"--policy {spec!r}: expected constant:NUMBER, e.g. constant:2.5") from None
-        action = physical_action(task, value)
-        return lambda obs: action
-    raise ConfigError(f"--policy {spec!r} is unknown; use zero, random or constant:VALUE")
+    try:
+        value = float(spec.partition(":")[2])
+    except ValueError:
+        raise ConfigError(f"--policy {spec!r}: expected constant:NUMBER, e.g. constant:2.5") from None
+    if not math.isfinite(value):
+        raise ConfigError(f"--policy {spec!r}: expected a finite number, e.g. constant:2.5")
+    action = physical_action(task, [value] * len(task.action_inputs), spec)
+    return lambda obs: action
 
 
 def run_episodes(

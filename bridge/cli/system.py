@@ -10,21 +10,62 @@ import typer
 from rich.console import Console
 from rich.table import Table
 
-from bridge.experiment.config import as_experiment
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.system import is_system_file
 
 system_app = typer.Typer(
     help="Systems of coupled FMUs: inspect, check, simulate, serve.", no_args_is_help=True
 )
 console = Console()
 err_console = Console(stderr=True)
-ExperimentArg = Annotated[Path, typer.Argument(help="An experiment file with a system: section or an .ssp.")]
+ExperimentArg = Annotated[
+    Path, typer.Argument(help="An experiment file with a system: section, or an .ssp/.ssd itself.")
+]
+StepSizeOpt = Annotated[
+    float | None,
+    typer.Option("--step-size", help="Macro step [s] of an .ssp/.ssd (default: its DefaultExperiment)."),
+]
+ZenohConfigOpt = Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config.")]
+ListenOpt = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on.")]
+ConnectOpt = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")]
+ZenohModeOpt = Annotated[
+    str | None,
+    typer.Option("--zenoh-mode", help="client or peer; default: client when only --connect is given."),
+]
+PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
 
 
-def _open(experiment: Path) -> Any:
+def _experiment(path: Path, step_size_s: float | None = None, duration_s: float | None = None) -> Experiment:
+    """An experiment file, or an .ssp/.ssd run as it is (every output observed, no actions)."""
+    if is_system_file(str(path)):
+        from bridge.plant.system.ssp import ssp_experiment
+
+        return ssp_experiment(path, step_size_s=step_size_s, duration_s=duration_s)
+    return as_experiment(path)
+
+
+def _remote(
+    zenoh_config: Path | None,
+    listen: list[str] | None,
+    connect: list[str] | None,
+    zenoh_mode: str | None,
+    prefix: str,
+) -> Any:
+    """Node components reached with the command's Zenoh options (a session only if one is used)."""
     from bridge.net.system_node import NodeComponents
+    from bridge.net.transport import ZenohOptions, session_mode
+
+    if zenoh_config is None and not listen and not connect and zenoh_mode is None:
+        return NodeComponents(prefix=prefix)
+    mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
+    options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
+    return NodeComponents(options=options, prefix=prefix)
+
+
+def _open(experiment: Experiment, remote: Any) -> Any:
     from bridge.plant.system.plant import SystemPlant
 
-    return SystemPlant(as_experiment(experiment), remote=NodeComponents())
+    return SystemPlant(experiment, remote=remote)
 
 
 def summary(plant: Any) -> dict[str, Any]:
@@ -52,16 +93,23 @@ def summary(plant: Any) -> dict[str, Any]:
 
 
 @system_app.command("inspect")
-def inspect_system(
+def inspect_system(  # noqa: PLR0917 (typer options)
     experiment: ExperimentArg,
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
     dot: Annotated[Path | None, typer.Option(help="Write the connection graph as Graphviz DOT.")] = None,
     png: Annotated[Path | None, typer.Option(help="Draw the connection graph into a PNG.")] = None,
+    step_size: StepSizeOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
 ) -> None:
     """A table of components and connections, and a picture of the connection graph."""
     from bridge.plant.system.graph import to_dot
 
-    with _open(experiment) as plant:
+    exp = _experiment(experiment, step_size)
+    with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
         data = summary(plant)
         if dot is not None:
             dot.write_text(to_dot(plant.system, plant.feedthrough))
@@ -87,14 +135,27 @@ def inspect_system(
 
 
 @system_app.command("check")
-def check_system_cmd(
+def check_system_cmd(  # noqa: PLR0917 (typer options)
     experiment: ExperimentArg,
     steps: Annotated[int, typer.Option(help="Samples to run after the checks.")] = 5,
+    step_size: StepSizeOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
 ) -> None:
     """Check every connection and name, then reset the system and run a few samples."""
     from bridge.env.fmu_env import FmuEnv
 
-    with FmuEnv(experiment) as env:
+    exp = _experiment(experiment, step_size)
+    plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix))
+    try:
+        env = FmuEnv(exp, plant=plant)
+    except BaseException:
+        plant.close()
+        raise
+    with env:
         plant = env.plant
         _, info = env.reset(seed=0)
         for _ in range(steps):
@@ -108,7 +169,7 @@ def check_system_cmd(
 
 
 @system_app.command("simulate")
-def simulate_system(
+def simulate_system(  # noqa: PLR0917 (typer options)
     experiment: ExperimentArg,
     duration: Annotated[float | None, typer.Option(help="Seconds (default: the episode duration).")] = None,
     csv: Annotated[Path | None, typer.Option(help="Write every observed output over time to CSV.")] = None,
@@ -116,10 +177,19 @@ def simulate_system(
     set_input: Annotated[
         list[str] | None, typer.Option("--input", help="Hold a task input at a value: NAME=VALUE.")
     ] = None,
+    step_size: StepSizeOpt = None,
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
 ) -> None:
-    """Run the system open loop (task inputs at their start values) and print its outputs."""
-    exp = as_experiment(experiment)
-    with _open(experiment) as plant:
+    """Run the system open loop (task inputs at their start values) and print its outputs.
+
+    An .ssp/.ssd runs as it is: every numeric output observed, its DefaultExperiment's step and
+    duration unless --step-size and --duration say otherwise."""
+    exp = _experiment(experiment, step_size, duration)
+    with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
         names = list(exp.observations.outputs)
         inputs = list(exp.actions.inputs)
         plant.bind(inputs, names)
@@ -162,18 +232,12 @@ def serve_system(  # noqa: PLR0917 (typer options)
     component: Annotated[
         list[str] | None, typer.Option("--component", help="Serve only this component (repeatable).")
     ] = None,
-    zenoh_config: Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config.")] = None,
-    listen: Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on.")] = None,
-    connect: Annotated[
-        list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")
-    ] = None,
-    zenoh_mode: Annotated[
-        str | None,
-        typer.Option("--zenoh-mode", help="client or peer; default: client when only --connect is given."),
-    ] = None,
-    prefix: Annotated[
-        str, typer.Option("--prefix", help="Key expression prefix of the nodes.")
-    ] = "fmu_bridge",
+    zenoh_config: ZenohConfigOpt = None,
+    listen: ListenOpt = None,
+    connect: ConnectOpt = None,
+    zenoh_mode: ZenohModeOpt = None,
+    prefix: PrefixOpt = "fmu_bridge",
+    step_size: StepSizeOpt = None,
 ) -> None:
     """Serve the components that have node: as FMU nodes (lockstep) until interrupted.
 
@@ -190,7 +254,7 @@ def serve_system(  # noqa: PLR0917 (typer options)
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
     stop = threading.Event()
-    served = served_experiments(as_experiment(experiment), component or ())  # before the network
+    served = served_experiments(_experiment(experiment, step_size), component or ())  # before the network
     session = open_session(options)
     try:
         nodes = start_nodes(served, prefix=prefix, session=session)

@@ -3,9 +3,12 @@
 ``BatchEnv`` is the engine (one native call steps every FMU instance, the Task's math runs
 with numpy over the batch); two interfaces sit on it:
 
-- :class:`BatchVectorEnv`, a Gymnasium ``VectorEnv`` with ``autoreset_mode`` SAME_STEP: an
-  env whose episode ended is reset in the same step, its last observation and info in
-  ``infos["final_obs"]`` / ``infos["final_info"]`` (masks ``_final_obs`` / ``_final_info``);
+- :class:`BatchVectorEnv`, a Gymnasium ``VectorEnv`` in either autoreset mode, declared in its
+  ``metadata["autoreset_mode"]``: SAME_STEP (the default) resets an env whose episode ended in
+  the same step, its last observation and info in ``infos["final_obs"]`` / ``infos["final_info"]``
+  (masks ``_final_obs`` / ``_final_info``); NEXT_STEP (gymnasium's default, what RLlib's env
+  runner assumes) returns the last observation itself and resets that env on the next step,
+  which ignores its action and returns the first observation, reward 0, not done;
 - :class:`BatchVecEnv`, stable-baselines3's ``VecEnv`` interface (``terminal_observation`` and
   ``TimeLimit.truncated`` in ``infos[i]``), registered as a virtual subclass of SB3's ``VecEnv``
   whenever SB3 is loaded (bridge never imports SB3).
@@ -33,6 +36,7 @@ from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.plant.batch import BatchPlant
+from bridge.plant.factory import model_info_for
 from bridge.task.batch import BatchTask
 from bridge.task.core import NonFiniteOutputs
 
@@ -71,6 +75,7 @@ class BatchEnv:
         self.experiment = exp = as_experiment(experiment, version)
         self.n, self.on_error, self.autoreset = n_envs, on_error, autoreset
         self.active = np.ones(n_envs, dtype=bool)
+        _check_once_per_process(exp, n_envs)
         self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)
         try:
             self.task = BatchTask(exp, plant.info.variables, plant.timing, n_envs)
@@ -193,23 +198,46 @@ class BatchEnv:
 
 
 class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
-    """A Gymnasium ``VectorEnv`` over :class:`BatchEnv` (autoreset in the same step).
+    """A Gymnasium ``VectorEnv`` over :class:`BatchEnv`.
 
-    ``infos`` holds per-env arrays ``step`` and ``time_s``; for envs whose episode ended, the
-    last observation and info in ``final_obs`` / ``final_info`` and the new episode's reset
-    info (``scenario``, ``drawn``) in ``reset_info`` (each with a ``_``-prefixed mask).
+    Args:
+        experiment, n_envs, kwargs: as :class:`BatchEnv` (``autoreset`` follows the mode).
+        autoreset_mode: ``AutoresetMode.SAME_STEP`` (default) or ``AutoresetMode.NEXT_STEP``
+            (or their values ``"SameStep"`` / ``"NextStep"``); in ``metadata["autoreset_mode"]``.
+
+    ``infos`` holds per-env arrays ``step`` and ``time_s``. SAME_STEP: for envs whose episode
+    ended, the last observation and info in ``final_obs`` / ``final_info`` and the new episode's
+    reset info (``scenario``, ``drawn``) in ``reset_info`` (each with a ``_``-prefixed mask).
+    NEXT_STEP: an env whose episode ended has its ``reason`` (and ``plant_error``, ``outputs``)
+    in ``infos``; the step that resets it has its ``scenario`` and ``drawn``.
     """
 
     metadata: dict[str, Any] = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
 
-    def __init__(self, experiment: Experiment | str | Path, n_envs: int, **kwargs: Any) -> None:
-        self.engine = BatchEnv(experiment, n_envs, **kwargs)
+    def __init__(
+        self,
+        experiment: Experiment | str | Path,
+        n_envs: int,
+        *,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.SAME_STEP,
+        **kwargs: Any,
+    ) -> None:
+        mode = _autoreset_mode(autoreset_mode)
+        if "autoreset" in kwargs:
+            raise ConfigError(
+                "BatchVectorEnv takes autoreset_mode (SAME_STEP or NEXT_STEP), not autoreset; "
+                "for episodes that stop at their end use BatchEnv(autoreset=False)"
+            )
+        self.engine = BatchEnv(experiment, n_envs, autoreset=mode is AutoresetMode.SAME_STEP, **kwargs)
+        self.metadata = {**type(self).metadata, "autoreset_mode": mode}
+        self.autoreset_mode = mode
         self.num_envs = n_envs
         task = self.engine.task
         self.single_observation_space, self.single_action_space = task.observation_space, task.action_space
         self.observation_space = batch_space(task.observation_space, n_envs)
         self.action_space = batch_space(task.action_space, n_envs)
         self.render_mode = None
+        self._to_reset = np.zeros(n_envs, dtype=bool)  # NEXT_STEP: envs whose episode ended last step
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -218,20 +246,28 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         scenario = (options or {}).get("scenario")
         scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
         obs, infos = self.engine.reset_all(seeds, scenarios)
+        self._to_reset[:] = False
         merged: dict[str, Any] = {}
         for i, info in enumerate(infos):
             merged = self._add_info(merged, info, i)
         return obs, merged
 
     def step(self, actions: Any) -> tuple[ObsArray, Any, Any, Any, dict[str, Any]]:
-        obs, reward, terminated, truncated, ended = self.engine.step(actions)
         engine = self.engine
-        infos: dict[str, Any] = {
-            "step": engine.samples.copy(),
-            "time_s": engine.plant.timing.start_time_s + engine.plant.k * engine.plant.timing.step_size_s,
-        }
-        for i, end in ended.items():
-            infos = self._add_info(infos, end, i)
+        obs, reward, terminated, truncated, ended = engine.step(actions)  # ended envs do not step
+        infos: dict[str, Any] = {}
+        if self.autoreset_mode is AutoresetMode.NEXT_STEP:
+            for i in np.flatnonzero(self._to_reset).tolist():
+                infos = self._add_info(infos, _per_episode(engine._reset_or_recover(i)), i)
+                obs[i], reward[i], terminated[i], truncated[i] = engine.obs[i], 0.0, False, False
+            self._to_reset[:] = terminated | truncated
+            for i, end in ended.items():
+                infos = self._add_info(infos, _per_episode(end["final_info"]), i)
+        else:
+            for i, end in ended.items():
+                infos = self._add_info(infos, end, i)
+        infos["step"] = engine.samples.copy()
+        infos["time_s"] = engine.plant.timing.start_time_s + engine.plant.k * engine.plant.timing.step_size_s
         return obs, reward, terminated, truncated, infos
 
     def close_extras(self, **kwargs: Any) -> None:
@@ -293,6 +329,40 @@ class BatchVecEnv(Sb3VecEnv):
 
     def close(self) -> None:
         self.engine.close()
+
+
+def _check_once_per_process(exp: Experiment, n_envs: int) -> None:
+    """A batch steps its instances in this process: refuse several of a once-per-process FMU."""
+    if n_envs < 2:
+        return
+    info = model_info_for(exp)
+    if info.once_per_process:
+        raise ConfigError(
+            f"{info.model_name} declares canBeInstantiatedOnlyOncePerProcess: the {n_envs} instances of a "
+            f"batch env would share one process and its global state. Use n_envs=1 per process (e.g. one "
+            f"per Ray env runner), or a PlantVecEnv of FmuEnv, which gives each instance its own process "
+            f"[{info.path}]"
+        )
+
+
+def _per_episode(info: dict[str, Any]) -> dict[str, Any]:
+    """An env's info less ``step`` and ``time_s`` (every env has them, as whole arrays)."""
+    return {k: v for k, v in info.items() if k not in ("step", "time_s")}
+
+
+def _autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
+    supported = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
+    try:
+        value = AutoresetMode(mode)
+    except ValueError:
+        value = None
+    if value not in supported:
+        raise ConfigError(
+            f"autoreset_mode must be one of {[m.value for m in supported]} (gymnasium's AutoresetMode), "
+            f"got {mode!r}"
+        )
+    assert value is not None
+    return value
 
 
 def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:

@@ -11,10 +11,11 @@ import math
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from pydantic import Field, ValidationError, field_validator, model_validator
+from pydantic import AfterValidator, Field, ValidationError, field_validator, model_validator
 
 from bridge.errors import ConfigError
 from bridge.experiment.profiles import PROFILE_KINDS, Distribution, Profile
+from bridge.experiment.safe import check_safe_name
 from bridge.experiment.sections import (
     EvaluationSection,
     NodeSection,
@@ -240,7 +241,10 @@ class RewardSection(Strict):
         if not (self.terms or self.expression or self.callable):
             raise ValueError("give reward terms, an expression or a callable")
         if self.callable is not None:
-            check_import_path(self.callable)
+            try:
+                check_import_path(self.callable)
+            except ValueError as exc:
+                raise invalid("callable", str(exc)) from None
         return self
 
 
@@ -322,7 +326,7 @@ class HooksSection(Strict):
 class Experiment(Strict):
     """A whole experiment file."""
 
-    name: str = "experiment"
+    name: Annotated[str, AfterValidator(check_safe_name)] = "experiment"
     description: str = ""
     model: ModelSection
     actions: ActionSection = ActionSection()  # none: an observation-only experiment

@@ -9,8 +9,12 @@ from pydantic import Field, model_validator
 
 from bridge.experiment.strict import FiniteFloat, Strict
 
-
 # -- random distributions ---------------------------------------------------------------------
+MAX_DRAW_MAGNITUDE = 1e100
+"""Largest magnitude of a distribution's parameters: finite floats near 1e308 overflow to infinity
+in ``high - low`` or ``mean + k * std``, so such a draw would be infinite or NaN."""
+
+
 class Distribution(Strict):
     """Exactly one of: ``uniform: [low, high]``, ``normal: [mean, std]``,
     ``truncnormal: [mean, std, low, high]``, ``lognormal: [median, sigma]``, ``choice: [values]``
@@ -40,12 +44,25 @@ class Distribution(Strict):
             raise ValueError(f"truncnormal: need std >= 0 and low < high, got {list(self.truncnormal)}")
         if self.lognormal and self.lognormal[0] <= 0:
             raise ValueError(f"lognormal: the median must be > 0, got {self.lognormal[0]}")
+        if self.lognormal and self.lognormal[1] > 20:
+            raise ValueError(f"lognormal: sigma must be at most 20, got {self.lognormal[1]}")
+        self._check_magnitudes()
         if self.weights is not None:
             if not self.choice or len(self.weights) != len(self.choice):
                 raise ValueError("weights go with choice and need one weight per value")
             if min(self.weights) < 0 or sum(self.weights) <= 0:
                 raise ValueError(f"weights must be >= 0 with a positive sum, got {self.weights}")
         return self
+
+    def _check_magnitudes(self) -> None:
+        kind = self.kind
+        values = [float(v) for v in getattr(self, kind)]
+        large = [v for v in values if abs(v) > MAX_DRAW_MAGNITUDE]
+        if large:
+            raise ValueError(
+                f"{kind}: {large} beyond +-{MAX_DRAW_MAGNITUDE:g}; draws that wide overflow to "
+                "infinity: give the range the model can take"
+            )
 
     @property
     def kind(self) -> str:

@@ -12,6 +12,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import Field, field_validator, model_validator
 
+from bridge.experiment.control import ControlDesign
+from bridge.experiment.safe import check_own_module
 from bridge.experiment.strict import FiniteFloat, PositiveFloat, Strict, invalid
 
 Count = Annotated[int, Field(ge=1, le=10**12)]
@@ -22,6 +24,7 @@ def check_import_path(value: str) -> str:
     module, sep, attr = value.partition(":")
     if not sep or not module or not attr:
         raise ValueError(f"expected 'module:function', got {value!r}")
+    check_own_module(module)
     return value
 
 
@@ -86,15 +89,17 @@ class TrainingSection(Strict):
 PID_KEYS: tuple[str, ...] = ("output", "reference", "input", "kp", "ki", "kd", "limits", "anti_windup")
 PID_KEYS += ("tracking_time_s", "feedforward", "feedforward_gains")
 BASELINE_KEYS = {"pid": PID_KEYS, "constant": ("value",), "python": ("callable",)}
+BASELINE_KEYS |= {"lqr": ("design",), "mpc": ("design",)}
 
 
 class BaselineSection(Strict):
     """One of ``evaluation.baselines``: ``type: pid`` (the default; output, reference, input, gains,
     ``limits``, ``anti_windup``, a constant ``feedforward`` and ``feedforward_gains`` on signals),
     ``type: constant`` (``value`` in physical units) or ``type: python`` (``callable:
-    module:function``)."""
+    module:function``), or ``type: lqr`` / ``type: mpc`` (a ``design`` from the linearised FMU,
+    ``bridge.experiment.control``)."""
 
-    type: Literal["pid", "constant", "python"] = "pid"
+    type: Literal["pid", "constant", "python", "lqr", "mpc"] = "pid"
     output: str | None = None
     reference: str | None = None
     input: str | None = None
@@ -110,6 +115,7 @@ class BaselineSection(Strict):
     )
     value: FiniteFloat | None = None
     callable: str | None = None
+    design: ControlDesign | None = None
 
     @model_validator(mode="after")
     def _fits_type(self) -> BaselineSection:
@@ -117,14 +123,18 @@ class BaselineSection(Strict):
         foreign = sorted(self.model_fields_set - allowed)
         if foreign:
             raise ValueError(f"{foreign} do not apply to a {self.type} baseline; it takes {sorted(allowed)}")
-        required = {"pid": PID_KEYS[:3], "constant": ("value",), "python": ("callable",)}[self.type]
-        missing = [k for k in required if getattr(self, k) is None]
+        required = {"pid": PID_KEYS[:3], "constant": ("value",), "python": ("callable",)}
+        required |= {"lqr": ("design",), "mpc": ("design",)}
+        missing = [k for k in required[self.type] if getattr(self, k) is None]
         if missing:
             raise ValueError(f"a {self.type} baseline needs {missing}")
         if self.limits is not None:
             check_ordered("limits", *self.limits)
         if self.callable is not None:
-            check_import_path(self.callable)
+            try:
+                check_import_path(self.callable)
+            except ValueError as exc:
+                raise invalid("callable", str(exc)) from None
         return self
 
     def settings(self) -> dict[str, Any]:

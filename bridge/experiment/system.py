@@ -8,7 +8,7 @@ everywhere else in the experiment (actions, observations, rewards, scenarios, te
 from __future__ import annotations
 
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
@@ -50,6 +50,18 @@ class IterationSection(_Strict):
     tolerance: Annotated[float, Field(gt=0)] = 1e-10
 
 
+class AgentSection(_Strict):
+    """One agent of several in the system (``bridge.env.multi_agent``): the inputs it drives (its
+    actions, in [-1, 1] scaled to ``low``/``high``), the outputs it observes, and its own reward
+    (a ``reward:`` section as the experiment's, over its observations and any other output)."""
+
+    inputs: list[str] = Field(min_length=1)
+    low: dict[str, FiniteFloat] = {}
+    high: dict[str, FiniteFloat] = {}
+    observations: list[str] = Field(min_length=1)
+    reward: dict[str, Any] = Field(description="as the experiment's reward: section (terms, expression)")
+
+
 class SystemSection(_Strict):
     """Components, connections and the master algorithm (``jacobi`` or ``gauss_seidel``)."""
 
@@ -58,6 +70,16 @@ class SystemSection(_Strict):
     algorithm: Literal["jacobi", "gauss_seidel"] = "jacobi"
     iteration: IterationSection | None = None
     order: list[str] = Field(default=[], description="Gauss-Seidel order; default: from the graph")
+    agents: dict[str, AgentSection] = Field(
+        default={}, description="several agents in one system (PettingZoo ParallelEnv), by name"
+    )
+    feedthrough_outputs: Literal["held", "updated"] = Field(
+        default="held",
+        description="held: outputs at t+H as the FMUs computed them in the step, with the inputs "
+        "held at their values of t (what libcosim, Ecos and FMPy report); updated: after the "
+        "exchange, components with direct feedthrough get the inputs of t+H and their outputs are "
+        "read again, so every output at t+H is of that one instant (in-process components only)",
+    )
 
     @field_validator("components")
     @classmethod
@@ -77,5 +99,7 @@ class SystemSection(_Strict):
 
 
 def is_system_file(fmu: str) -> bool:
-    """Whether ``model.fmu`` names an SSP archive or an SSD file rather than one FMU."""
-    return fmu.lower().endswith(SYSTEM_SUFFIXES)
+    """Whether ``model.fmu`` names an SSP archive, an SSD file or OSP's system structure
+    (``*OspSystemStructure*.xml``) rather than one FMU."""
+    name = fmu.lower().replace("\\", "/").rpartition("/")[2]
+    return name.endswith(SYSTEM_SUFFIXES) or (name.endswith(".xml") and "ospsystemstructure" in name)

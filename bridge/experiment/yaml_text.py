@@ -6,6 +6,10 @@ them all, and whatever serialises the config later (recording metadata, run dire
 write them all. The node graph is composed first (aliases are shared nodes there, so that is
 cheap), its expanded size is counted with each shared node counted once per use, and only a
 document within the limits is constructed into Python values.
+
+Before construction every scalar and mapping is checked too: an integer of thousands of digits
+(Python refuses to convert it, with a ValueError) and a key given twice in one mapping (YAML would
+keep the last one silently) are ConfigErrors naming the line.
 """
 
 from __future__ import annotations
@@ -22,6 +26,9 @@ from bridge.errors import ConfigError
 MAX_FILE_BYTES = 256 << 10  # experiment files are a few KB; long tables belong in a csv: profile
 MAX_ALIAS_GROWTH = 100_000  # values plus characters that aliases may add to what the file spells out
 MAX_DEPTH = 100  # nesting levels; the parser and pydantic recurse once per level
+MAX_INT_DIGITS = 30  # an int64 has 19 digits; seeds, counts and step numbers fit easily
+_INT_TAG = "tag:yaml.org,2002:int"
+_MERGE_TAG = "tag:yaml.org,2002:merge"
 
 
 # libyaml's parser where it is installed (ten times faster); it composes recursively in C, so the
@@ -58,6 +65,7 @@ def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
             return None
         if has_aliases:
             _check_size(node, file)
+        _check_scalars(node, file)
         return loader.construct_document(node)
     except yaml.YAMLError as exc:
         raise ConfigError(f"{file}: not valid YAML: {exc}") from exc
@@ -70,12 +78,15 @@ def parse_yaml(text: str, file: Path | str = "<text>") -> Any:
         loader.dispose()
 
 
-def _check_depth(text: str, file: Path | str) -> bool:
+def _check_depth(text: str, file: Path | str, loader_class: Any = _Loader) -> bool:
     """Raise if collections nest more than MAX_DEPTH deep; whether ``text`` has aliases.
 
-    A YAML syntax error is left for the composer to report.
+    A YAML syntax error is left for the composer to report. libyaml scans a flow collection's
+    tokens ahead to its own nesting limit (1000 levels in newer releases) before the first event,
+    so a deeper file fails there with libyaml's wording; it is scanned again with PyYAML's own
+    (iterative, 1024-character lookahead) loader, so the limit and its message are always ours.
     """
-    loader = _Loader(text)
+    loader = loader_class(text)
     depth, aliases = 0, False
     try:
         while loader.check_event():
@@ -93,6 +104,8 @@ def _check_depth(text: str, file: Path | str) -> bool:
             elif isinstance(event, AliasEvent):
                 aliases = True
     except yaml.YAMLError:
+        if loader_class is not yaml.SafeLoader:
+            return _check_depth(text, file, yaml.SafeLoader)
         return True
     finally:
         loader.dispose()
@@ -137,6 +150,43 @@ def _check_size(root: Node, file: Path | str) -> None:
             f"and characters, {sum(literal):,} written out; aliases may add at most "
             f"{MAX_ALIAS_GROWTH:,}: write the values out, or use fewer nested aliases"
         )
+
+
+def _check_scalars(root: Node, file: Path | str) -> None:
+    """Raise on an integer of more than MAX_INT_DIGITS digits or a key given twice in one mapping."""
+    seen: set[int] = set()
+    stack = [root]
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        line = node.start_mark.line + 1
+        if isinstance(node, ScalarNode) and node.tag == _INT_TAG:
+            digits = sum(c.isdigit() for c in str(node.value))
+            if digits > MAX_INT_DIGITS:
+                raise ConfigError(
+                    f"{file}: line {line}: an integer of {digits} digits; at most {MAX_INT_DIGITS} are "
+                    "accepted (seeds, counts and steps need far fewer): is a value mistyped?"
+                )
+        if isinstance(node, MappingNode):
+            _check_keys(node, file)
+        stack.extend(_children(node))
+
+
+def _check_keys(node: MappingNode, file: Path | str) -> None:
+    first: dict[str, int] = {}
+    for key, _ in node.value:
+        if not isinstance(key, ScalarNode) or key.tag == _MERGE_TAG:
+            continue  # a merge key (<<) may override; complex keys are refused later by the schema
+        line = key.start_mark.line + 1
+        text = str(key.value)
+        if text in first:
+            raise ConfigError(
+                f"{file}: line {line}: key {text!r} is given twice in one mapping (first at line "
+                f"{first[text]}); YAML would keep only the last one: remove or rename one of them"
+            )
+        first[text] = line
 
 
 def _children(node: Node) -> list[Node]:

@@ -14,9 +14,8 @@ import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import fmpy
-
 from bridge.errors import FmuLoadError
+from bridge.fmu import unzip
 
 _LOCK = threading.Lock()
 _EXTRACTIONS: dict[tuple[str, int, int], _Extraction] = {}
@@ -93,8 +92,11 @@ def _key(fmu_path: Path) -> tuple[str, int, int]:
 def _extract(fmu_path: Path) -> Path:
     target = Path(tempfile.mkdtemp(prefix=f"fmu-bridge-{fmu_path.stem}-"))
     try:
-        fmpy.extract(str(fmu_path), unzipdir=str(target))
-    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+        unzip.extract(fmu_path, target)  # limits on size, count, paths and links
+    except FmuLoadError:
+        shutil.rmtree(target, ignore_errors=True)
+        raise
+    except (zipfile.BadZipFile, OSError, ValueError, NotImplementedError, EOFError) as exc:
         shutil.rmtree(target, ignore_errors=True)
         raise FmuLoadError(f"{fmu_path.name} could not be extracted: {exc} [{fmu_path}]") from exc
     return target

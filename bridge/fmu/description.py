@@ -18,6 +18,7 @@ import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
 
 from bridge.errors import FmuLoadError
+from bridge.fmu import unzip
 from bridge.fmu.vocab import (
     NUMERIC_TYPES,
     ClockInfo,
@@ -51,7 +52,10 @@ def read_model_info(path: str | Path) -> ModelInfo:
     Raises:
         FmuLoadError: the file is missing, not a zip archive, or has no valid modelDescription.xml.
     """
-    fmu_path = Path(path).expanduser().resolve()
+    try:
+        fmu_path = Path(path).expanduser().resolve()
+    except (RuntimeError, OSError) as exc:  # a symbolic link loop (RuntimeError up to Python 3.12)
+        raise FmuLoadError(f"cannot read FMU: {exc} [{path}]") from None
     try:
         stat = fmu_path.stat()
     except OSError:
@@ -76,11 +80,13 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
     interfaces: list[Interface] = []
     identifiers: dict[str, str] = {}
     can_state: dict[str, bool] = {}
+    once_per_process = False
     for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange)):
         if iface is not None:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
             can_state[kind] = bool(iface.canGetAndSetFMUstate)
+            once_per_process |= bool(iface.canBeInstantiatedOnlyOncePerProcess)
     scheduled = md.scheduledExecution is not None
     if not interfaces and not scheduled:
         raise FmuLoadError(
@@ -104,6 +110,7 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
         description=md.description,
         problems=problems,
         scheduled_execution=scheduled,
+        once_per_process=once_per_process,
         raw=md,
     )
 
@@ -111,6 +118,7 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
 def _read_description(fmu_path: Path) -> tuple[ModelDescription, tuple[str, ...]]:
     if not fmu_path.exists():
         raise FmuLoadError(f"FMU file not found: expected an .fmu archive at {fmu_path}")
+    unzip.check_regular(fmu_path)  # a FIFO would block, /dev/zero be read without end
     if fmu_path.is_file():
         if not zipfile.is_zipfile(fmu_path):
             raise FmuLoadError(

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
-from bridge.fmu import access, archive
+from bridge.fmu import access, archive, once
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
@@ -113,11 +113,13 @@ class Model:
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
+        once.claim(self.info, self)  # canBeInstantiatedOnlyOncePerProcess: refused if one is open
         self._unzip = archive.acquire(self.info.path)
         try:
             self._backend: Backend = open_backend(self.info, self._unzip, self.interface, name)
         except BaseException:
             archive.release(self.info.path)
+            once.release(self.info, self)
             raise
         self._do_step = self._backend.stepper() if self.interface == "cs" else self._backend.do_step
 
@@ -146,6 +148,7 @@ class Model:
             self._backend.unload()
         finally:
             archive.release(self.info.path)
+            once.release(self.info, self)
 
     # -- the clock ----------------------------------------------------------------------------
     @property

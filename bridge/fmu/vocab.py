@@ -131,6 +131,7 @@ class ModelInfo:
     description: str | None = None
     problems: tuple[str, ...] = ()
     scheduled_execution: bool = False  # FMI 3.0 scheduled execution (listed, not run)
+    once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (either interface)
     raw: Any = field(default=None, repr=False, compare=False)  # FMPy's ModelDescription, in-process only
 
     @property
@@ -213,6 +214,7 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
         "continuous_states": info.number_of_states,
         "event_indicators": info.number_of_event_indicators,
         "scheduled_execution": info.scheduled_execution,
+        "once_per_process": info.once_per_process,
         "problems": list(info.problems),
         "variables": [
             {
@@ -290,6 +292,7 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
         number_of_states=int(data.get("continuous_states", 0)),
         number_of_event_indicators=int(data.get("event_indicators", 0)),
         scheduled_execution=bool(data.get("scheduled_execution", False)),
+        once_per_process=bool(data.get("once_per_process", False)),
         generation_tool=data.get("generation_tool"),
         description=data.get("description"),
     )

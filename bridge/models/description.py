@@ -172,10 +172,14 @@ def _xml_fmi1(spec: Spec, interface: str, token: str) -> ET.Element:
 
 def _interface_element(spec: Spec, fmi_version: str, interface: str) -> ET.Element:
     flags = {"modelIdentifier": spec.name}
+    state = "true"
+    if spec.once_per_process:  # its state is in globals, which an instance's FMU state does not hold
+        flags["canBeInstantiatedOnlyOncePerProcess"] = "true"
+        state = "false"
     if fmi_version == "2.0":
-        flags |= {"canGetAndSetFMUstate": "true", "canNotUseMemoryManagementFunctions": "true"}
+        flags |= {"canGetAndSetFMUstate": state, "canNotUseMemoryManagementFunctions": "true"}
     else:
-        flags |= {"canGetAndSetFMUState": "true"}
+        flags |= {"canGetAndSetFMUState": state}
     if interface == "cs":
         return ET.Element("CoSimulation", flags | {"canHandleVariableCommunicationStepSize": "true"})
     if fmi_version == "2.0":

@@ -38,7 +38,7 @@ _C_KEYWORD_TEXT: Final = """
 _C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
-    | {"type_definitions", "variables"}
+    | {"type_definitions", "variables", "once_per_process"}
 )
 
 
@@ -99,6 +99,7 @@ def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> Spec:
         event_indicators=tuple(str(n) for n in raw.get("event_indicators", [])),
         enums={k: _parse_enum(k, v) for k, v in raw.get("type_definitions", {}).items()},
         variables=(TIME, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1))),
+        once_per_process=bool(raw.get("once_per_process", False)),
     )
     _check_spec(spec)
     return spec

@@ -132,6 +132,7 @@ class Spec:
     event_indicators: tuple[str, ...]
     enums: Mapping[str, EnumType]
     variables: tuple[Variable, ...]
+    once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (and no FMU state): globals
 
     def variable(self, name: str) -> Variable:
         return next(v for v in self.variables if v.name == name)

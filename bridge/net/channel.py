@@ -1,34 +1,167 @@
-"""``ChannelClient``: a node client whose answers wait in a Zenoh channel for the stepping thread.
+"""How a node client waits for its answer: a strategy object, chosen by who waits.
 
-The callback path of :class:`bridge.net.remote.NodeClient` runs Python on Zenoh's receive
-thread for every frame: it takes the GIL there, decodes, and wakes the waiting thread through an
-Event, so each answer crosses threads twice and both fight for the GIL. Here Zenoh puts the
-frame in a ring channel without Python, and the waiting thread, blocked in the channel's
-``recv`` with the GIL released, takes it itself. A system master waits for every node of a
-macro step, so this is saved once per node (``benchmarks/bench_system.py``: about 30 us per
-node and macro step on loopback).
+A :class:`~bridge.net.remote.NodeClient` sends an action and then waits for the frame that
+answers it; *how* it waits is one of two strategies with one interface (:class:`Waiting`):
 
-A channel's ``recv`` has no timeout. A watchdog closes the channel when an answer is overdue,
-and the end of the node's liveliness token closes it too; ``recv`` then returns, and ``wait``
-raises StepTimeout or PlantDied as the callback path does. The next action opens a new channel.
-A ring channel drops its oldest frame when full: a flood of frames never blocks Zenoh.
+- :class:`EventWaiting` (vector envs, the default): Zenoh hands each frame to a callback on its
+  receive thread, which decodes it and sets an Event (and the client's ``notify`` Event, so that
+  a vector env can wait for whichever node answers first).
+- :class:`ChannelWaiting` (a system's master): Zenoh puts each frame in a ring channel without
+  running Python, and the waiting thread, blocked in the channel's ``recv`` with the GIL
+  released, takes it itself. Each answer then crosses threads once instead of twice, saved once
+  per node and macro step (``benchmarks/bench_system.py``: about 30 us per node on loopback). A
+  channel's ``recv`` has no timeout: a watchdog closes the channel when an answer is overdue,
+  and the end of the node's liveliness token closes it too; the next action opens a new one. A
+  ring channel drops its oldest frame when full: a flood of frames never blocks Zenoh.
 
-Vector envs keep the callback path: they wait for whichever node answers first.
+Which frame answers, and what it means, is the client's business (``NodeClient.take`` and
+``bridge.net.remote.answer``): both strategies hand every frame to it.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Any
+import time
+from typing import TYPE_CHECKING, Any, Protocol
 
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
-from bridge.net.remote import NodeClient
 from bridge.net.transport import undeclare
 from bridge.net.watchdog import Watchdog
-from bridge.plant.base import Plant
+
+if TYPE_CHECKING:
+    from bridge.net.remote import NodeClient
 
 CAPACITY = 64  # frames kept for the waiting thread; older ones are dropped
+
+
+class Waiting(Protocol):
+    """How a :class:`NodeClient` receives frames and waits for the one that answers."""
+
+    def start(self, client: NodeClient) -> Any:
+        """Subscribe to the client's node's frames; returns what ``close`` undeclares."""
+
+    def arm(self) -> None:
+        """Forget the last answer: an action is about to be sent."""
+
+    def sent(self) -> None:
+        """The action is out: its deadline runs."""
+
+    def wait(self) -> bool:
+        """Block until the answer arrives or the node dies (True), or the deadline (False)."""
+
+    def ready(self) -> bool:
+        """Whether ``wait`` would return at once."""
+
+    def wake(self) -> None:
+        """The node died: end a waiting ``wait`` now."""
+
+    def close(self) -> None:
+        """Stop any helper thread (the subscription is undeclared by the client)."""
+
+
+class EventWaiting:
+    """Frames through a callback on Zenoh's thread; an Event wakes the waiting thread."""
+
+    def __init__(self) -> None:
+        self._event = threading.Event()
+        self._client: NodeClient | None = None
+
+    def start(self, client: NodeClient) -> Any:
+        self._client = client
+        return client.session.declare_subscriber(client.keys.outputs, self._on_sample)
+
+    def _on_sample(self, sample: Any) -> None:
+        client = self._client
+        try:
+            frame = proto.decode(sample.payload.to_bytes())
+        except TransportError:
+            return
+        if client is not None and client.take(frame):
+            self.wake()
+
+    def wake(self) -> None:
+        self._event.set()
+        client = self._client
+        if client is not None and client.notify is not None:
+            client.notify.set()
+
+    def arm(self) -> None:
+        self._event.clear()
+
+    def sent(self) -> None:
+        pass
+
+    def wait(self) -> bool:
+        assert self._client is not None
+        return self._event.wait(max(0.0, self._client.deadline - time.monotonic()))
+
+    def ready(self) -> bool:
+        assert self._client is not None
+        return self._event.is_set() or time.monotonic() >= self._client.deadline
+
+    def close(self) -> None:
+        pass
+
+
+class ChannelWaiting:
+    """Frames through a Zenoh ring channel, read by the waiting thread itself."""
+
+    def __init__(self) -> None:
+        self._client: NodeClient | None = None
+        self._overdue = False
+
+    def start(self, client: NodeClient) -> Any:
+        self._client = client
+        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(client.description["output_names"]))
+        self._channel = FrameChannel(client.session, client.keys.outputs)
+        self._watchdog = Watchdog(client.timeout_s, self._on_overdue, name=f"client-{client.name}")
+        return self._channel
+
+    def _on_overdue(self, what: str, elapsed_s: float) -> None:
+        self._overdue = True
+        self._channel.close()
+
+    def arm(self) -> None:
+        if not self._channel.is_open:
+            self._channel.open()
+            self._overdue = False
+            self._watchdog.rearm()
+
+    def sent(self) -> None:
+        self._watchdog.begin("step")
+
+    def wait(self) -> bool:
+        client = self._client
+        assert client is not None
+        try:
+            while (payload := self._channel.recv()) is not None:
+                frame = self._read(payload)
+                if frame is not None and client.take(frame):
+                    return True
+        finally:
+            self._watchdog.end()
+        # Closed: by the end of the node's liveliness (dead: True) or by the watchdog (overdue).
+        return not client.alive or not self._overdue
+
+    def ready(self) -> bool:
+        return not self._channel.is_open
+
+    def _read(self, payload: bytes) -> proto.Frame | None:
+        """The frame (None if malformed): outputs with one struct call, the rest decoded."""
+        fields = self._outputs.read(payload)
+        if fields is not None:
+            return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:])
+        try:
+            return proto.decode(payload)
+        except TransportError:
+            return None
+
+    def wake(self) -> None:
+        self._channel.close()
+
+    def close(self) -> None:
+        self._watchdog.stop()
 
 
 class FrameChannel:
@@ -71,63 +204,3 @@ class FrameChannel:
             undeclare(subscriber)
 
     undeclare = close  # NodeClient.close undeclares what it declared
-
-
-class ChannelClient(NodeClient):
-    """A :class:`NodeClient` that receives its answers through a :class:`FrameChannel`."""
-
-    def __init__(
-        self, session: Any, node: str, *, prefix: str = proto.DEFAULT_PREFIX, timeout_s: float = 5.0
-    ) -> None:
-        self._overdue = False
-        super().__init__(session, node, prefix=prefix, timeout_s=timeout_s)
-        self._watchdog = Watchdog(timeout_s, self._on_overdue, name=f"client-{node}")
-
-    def _subscribe_frames(self) -> FrameChannel:
-        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(self.description["output_names"]))
-        self._channel = FrameChannel(self._session, self.keys.outputs)
-        return self._channel
-
-    def _on_overdue(self, what: str, elapsed_s: float) -> None:
-        self._overdue = True
-        self._channel.close()
-
-    def _lost(self) -> None:
-        self._channel.close()
-
-    def _arm(self) -> None:
-        self._frame = None
-        if not self._channel.is_open:
-            self._channel.open()
-            self._overdue = False
-            self._watchdog.rearm()
-
-    def send_action(self, plant: Plant, episode: int, step: int, inputs: Any, flags: int = 0) -> None:
-        super().send_action(plant, episode, step, inputs, flags)
-        self._watchdog.begin("step")
-
-    def _answered(self) -> bool:
-        try:
-            while (payload := self._channel.recv()) is not None:
-                frame = self._read(payload)
-                if frame is not None and self._answers(frame):
-                    self._frame = frame
-                    return True
-        finally:
-            self._watchdog.end()
-        # Closed: by the end of the node's liveliness (an answer of None: dead) or by the watchdog.
-        return not self.alive or not self._overdue
-
-    def _read(self, payload: bytes) -> proto.Frame | None:
-        """The frame (None if malformed): outputs with one struct call, the rest decoded."""
-        fields = self._outputs.read(payload)
-        if fields is not None:
-            return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:])
-        try:
-            return proto.decode(payload)
-        except TransportError:
-            return None
-
-    def close(self) -> None:
-        self._watchdog.stop()
-        super().close()

@@ -92,8 +92,6 @@ def _refusal(plant: Any, mode: str) -> str | None:
         return "a real-time node does not save or restore its state; serve the component in lockstep"
     if getattr(plant, "can_save", False):
         return None
-    from bridge.plant.isolated import IsolatedFmuPlant
-
-    if isinstance(plant, IsolatedFmuPlant):
+    if getattr(plant, "isolated", False):
         return "the FMU runs isolated in a child process (--isolate or model.isolation); serve it without"
     return "the FMU cannot get and set its state (FMI 1.0, or canGetAndSetFMUstate is false)"

@@ -181,6 +181,19 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
     return Frame(kind, episode, step, sim_time_ns, flags, floats=floats)
 
 
+def decode_action(payload: bytes, inputs: int) -> Frame:
+    """An ACTION frame of ``inputs`` values with a client id >= 0 and known flags, else
+    TransportError saying what is wrong with it."""
+    frame = decode(payload, expected_values=inputs)
+    if frame.kind != ACTION:
+        raise TransportError(f"a {KIND_NAMES[frame.kind]} frame on the actions key")
+    if frame.sim_time_ns < 0:
+        raise TransportError(f"client id {frame.sim_time_ns} is negative")
+    if frame.flags & ~ACTION_FLAGS:
+        raise TransportError(f"action flags {frame.flags:#x} are unknown")
+    return frame
+
+
 class PlainFrames:
     """Values frames of one kind and count, read with one ``struct`` call and no :class:`Frame`.
 

@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import fnmatch
 import logging
+import math
 import secrets
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
 
 from bridge.errors import (
     FMU_LOG_HEADER,
@@ -30,8 +34,12 @@ from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, check_experiment, timing
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
+from bridge.net.channel import ChannelWaiting, EventWaiting, Waiting
 from bridge.net.transport import ZenohOptions, open_session, undeclare
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+
+if TYPE_CHECKING:
+    from bridge.plant.system.description import Component
 
 _log = logging.getLogger(__name__)
 
@@ -57,10 +65,11 @@ def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, An
 
 
 class NodeClient:
-    """Talks to one node: stamped actions out, the matching outputs frame back.
+    """Talks to one node: stamped actions out, the matching frame back.
 
     The client has a random id, sent with every reset and action, and a liveliness token
     ``<prefix>/<node>/clients/<id>`` that ends the node's lease when this session goes away.
+    ``waiting`` says how it waits for an answer (``bridge.net.channel``; by default an Event).
     """
 
     def __init__(
@@ -71,70 +80,47 @@ class NodeClient:
         prefix: str = proto.DEFAULT_PREFIX,
         timeout_s: float = 5.0,
         take_over: bool = False,
+        waiting: Waiting | None = None,
     ) -> None:
         self.keys = proto.Keys(prefix, node)
         self.name = node
+        self.session = session
         self.timeout_s = timeout_s
         self.take_over = take_over
         self.client_id = secrets.randbits(63) | 1
         self.notify: threading.Event | None = None  # set too whenever an answer arrives (vector envs)
-        self._session = session
-        self._event = threading.Event()
-        self._want: tuple[int, int] = (-1, -1)
-        self._deadline = 0.0
-        self._frame: proto.Frame | None = None
+        self.waiting: Waiting = waiting if waiting is not None else EventWaiting()
+        self.want: tuple[int, int] = (-1, -1)
+        self.deadline = 0.0
+        self.frame: proto.Frame | None = None
         self.alive = True
         self.description = query_info(session, self.keys, timeout_s)
         self._declared = [
             session.liveliness().declare_token(self.keys.client(self.client_id)),
-            self._subscribe_frames(),
+            self.waiting.start(self),
             session.liveliness().declare_subscriber(self.keys.alive, self._on_liveliness, history=True),
         ]
         self._pub = session.declare_publisher(self.keys.actions)
         self._declared.append(self._pub)
 
-    def _subscribe_frames(self) -> Any:
-        """The node's outputs frames, each handed to ``_on_frame`` on Zenoh's thread."""
-        return self._session.declare_subscriber(self.keys.outputs, self._on_frame)
-
-    def _on_frame(self, sample: Any) -> None:
-        try:
-            frame = proto.decode(sample.payload.to_bytes())
-        except TransportError:
-            return
-        if self._answers(frame):
-            self._frame = frame
-            self._wake()
-
-    def _answers(self, frame: proto.Frame) -> bool:
-        """Whether ``frame`` answers the last action: its step, and not another client's reject."""
-        if (frame.episode, frame.step) != self._want:
+    def take(self, frame: proto.Frame) -> bool:
+        """Keep ``frame`` if it answers the last action (its step, and not another client's
+        reject); whether it did."""
+        if (frame.episode, frame.step) != self.want:
             return False
-        return frame.kind != proto.REJECT or frame.sim_time_ns in (0, self.client_id)
-
-    def _wake(self) -> None:
-        self._event.set()
-        notify = self.notify
-        if notify is not None:
-            notify.set()
+        if frame.kind == proto.REJECT and frame.sim_time_ns not in (0, self.client_id):
+            return False
+        self.frame = frame
+        return True
 
     def _on_liveliness(self, sample: Any) -> None:
         import zenoh
 
         if sample.kind == zenoh.SampleKind.DELETE:
             self.alive = False
-            self._wake()  # wake a waiting step at once
-            self._lost()
+            self.waiting.wake()  # wake a waiting step at once
         else:
             self.alive = True
-
-    def _arm(self) -> None:
-        """Forget the last answer before the next action is sent."""
-        self._frame = None
-        self._event.clear()
-
-    def _lost(self) -> None:
-        """The node's liveliness token ended (``_wake`` has woken a waiting step)."""
 
     def send_action(
         self, plant: Plant, episode: int, step: int, inputs: Sequence[float], flags: int = 0
@@ -142,37 +128,31 @@ class NodeClient:
         """Publish the action for ``step``; ``flags``: SAVE_STATE or RESTORE_STATE (rollback)."""
         if not self.alive:
             raise self._dead(plant)
-        self._arm()
-        self._want = (episode, step)
-        self._deadline = time.monotonic() + self.timeout_s
+        self.frame = None
+        self.waiting.arm()
+        self.want = (episode, step)
+        self.deadline = time.monotonic() + self.timeout_s
         self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))
+        self.waiting.sent()
 
     def ready(self) -> bool:
         """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""
-        return self._event.is_set() or time.monotonic() >= self._deadline
+        return self.waiting.ready()
 
     def wait(self, plant: Plant) -> proto.Frame:
-        """The outputs frame for the last action; raises if the node died, rejected it or timed out."""
-        if not self._answered():
+        """The frame that answers the last action; raises if the node died or timed out."""
+        if not self.waiting.wait():
             raise plant.failure(
                 StepTimeout,
                 f"no answer within {self.timeout_s:g} s",
-                f"no outputs for step {self._want[1]} within {self.timeout_s:g} s",
+                f"no outputs for step {self.want[1]} within {self.timeout_s:g} s",
                 "the node may be overloaded, hung or unreachable; "
                 f"timeout_s sets the limit [{self.keys.base}]",
             )
-        frame = self._frame
+        frame = self.frame
         if frame is None:
             raise self._dead(plant)
-        if frame.kind == proto.REJECT:
-            raise TransportError(
-                f"{plant.name} rejected step {self._want[1]} of episode {self._want[0]}: {frame.message}"
-            )
         return frame
-
-    def _answered(self) -> bool:
-        """Block until the answer arrives or the node dies (True), or until the deadline (False)."""
-        return self._event.wait(max(0.0, self._deadline - time.monotonic()))
 
     def _dead(self, plant: Plant, step: int | None = -1) -> PlantDied:
         fields: dict[str, Any] = {} if step == -1 else {"step": step}
@@ -194,13 +174,13 @@ class NodeClient:
                 "values": values,
                 "inputs": inputs,
                 "client": self.client_id,
-                "zid": str(self._session.zid()),
+                "zid": str(self.session.zid()),
                 "take_over": self.take_over,
             }
         )
-        self._want = (episode, 0)
+        self.want = (episode, 0)
         start = time.monotonic()
-        for reply in self._session.get(self.keys.reset, payload=request, timeout=self.timeout_s):
+        for reply in self.session.get(self.keys.reset, payload=request, timeout=self.timeout_s):
             if reply.ok is not None:
                 return proto.decode(reply.ok.payload.to_bytes())
             raise self._reset_refused(plant, reply.err.payload.to_bytes().decode(errors="replace"))
@@ -228,12 +208,35 @@ class NodeClient:
         return TransportError(f"{plant.name}: the reset was refused ({code}): {detail}")
 
     def close(self) -> None:
+        self.waiting.close()
         for entity in reversed(self._declared):
             try:
                 undeclare(entity)
             except Exception:
                 _log.debug("undeclare failed", exc_info=True)
         self._declared = []
+
+
+def answer(plant: Plant, frame: proto.Frame, episode: int, step: int) -> proto.Frame:
+    """The one reading of a node's answer to ``step`` of ``episode``: an OUTPUTS frame is
+    returned; an ERROR frame is the model's failure (:class:`StepError`, or :class:`StepTimeout`
+    when flagged HUNG), at the frame's simulation time; a REJECT is the node refusing the action
+    (:class:`TransportError`). Every remote plant reads frames through this function, so a node
+    gives the same error through a remote env and through a system."""
+    if frame.kind == proto.OUTPUTS:
+        return frame
+    if frame.kind == proto.REJECT:
+        raise TransportError(f"{plant.name} rejected step {step} of episode {episode}: {frame.message}")
+    time_s = frame.sim_time_ns / 1e9
+    if frame.flags & proto.HUNG:
+        hint = "the node killed its FMU process; reset() starts a fresh one"
+        if "restart the node" in frame.message:
+            hint = "the node is unhealthy until restarted"
+        raise plant.failure(StepTimeout, "the model hung", frame.message, hint, step=step, time_s=time_s)
+    detail, _, log = frame.message.partition(FMU_LOG_HEADER)
+    raise plant.failure(
+        StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, time_s=time_s, log=log.split("\n  ")
+    )
 
 
 def check_node(
@@ -256,8 +259,23 @@ def check_node(
         )
 
 
+@dataclass(frozen=True)
+class ComponentRole:
+    """A remote plant that is one component of a system: its sample is the macro step."""
+
+    component: Component
+    macro_step_s: float
+    start_time_s: float
+    where: str = ""
+
+
 class RemotePlant(Plant):
     """The model of a node (lockstep over Zenoh): the FMU need not exist on this machine.
+
+    The same plant serves a remote env (the node serves the env's experiment: the names must
+    match exactly) and a system's component (:meth:`for_component`: the plant's bound inputs and
+    outputs are mapped onto the node's by name, and the master rolls it back for fixed-point
+    iteration: SAVE_STATE or RESTORE_STATE rides on the next action, ``bridge.net.node_state``).
 
     Args:
         experiment: the experiment (the same file the node was started with).
@@ -265,11 +283,12 @@ class RemotePlant(Plant):
         options: how to open a Zenoh session (ignored when ``session`` is given).
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
         take_over: take the node over from the client that holds it (its next action is rejected).
+        waiting: how to wait for answers (``bridge.net.channel``; by default an Event).
     """
 
     def __init__(
         self,
-        experiment: Experiment,
+        experiment: Experiment | None,
         node: str,
         *,
         options: ZenohOptions | None = None,
@@ -277,30 +296,87 @@ class RemotePlant(Plant):
         prefix: str = proto.DEFAULT_PREFIX,
         timeout_s: float = 5.0,
         take_over: bool = False,
+        waiting: Waiting | None = None,
+        role: ComponentRole | None = None,
     ) -> None:
-        self.experiment = experiment
-        self.node = node
-        self.name = f"node {node!r}"
+        self.experiment, self.node, self.role = experiment, node, role
+        self.name = f"node {node!r}" if role is None else f"component {role.component.name!r} (node {node!r})"
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._time_s = 0.0
         try:
             self.client = NodeClient(
-                self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over
+                self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over, waiting=waiting
             )
-            self.info = info_from_summary(self.client.description["model"])
-            check_experiment(experiment, self.info)
-            self.timing = timing(experiment, self.info)
+            d = self.client.description
+            self.info = info_from_summary(d["model"])
+            if role is not None:
+                self.timing = _check_timing(self.name, d, role.macro_step_s, role.start_time_s, role.where)
+            else:
+                assert experiment is not None, "a remote env's plant needs its experiment"
+                check_experiment(experiment, self.info)
+                self.timing = timing(experiment, self.info)
         except BaseException:
             self.close()
             raise
         self._time_s = self.timing.start_time_s
+        self._node_inputs: list[str] = list(d["input_names"])
+        self._node_outputs: list[str] = list(d["output_names"])
+        self._defaults = dict(role.component.parameters) if role is not None else {}
+        self._u = np.zeros(len(self._node_inputs))
+        self._held: Sequence[float] = []
+        self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
+
+    @property
+    def component(self) -> Component | None:
+        """The system's component this plant is (None: a remote env's plant)."""
+        return self.role.component if self.role is not None else None
+
+    @classmethod
+    def for_component(
+        cls,
+        component: Component,
+        macro_step_s: float,
+        start_time_s: float,
+        *,
+        session: Any,
+        prefix: str,
+        timeout_s: float,
+        where: str = "",
+    ) -> RemotePlant:
+        """A system's component served by its node; answers wait in a ring channel (the master
+        waits for every node of a macro step in turn)."""
+        return cls(
+            None,
+            component.node or component.name,
+            session=session,
+            prefix=prefix,
+            timeout_s=timeout_s,
+            waiting=ChannelWaiting(),
+            role=ComponentRole(component, macro_step_s, start_time_s, where),
+        )
 
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
-        check_node(
-            self.experiment, self.client.description, (self.input_names, self.output_names), self.timing
-        )
+        if self.role is None:
+            assert self.experiment is not None
+            names = (self.input_names, self.output_names)
+            check_node(self.experiment, self.client.description, names, self.timing)
+        self._in_index = self._positions(self.input_names, self._node_inputs, "inputs")
+        self._out_index = self._positions(self.output_names, self._node_outputs, "outputs")
+        # the usual case (both sides bound alike): values pass through without reordering
+        self._all_inputs = self._in_index == list(range(len(self._node_inputs)))
+        self._all_outputs = self._out_index == list(range(len(self._node_outputs)))
+
+    def _positions(self, names: Sequence[str], served: list[str], what: str) -> list[int]:
+        missing = [n for n in names if n not in served]
+        if missing:
+            where = self.role.where if self.role is not None else ""
+            raise ConfigError(
+                f"{self.name}: the node serves {what} {served}, not {missing}; restart the node with "
+                f"this experiment file ({SERVE_HINT}){where}"
+            )
+        return [served.index(n) for n in names]
 
     @property
     def time_s(self) -> float:
@@ -308,32 +384,64 @@ class RemotePlant(Plant):
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1
-        self.sample, self.terminated = 0, False
-        frame = self.client.reset(self, dict(values), list(inputs or []))
+        self.sample, self.terminated, self._flags = 0, False, 0
+        merged = {**self._defaults, **values}
+        for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
+            self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
+        if inputs is not None:
+            self._u[self._in_index] = inputs
+        self._held = held = self._u.tolist()
+        frame = self.client.reset(self, merged, held)
         self._time_s = frame.sim_time_ns / 1e9
-        return frame.values
+        return frame.values if self._all_outputs else frame.values[self._out_index]
 
     def send(self, inputs: Sequence[float] | None) -> None:
+        flags, self._flags = self._flags, 0
         if inputs is None:
-            raise ConfigError(f"{self.name}: a lockstep step needs input values")
-        self.client.send_action(self, self.episode, self.sample + 1, inputs)
+            inputs = self._held
+        elif not self._all_inputs:
+            self._u[self._in_index] = inputs
+            inputs = self._u.tolist()
+        self._held = inputs
+        self.client.send_action(self, self.episode, self.sample + 1, inputs, flags)
 
     def receive(self) -> FloatArray:
         frame = self.client.wait(self)
-        self._time_s = frame.sim_time_ns / 1e9
-        self.sample += 1
-        if frame.kind == proto.ERROR and frame.flags & proto.HUNG:
-            hint = "the node killed its FMU process; reset() starts a fresh one"
-            if "restart the node" in frame.message:
-                hint = "the node is unhealthy until restarted"
-            raise self.failure(StepTimeout, "the model hung", frame.message, hint, step=self.sample)
-        if frame.kind == proto.ERROR:
-            detail, _, log = frame.message.partition(FMU_LOG_HEADER)
-            raise self.failure(
-                StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=self.sample, log=log.split("\n  ")
-            )
+        step = self.sample + 1
+        if frame.kind != proto.REJECT:  # a refused action took no step
+            self._time_s, self.sample = frame.sim_time_ns / 1e9, step
+        frame = answer(self, frame, self.episode, step)
         self.terminated = frame.terminated
-        return frame.values
+        return frame.values if self._all_outputs else frame.values[self._out_index]
+
+    # -- saved states (rollback): carried by the next action -----------------------------------------
+    @property
+    def can_save(self) -> bool:
+        """Whether the node can save and restore its FMU state (its ``info`` says so)."""
+        return bool(self.client.description.get("can_save_state", False))
+
+    @property
+    def save_refusal(self) -> str:
+        """Why the node cannot save its state ("" if it can)."""
+        if self.can_save:
+            return ""
+        return str(self.client.description.get("save_state_refusal") or "the node is too old to save states")
+
+    def save(self) -> tuple[int, bool, float, list[float]]:
+        """The node saves its state with the next action (SAVE_STATE); this keeps the step stamp."""
+        self._flags = proto.SAVE_STATE
+        return self.sample, self.terminated, self._time_s, list(self._held)
+
+    def restore(self, saved: tuple[int, bool, float, list[float]]) -> None:
+        """The next action goes back to the saved state first (RESTORE_STATE), stamped as then."""
+        self.sample, self.terminated, self._time_s, held = saved
+        self._held = list(held)
+        self._u[:] = held
+        self._flags = proto.RESTORE_STATE
+
+    def discard(self, saved: tuple[int, bool, float, list[float]]) -> None:
+        """Nothing to free here: the node keeps one state, replaced by the next save."""
+        self._flags = 0
 
     def answer_ready(self) -> bool:
         return self.client.ready()
@@ -343,11 +451,10 @@ class RemotePlant(Plant):
 
     def provenance(self) -> dict[str, str]:
         d = self.client.description
-        return {
-            "fmu": str(d.get("model", {}).get("path", "")),
-            "fmu_sha256": d.get("fmu_sha256", ""),
-            "node": self.node,
-        }
+        fmu = (
+            str(self.role.component.fmu) if self.role is not None else str(d.get("model", {}).get("path", ""))
+        )
+        return {"fmu": fmu, "fmu_sha256": d.get("fmu_sha256", ""), "node": self.node}
 
     def reset_info(self) -> dict[str, Any]:
         return {"node": self.node}
@@ -360,6 +467,26 @@ class RemotePlant(Plant):
         if getattr(self, "_own_session", False) and getattr(self, "_session", None) is not None:
             self._session.close()
             self._session = None
+
+
+SERVE_HINT = "`fmu-bridge system serve SYSTEM.yaml` starts the component nodes"
+
+
+def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, where: str) -> Timing:
+    if not math.isclose(d["sampling_time_s"], macro_s, rel_tol=1e-12) or d["start_time_s"] != t0:
+        raise ConfigError(
+            f"{name}: the node steps {d['sampling_time_s']} s from t0 = {d['start_time_s']} s; the system "
+            f"has macro step {macro_s} s from {t0} s: start the node from this system file ({SERVE_HINT})"
+            f"{where}"
+        )
+    return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
+
+
+def _start(value: Any) -> float:
+    try:
+        return float(value) if value is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0
 
 
 def list_nodes(

@@ -15,14 +15,15 @@ A node is a network service: every request is checked before anything touches th
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from bridge.errors import TransportError
-from bridge.experiment.config import Experiment
+from bridge.errors import BridgeError, TransportError
 from bridge.fmu.vocab import Variable
 from bridge.net import protocol as proto
+from bridge.net.served import Served
 
 MAX_STRING = 1024
 MAX_VALUES = 1000
@@ -106,15 +107,13 @@ def _number(value: Any, key: str) -> float:
 
 
 class RequestRules:
-    """What the experiment allows a client to set and send, for one node."""
+    """What a node allows a client to set and send (``bridge.net.served``)."""
 
-    def __init__(
-        self, experiment: Experiment, variables: Mapping[str, Variable], input_names: Sequence[str]
-    ) -> None:
+    def __init__(self, served: Served, variables: Mapping[str, Variable]) -> None:
         self.variables = variables
-        self.input_names = tuple(input_names)
-        self.settable = _declared_names(experiment, variables)
-        self.low, self.high = _input_ranges(experiment, variables, self.input_names)
+        self.input_names = served.input_names
+        self.settable = served.settable
+        self.low, self.high = list(served.low), list(served.high)
 
     def values(self, values: Mapping[str, Any]) -> dict[str, float | int | bool | str]:
         """Reset values, checked name by name against the experiment and the model."""
@@ -160,40 +159,17 @@ class RequestRules:
         return None
 
 
-def _declared_names(experiment: Experiment, variables: Mapping[str, Variable]) -> frozenset[str]:
-    if experiment.hooks.episode:  # a hook may choose any start value or parameter
-        return frozenset(n for n, v in variables.items() if v.settable_at_init)
-    model = experiment.model
-    names = set(model.parameters) | set(model.start_values)
-    randomizations = [experiment.randomization]
-    for scenario in experiment.scenarios.values():
-        names |= set(scenario.parameters) | set(scenario.start_values)
-        randomizations.append(scenario.randomization)
-    for r in randomizations:
-        names |= set(r.parameters) | set(r.start_values)
-    return frozenset(n for n in names if n in variables)
+class Refused(BridgeError):
+    """A request the node will not serve now; ``code`` starts the error reply (busy, unhealthy)."""
+
+    def __init__(self, code: str, message: str) -> None:
+        super().__init__(message)
+        self.code = code
 
 
-def _input_ranges(
-    experiment: Experiment, variables: Mapping[str, Variable], names: Sequence[str]
-) -> tuple[list[float], list[float]]:
-    """Per input: the hull of the FMU's min/max and the experiment's bounds, levels and table.
-
-    Where nothing is declared the range is the finite doubles: NaN and infinities are always refused.
-    """
-    actions = experiment.actions
-    low, high = [], []
-    for name in names:
-        var = variables[name]
-        listed = list(actions.levels.get(name, []))
-        if actions.table and name in actions.inputs:
-            column = actions.inputs.index(name)
-            listed += [row[column] for row in actions.table if column < len(row)]
-        lows = [v for v in (var.min, actions.low.get(name)) if v is not None] + listed
-        highs = [v for v in (var.max, actions.high.get(name)) if v is not None] + listed
-        low.append(float(min(lows)) if lows else -_LARGEST)
-        high.append(float(max(highs)) if highs else _LARGEST)
-    return low, high
+_PATH = re.compile(r"(?:file://)?(?:/[\w.~+@-]+)+/([\w.~+@-]+)")
 
 
-_LARGEST = 1.7976931348623157e308
+def redact(text: str) -> str:
+    """``text`` without local paths (``/home/me/plant.fmu`` -> ``.../plant.fmu``): replies leave the host."""
+    return _PATH.sub(r".../\1", text)

@@ -57,6 +57,7 @@ class Plant(ABC):
     output_names: tuple[str, ...] = ()
     terminated: bool = False
     can_set_values: bool = False  # whether set_values works between steps (hooks.state)
+    isolated: bool = False  # the model runs in a child process that a deadline can kill
     episode: int = 0  # episodes started by reset(), 1-based once running
     sample: int = 0  # samples stepped in this episode
 
@@ -66,7 +67,7 @@ class Plant(ABC):
         self.input_names, self.output_names = tuple(input_names), tuple(output_names)
 
     @abstractmethod
-    def reset(self, values: Mapping[str, Any], inputs: Sequence[float]) -> FloatArray:
+    def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         """Start a new episode: set ``values`` (parameters, start values), write ``inputs``, and
         return the outputs at the start time."""
 

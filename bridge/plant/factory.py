@@ -1,6 +1,8 @@
-"""What an experiment's model is without starting it: its variables and its fingerprint.
+"""An experiment's FMU plant, and what its model is without starting it (variables, fingerprint).
 
-``bridge.env.plants.plant_for`` builds the plant itself (it may use the network)."""
+:func:`fmu_plant` is the one place that chooses between an FMU in this process and one in a
+child process: envs (``bridge.env.plants.plant_for``, which adds systems over the network) and
+nodes (``bridge.net.node``) both get their plant here."""
 
 from __future__ import annotations
 
@@ -11,7 +13,33 @@ from bridge.experiment.system import is_system_file
 from bridge.fmu.vocab import ModelInfo
 
 if TYPE_CHECKING:
+    from bridge.plant.base import Plant
     from bridge.plant.system.plant import RemoteComponents
+
+
+def fmu_plant(experiment: Experiment, *, isolate: bool = False, timeout_s: float | None = None) -> Plant:
+    """The experiment's FMU in a child process when ``model.isolation`` or ``isolate`` asks for
+    it (bounded by the file's ``timeout``, else ``timeout_s``, else 10 s), else in this process.
+    ``plant.isolated`` says which."""
+    isolation = experiment.model.isolation
+    if isolation is None and not isolate and model_info_for(experiment).once_per_process:
+        # canBeInstantiatedOnlyOncePerProcess: each instance gets a process of its own, so that
+        # several envs, a vector env or a system never share the FMU's global state.
+        from bridge.experiment.config import IsolationSection
+
+        isolation = IsolationSection()
+    if isolation is not None or isolate:
+        from bridge.plant.isolated import IsolatedFmuPlant
+
+        return IsolatedFmuPlant(
+            experiment,
+            timeout_s=isolation.timeout if isolation is not None else (timeout_s or 10.0),
+            memory_limit_mb=isolation.memory_limit_mb if isolation is not None else None,
+            restart=isolation.restart if isolation is not None else True,
+        )
+    from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
+
+    return LocalFmuPlant(experiment)
 
 
 def is_system(experiment: Experiment) -> bool:

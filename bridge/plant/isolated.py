@@ -47,6 +47,7 @@ class IsolatedFmuPlant(Plant):
     """
 
     can_set_values = True
+    isolated = True
 
     def __init__(
         self,

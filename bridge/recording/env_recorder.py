@@ -17,6 +17,8 @@ from __future__ import annotations
 import atexit
 import datetime
 import logging
+import os
+import unicodedata
 import weakref
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -287,6 +289,30 @@ def default_run_name(env: gym.Env[Any, Any]) -> str:
     return f"{name}-{datetime.datetime.now().strftime('%Y%m%d-%H%M%S')}"
 
 
+MAX_RUN_NAME_CHARS = 150  # with "-<counter>.mcap.part" well within a file name's 255 bytes
+
+
+def check_run_name(name: str, folder: Path) -> None:
+    """Raise ConfigError unless ``name`` is one plain file name: no separator, not ``.`` or ``..``,
+    no control, format (bidirectional) or unassigned character, at most MAX_RUN_NAME_CHARS long;
+    so the recording lands in ``folder`` under a name that reads as what it is."""
+    odd = sorted({c for c in name if unicodedata.category(c)[0] in "CZ" and c != " "})
+    problem = (
+        f"{len(name):,} characters, at most {MAX_RUN_NAME_CHARS} are allowed"
+        if len(name) > MAX_RUN_NAME_CHARS
+        else "a path separator" if "/" in name or "\\" in name or os.sep in name
+        else "no file name" if name in ("", ".", "..")
+        else f"the characters {''.join(odd)!a}" if odd
+        else ""
+    )
+    if problem:
+        shown = ascii(name if len(name) <= 60 else name[:57] + "...")
+        raise ConfigError(
+            f"recording name {shown} has {problem}; give a plain file name (letters, digits, '.', "
+            f"'_', '-') so the recording stays in the recordings folder [{folder}]"
+        )
+
+
 def record_env(
     env: gym.Env[Any, Any],
     directory: str | Path = "recordings",
@@ -304,6 +330,7 @@ def record_env(
     """
     folder = Path(directory)
     base = run_name or default_run_name(env)
+    check_run_name(base, folder)
     path = folder / f"{base}.mcap"
     counter = 1
     while path.exists() or path.with_name(path.name + ".part").exists():

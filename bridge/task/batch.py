@@ -6,14 +6,12 @@ N single envs draw; the first observation of an episode is the scalar Task's own
 action mapping, the signal vector, termination, reward and observation run over the batch with
 the sources the scalar Task generates (reward terms, observation elements) evaluated on columns.
 Every operation is the same IEEE operation in the same order, so results are bit-identical to
-the scalar Task; one exception is made explicit: ``x ** 2`` is evaluated as an elementwise
-``pow`` (numpy's ``** 2`` is ``x * x``, which differs from ``pow`` in the last bit for about one
-value in a thousand). Reward expressions and reward callables run per env on its row.
+the scalar Task on every CPU (the generated sources use only exactly rounded operations; see
+:mod:`bridge.task.codegen`). Reward expressions and reward callables run per env on its row.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -24,13 +22,12 @@ from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing
 from bridge.fmu.vocab import Variable
+from bridge.task.codegen import batch_observation, batch_reward_terms
 from bridge.task.core import Task
-from bridge.task.rewards import terms_source
 from bridge.task.scenario import EpisodeSpec
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
-_POWER = re.compile(r"\*\* 2\b")
 
 
 class BatchTask:
@@ -73,13 +70,12 @@ class BatchTask:
 
     def _build_step(self, task: Task) -> None:
         exp, index = self.experiment, {name: i for i, name in enumerate(self.signal_names)}
-        pow_ns = {"__builtins__": {}, "abs": np.abs}
-        body = _POWER.sub("** _two", terms_source(exp.reward.terms, index, self.action_inputs))
-        self._terms = eval(f"lambda s, u, p, _two: {body}", pow_ns) if exp.reward.terms else None
+        terms = exp.reward.terms
+        self._terms = batch_reward_terms(terms, index, self.action_inputs) if terms else None
         self._expression, self._user = task.reward.expression, task.reward.user
         self._penalty = float(exp.reward.termination_penalty)
         observer = task.observer
-        self._observe = eval(observer.source, {"__builtins__": {}, "min": np.minimum, "max": np.maximum})
+        self._observe = batch_observation(observer.source)
         self._h, self._dim = observer.history_length, observer.dim
         self._obs_noise = observer.has_noise
         self.reasons: list[str | None] = [None]  # reason code -> text; 0: running
@@ -205,7 +201,7 @@ class BatchTask:
         st = s.T
         total = np.zeros(self.n)
         if self._terms is not None:
-            value = self._terms(st, self.inputs.T, self.previous.T, np.full(self.n, 2.0))
+            value = self._terms(st, self.inputs.T, self.previous.T)
             total = value if isinstance(value, np.ndarray) else np.full(self.n, float(value))
         if self._expression is not None or self._user is not None:
             total = total.copy()

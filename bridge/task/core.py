@@ -23,6 +23,7 @@ import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.config import Experiment, known_references, scenario_inputs
+from bridge.experiment.safe import check_own_module
 from bridge.experiment.validate import Timing, action_bounds, with_elements
 from bridge.fmu.vocab import Variable
 from bridge.task.observe import ObservationBuilder
@@ -39,6 +40,10 @@ class NonFiniteOutputs(BridgeError):
 def load_callable(path: str, key: str) -> Callable[..., Any]:
     """Import ``module:function`` named at config ``key``."""
     module_name, _, attr = path.partition(":")
+    try:
+        check_own_module(module_name)  # before the import: importing runs the module's code
+    except ValueError as exc:
+        raise ConfigError(f"{key}: {exc}") from None
     try:
         module = importlib.import_module(module_name)
     except ImportError as exc:
@@ -66,6 +71,26 @@ class ActionMapping:
     table: list[list[float]] = field(default_factory=list)
     levels: list[FloatArray] = field(default_factory=list)
     noise_columns: list[int] = field(default_factory=list)
+
+
+class ExactAction(np.ndarray[Any, np.dtype[np.float64]]):
+    """A continuous action that also carries the physical input values it stands for.
+
+    Every env and wrapper sees an ordinary float64 action in [-1, 1]; :meth:`Task.action_to_inputs`
+    applies ``physical`` instead of mapping the action back, so a value the user gave in physical
+    units (``--policy constant:0.9``) reaches the FMU exactly (the mapping ``centre + half * a``
+    cannot give every float, its bounds among them). Fixed policies use it; agents do not.
+    """
+
+    physical: list[float] | None
+
+    def __new__(cls, action: Any, physical: list[float]) -> ExactAction:
+        obj = np.asarray(action, dtype=np.float64).view(cls)
+        obj.physical = [float(v) for v in physical]
+        return obj
+
+    def __array_finalize__(self, obj: Any) -> None:
+        self.physical = getattr(obj, "physical", None)
 
 
 @dataclass(frozen=True)
@@ -186,6 +211,8 @@ class Task:
                 if v - v != 0.0:
                     raise self._bad_action(action, sample)
                 u[i] = centre[i] + half[i] * (-1.0 if v < -1.0 else 1.0 if v > 1.0 else v)
+            if type(action) is ExactAction and action.physical is not None and len(action.physical) == n:
+                u[:n] = action.physical
         elif self._kind == "discrete":
             u[:n] = self._discrete_row(action, sample)
         else:
@@ -274,26 +301,10 @@ class Task:
 
     # -- termination -------------------------------------------------------------------------------
     def _build_termination(self) -> None:
-        """``termination_reason(signals)`` as one generated conditional over the bounds.
+        """``termination_reason(signals)`` as one generated conditional over the bounds."""
+        from bridge.task.codegen import termination
 
-        Built from indices and the validated float bounds only (a code template, no user text).
-        """
-        checks = []
-        for name, (lo, hi) in self.experiment.termination.bounds.items():
-            i = self._index[name]
-            # "not (lo <= x <= hi)" so that a NaN signal also counts as outside its bounds
-            if lo is not None and hi is not None:
-                checks.append((f"not ({float(lo)!r} <= s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
-            elif lo is not None:
-                checks.append((f"not (s[{i}] >= {float(lo)!r})", f"bounds:{name}"))
-            elif hi is not None:
-                checks.append((f"not (s[{i}] <= {float(hi)!r})", f"bounds:{name}"))
-        body = "None"
-        for condition, reason in reversed(checks):
-            body = f"({reason!r} if {condition} else {body})"
-        self.termination_reason: Callable[[list[float]], str | None] = eval(
-            f"lambda s: {body}", {"__builtins__": {}}
-        )
+        self.termination_reason = termination(self.experiment.termination.bounds, self._index)
 
     # -- episode life cycle --------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:

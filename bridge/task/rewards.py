@@ -1,8 +1,9 @@
 """Rewards from config: weighted built-in terms, a safe arithmetic expression, a Python callable.
 
-Terms are compiled once into small closures over the task's signal vector, so a reward costs
-a few microseconds per step. Penalty norms are negative (``abs``: -|x|, ``squared``: -x^2);
-``linear`` is +x; every term is multiplied by its weight.
+Terms are generated once into one function over the task's signal vector
+(:mod:`bridge.task.codegen`), so a reward costs a few microseconds per step. Penalty norms are
+negative (``abs``: -|x|, ``squared``: -x^2); ``linear`` is +x; every term is multiplied by its
+weight.
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError
-from bridge.experiment.config import RewardSection, RewardTerm
+from bridge.experiment.config import RewardSection
+from bridge.task.codegen import Term, reward_terms
 
 FloatArray = npt.NDArray[np.float64]
-Term = Callable[[list[float], list[float], list[float]], float]
 
 
 def reward_signal_names(section: RewardSection, known: set[str]) -> list[str]:
@@ -35,49 +36,6 @@ def reward_signal_names(section: RewardSection, known: set[str]) -> list[str]:
             compile_expression(section.expression, sorted(known), where="reward.expression").names_used
         )
     return names
-
-
-def _norm(kind: str, weight: float, scale: float, x: str) -> str:
-    if kind == "abs":
-        return f"-{weight!r} * abs({x}) / {scale!r}"
-    if kind == "squared":
-        return f"-{weight!r} * (({x}) / {scale!r}) ** 2"
-    return f"{weight!r} * ({x}) / {scale!r}"
-
-
-def _term_source(term: RewardTerm, index: dict[str, int], action_inputs: Sequence[str]) -> str:
-    """A Python expression over ``s`` (signals), ``u`` (inputs), ``p`` (previous inputs)."""
-    if term.alive is not None:
-        return repr(float(term.alive))
-    if term.tracking is not None:
-        t = term.tracking
-        return _norm(t.norm, t.weight, t.scale, f"s[{index[t.output]}] - s[{index[t.reference]}]")
-    if term.effort is not None:
-        e = term.effort
-        return _norm(e.norm, e.weight, e.scale, f"u[{action_inputs.index(e.name)}]")
-    if term.rate is not None:
-        r, i = term.rate, action_inputs.index(term.rate.name)
-        return _norm(r.norm, r.weight, r.scale, f"u[{i}] - p[{i}]")
-    assert term.signal is not None  # RewardTerm's validator admits exactly these kinds
-    g = term.signal
-    return _norm(g.norm, g.weight, g.scale, f"s[{index[g.name]}]")
-
-
-def compile_terms(terms: Sequence[RewardTerm], index: dict[str, int], action_inputs: Sequence[str]) -> Term:
-    """The weighted sum of built-in terms as one generated function.
-
-    The source is built from indices and floats taken from the validated config (names never
-    enter it), so this is a code template, not evaluation of user text; one expression costs a
-    fraction of a chain of closures.
-    """
-    body = terms_source(terms, index, action_inputs)
-    return eval(f"lambda s, u, p: {body}", {"__builtins__": {}, "abs": abs})  # type: ignore[no-any-return]
-
-
-def terms_source(terms: Sequence[RewardTerm], index: dict[str, int], action_inputs: Sequence[str]) -> str:
-    """The weighted sum of ``terms`` as one expression over ``s``, ``u`` and ``p`` (also evaluated
-    over whole batches by ``bridge.task.batch``)."""
-    return " + ".join(f"({_term_source(t, index, action_inputs)})" for t in terms) or "0.0"
 
 
 class Reward:
@@ -136,7 +94,7 @@ def build_reward(
     """The reward of ``section`` over ``signal_names``; ``user`` is its ``reward.callable``, imported
     by the caller (``bridge.task.core.load_callable``)."""
     index = {name: i for i, name in enumerate(signal_names)}
-    terms = compile_terms(section.terms, index, action_inputs) if section.terms else None
+    terms = reward_terms(section.terms, index, action_inputs) if section.terms else None
     expression = None
     if section.expression:
         from bridge.task.expr import compile_expression

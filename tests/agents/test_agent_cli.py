@@ -20,6 +20,7 @@ from bridge.cli.main import _load_plugins, app
 from bridge.errors import ConfigError
 from bridge.experiment.examples import example_experiment
 from bridge.net.transport import session_mode
+from tests.conftest import wait_until
 
 CARTPOLE = example_experiment("cartpole_balance")
 MOTOR = example_experiment("dcmotor_tracking")
@@ -97,7 +98,7 @@ def test_missing_safe_publishes_a_full_vector_for_two_inputs(tmp_path: Path) -> 
     try:
         agent._last_inputs = [3.0, 0.05]
         agent._last_time = time.monotonic()
-        time.sleep(0.5)
+        wait_until(lambda: len(sent) >= 2, 30.0, "the watchdog sends the safe inputs")
     finally:
         agent.close()
     assert sent and all(s[:2] == [1.5, 1.5] for s in sent)

@@ -20,7 +20,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_until
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # training takes minutes when busy
 CARTPOLE = example_experiment("cartpole_balance")
@@ -133,7 +133,11 @@ def test_missing_observations_hold_or_go_safe(balancer: Path) -> None:
         try:
             agent._last_inputs = [10.0]  # as if the last observation led to a push right
             agent._last_time = time.monotonic()
-            time.sleep(0.5)  # no observations at all
+            wait_until(  # no observations at all
+                lambda a=agent, s=sent: a.stats.missing_events >= 2 and len(s) >= 2,
+                30.0,
+                f"the {rule!r} rule acts",
+            )
         finally:
             agent.close()
         assert agent.stats.missing_events >= 2 and sent and all(s == expected for s in sent)

@@ -65,6 +65,31 @@ def test_resume_continues_the_step_count(tmp_path: Path) -> None:
     assert info["timesteps"] == second.timesteps and info["resumed"][0]["at"] == first.timesteps
 
 
+def test_resume_keeps_evaluating_and_best_model_follows(tmp_path: Path) -> None:
+    """--resume evaluates on schedule; best_model.zip is replaced only by a better evaluation; agent run
+    names the checkpoint it deploys with its evaluation."""
+    from agents.deploy import deployed_checkpoint
+
+    run = tmp_path / "run"
+    settings = {"timesteps": 1024, "n_envs": 2, "eval_every": 512, "eval_episodes": 2}
+    train(CARTPOLE, overrides=settings, run_dir=run, progress=False)
+    with np.load(run / "evaluations.npz") as data:
+        first = list(data["timesteps"])
+        best_before = float(data["results"].mean(axis=1).max())
+    assert first == [512, 1024]
+    stamp = (run / "best_model.zip").stat().st_mtime_ns
+    train(CARTPOLE, overrides={"timesteps": 2048}, resume=run, progress=False)
+    with np.load(run / "evaluations.npz") as data:
+        steps, means = list(data["timesteps"]), data["results"].mean(axis=1)
+    assert steps[:2] == first and steps[2:] == [1536, 2048, 2560, 3072]  # the old ones kept, four new
+    improved = float(means[2:].max()) > best_before
+    assert ((run / "best_model.zip").stat().st_mtime_ns != stamp) == improved
+    text = deployed_checkpoint(run, "torch")
+    best = int(np.argmax(means))
+    assert str(run / "best_model.zip") in text
+    assert f"mean reward {means[best]:.1f} at step {steps[best]:,}" in text
+
+
 def test_residual_over_pid_with_normalised_observations(tmp_path: Path) -> None:
     run = tmp_path / "residual"
     overrides = {

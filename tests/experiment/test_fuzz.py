@@ -5,7 +5,7 @@ huge or negative; lists reversed; anchors shared or multiplied; the text cut at 
 goes through ``load_experiment`` and ``check_experiment``; a sample also through ``fmu-bridge
 check``. The outcome must be success or a BridgeError whose message names a key or the file,
 never another exception; an accepted experiment must pass independent sanity checks. The counts
-go to docs/reliability/experiment_fuzz.json for the reliability table.
+go to experiment_fuzz.json for the reliability table (see tests/reliability_table.py).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from typing import Any
 
 import pytest
 import yaml
+from reliability_table import counts_dir
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
@@ -33,7 +34,7 @@ from tests.conftest import check_with_model
 
 MUTANTS_PER_EXAMPLE = 1000
 CLI_SAMPLE = 5  # accepted and as many rejected mutants per example also go through `fmu-bridge check`
-REPORT = Path(__file__).resolve().parents[2] / "docs" / "reliability" / "experiment_fuzz.json"
+REPORT = counts_dir() / "experiment_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
 NUMBERS = [math.inf, -math.inf, math.nan, 1e308, -1e308, 1e12, -1.0, 0.0, -0.0, 2**63, -(2**80)]
 OTHERS: list[Any] = ["text", "", None, True, [], {}, [1, "a"], {"k": 1}, "1e3", "example:nothing"]
 

@@ -98,17 +98,17 @@ def test_a_huge_or_binary_file_is_a_config_error(tmp_path: Path) -> None:
         (
             "- alive: 1.0\n  termination_penalty",
             "- signal: {name: x, scale: .inf}\n  termination_penalty",
-            r"reward\.terms\[0\]\.signal\.scale: Input should be a finite number \(got inf\)",
+            r"reward\.terms\[0\]\.signal\.scale: .*\(got inf\)",
         ),
         (
             "- alive: 1.0\n  termination_penalty",
             "- signal: {name: x, scale: .nan}\n  termination_penalty",
-            r"reward\.terms\[0\]\.signal\.scale: Input should be a finite number \(got nan\)",
+            r"reward\.terms\[0\]\.signal\.scale: .*\(got nan\)",
         ),
         (
             "  episode_duration: 10.0 ",
             "  episode_duration: .inf ",
-            r"model\.episode_duration: Input should be a finite number \(got inf\)",
+            r"model\.episode_duration: .*\(got inf\)",
         ),
         (
             "  episode_duration: 10.0 ",
@@ -118,7 +118,7 @@ def test_a_huge_or_binary_file_is_a_config_error(tmp_path: Path) -> None:
         (
             "  reset_policy: auto",
             "  reset_policy: auto\n  tolerance: .inf",
-            r"model\.tolerance: Input should be a finite number \(got inf\)",
+            r"model\.tolerance: .*\(got inf\)",
         ),
         (
             "    x: [-2.4, 2.4]",
@@ -128,12 +128,12 @@ def test_a_huge_or_binary_file_is_a_config_error(tmp_path: Path) -> None:
         (
             "  reset_policy: auto",
             "  reset_policy: auto\n  parameters: {x0: .nan}",
-            r"model\.parameters\.x0: Input should be a finite number \(got nan\)",
+            r"model\.parameters\.x0: .*\(got nan\)",
         ),
         (
             "  eval_every: 20000",
             "  eval_every: 20000\n  remote: {timeout_s: .inf}",
-            r"training\.remote\.timeout_s: Input should be a finite number",
+            r"training\.remote\.timeout_s: .*\(got inf\)",
         ),
     ],
 )
@@ -149,7 +149,7 @@ def test_infinite_and_reversed_values_in_cartpole_are_rejected(
         (
             "scale: 100.0}",
             "scale: .inf}",
-            r"reward\.terms\[0\]\.tracking\.scale: Input should be a finite number",
+            r"reward\.terms\[0\]\.tracking\.scale: .*\(got inf\)",
         ),
         (
             "    omega: [-250.0, 250.0]",
@@ -169,7 +169,7 @@ def test_infinite_and_reversed_values_in_cartpole_are_rejected(
         (
             "    parameters: {J: 0.015}",
             "    parameters: {J: .inf}\n    episode_duration: .inf",
-            r"scenarios\.heavy_load\.parameters\.J: Input should be a finite number",
+            r"scenarios\.heavy_load\.parameters\.J: .*\(got inf\)",
         ),
         (
             "    parameters: {J: 0.015}",
@@ -179,7 +179,7 @@ def test_infinite_and_reversed_values_in_cartpole_are_rejected(
         (
             "  mode: random",
             "  mode: weighted\n  weights: {step_up: .inf}",
-            r"schedule\.weights\.step_up: Input should be a finite number",
+            r"schedule\.weights\.step_up: .*\(got inf\)",
         ),
     ],
 )

@@ -116,7 +116,7 @@ def test_training_settings_keep_the_file_and_apply_overrides() -> None:
     settings = TrainingSettings.from_experiment(load_experiment(CARTPOLE), {"seed": 7, "n_envs": None})
     assert (settings.algo, settings.timesteps, settings.n_envs, settings.seed) == ("PPO", 150000, 8, 7)
     assert settings.hyperparams["learning_rate"] == "lin_0.001"
-    with pytest.raises(ConfigError, match=r"training\.n_envs: Input should be greater than or equal to 1"):
+    with pytest.raises(ConfigError, match=r"training\.n_envs: .*\(got 0\)"):
         TrainingSettings.from_experiment(load_experiment(CARTPOLE), {"n_envs": 0})
 
 
@@ -145,7 +145,7 @@ def test_baselines_give_the_policies_what_the_file_says() -> None:
         ({"type": "constant", "value": 1.0, "kp": 2.0}, r"\['kp'\] do not apply to a constant baseline"),
         ({"output": "omega", "reference": "omega_ref"}, r"a pid baseline needs \['input'\]"),
         ({"type": "python", "callable": "nocolon"}, r"expected 'module:function'"),
-        ({"type": "pidd"}, r"Input should be 'pid', 'constant' or 'python'"),
+        ({"type": "pidd"}, r"\.type: .*\(got 'pidd'\)"),
     ],
 )
 def test_a_baseline_takes_the_keys_of_its_type(
@@ -181,7 +181,7 @@ def test_residual_needs_a_baseline_of_the_file(tmp_path: Path) -> None:
     ):
         load_experiment(path)
     path = with_changes(tmp_path, MOTOR, training={"residual": {"baseline": "pid", "scale": 0.0}})
-    with pytest.raises(ConfigError, match=r"training\.residual\.scale: Input should be greater than 0"):
+    with pytest.raises(ConfigError, match=r"training\.residual\.scale: .*\(got 0\.0\)"):
         load_experiment(path)
 
 
@@ -191,7 +191,7 @@ def test_the_ros_section_is_the_ros_view_settings(tmp_path: Path) -> None:
     section = load_experiment(path).ros
     view = settings_from(section.model_dump(exclude_unset=True), backend="zenoh")
     assert (view.domain_id, view.per_variable, view.backend) == (7, True, "zenoh")
-    with pytest.raises(ConfigError, match=r"ros\.domain_id: Input should be less than or equal to 232"):
+    with pytest.raises(ConfigError, match=r"ros\.domain_id: .*\(got 999\)"):
         settings_from({"domain_id": 999})
 
 
@@ -199,7 +199,7 @@ def test_the_node_section_sets_the_defaults_of_fmu_bridge_node(tmp_path: Path) -
     path = with_changes(tmp_path, MOTOR, node={"name": "motor-1", "mode": "realtime", "rate": 0.0})
     node = load_experiment(path).node
     assert (node.name, node.mode, node.rate, node.prefix) == ("motor-1", "realtime", 0.0, "fmu_bridge")
-    with pytest.raises(ConfigError, match=r"node\.mode: Input should be 'lockstep' or 'realtime'"):
+    with pytest.raises(ConfigError, match=r"node\.mode: .*\(got 'fast'\)"):
         load_experiment(with_changes(tmp_path, MOTOR, node={"mode": "fast"}))
 
 

@@ -4,7 +4,7 @@ Each request gets a clear error or a correct result: every reset and info query 
 (ok, or an error that starts with its code and names no local path), every action is accounted
 for in the node's counters, no traceback reaches the node's log, its memory stays bounded, and
 afterwards a well-behaved client gets the in-process trajectory bit for bit. Seeded and bounded;
-the counts go to ``docs/reliability/node_fuzz.json``.
+the counts go to ``node_fuzz.json`` (see ``tests/reliability_table.py``).
 """
 
 from __future__ import annotations
@@ -19,11 +19,11 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
+from reliability_table import counts_dir
 from rosbags.typesys import Stores, get_typestore
 
 from bridge.env import RemoteFmuEnv
@@ -36,7 +36,7 @@ from tests.conftest import Loopback, _wait_for_node
 pytestmark = pytest.mark.integration
 SEED = 20260412
 CARTPOLE = example_experiment("cartpole_continuous")
-COUNTS = Path(__file__).resolve().parents[2] / "docs" / "reliability" / "node_fuzz.json"
+COUNTS = counts_dir() / "node_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE = "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"  # noqa: E501
 TRIGGER = (

@@ -100,7 +100,7 @@ def test_nodes_give_the_in_process_trajectory(
     there = system_file(served, f"there_{algorithm}_{len(remote)}", {c: NODES[c] for c in remote}, algorithm)
     with FmuEnv(here) as local, remote_env(there, net) as distributed:
         assert all(
-            type(p).__name__ == "NodeComponent" for n, p in distributed.plant.plants.items() if n in remote
+            type(p).__name__ == "RemotePlant" for n, p in distributed.plant.plants.items() if n in remote
         )
         for seed in (0, 3, 0):  # the repeat: reset restores the whole system
             expected, got = trajectory(local, seed), trajectory(distributed, seed)

@@ -91,7 +91,7 @@ def steps_like_in_process(client_file: Path, own: Loopback) -> None:
     remote = NodeComponents(session=own.session, prefix=own.prefix, timeout_s=60.0)
     plant = SystemPlant(load_experiment(client_file), remote=remote)
     with FmuEnv(local_file) as local, FmuEnv(client_file, plant=plant) as distributed:
-        assert type(distributed.plant.plants["motor"]).__name__ == "NodeComponent"  # type: ignore[attr-defined]
+        assert type(distributed.plant.plants["motor"]).__name__ == "RemotePlant"  # type: ignore[attr-defined]
         for seed in (1, 4):
             expected = trajectory(local, seed)
             np.testing.assert_array_equal(trajectory(distributed, seed), expected)

@@ -6,7 +6,12 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
 - ``~/outputs``: ``sensor_msgs/msg/JointState``, one per sample: names = the FMU outputs, position =
   their values, header.stamp = simulation time;
 - ``~/actions``: ``sensor_msgs/msg/JointState`` in: names = FMU inputs (any subset), position =
-  values; held (real time) or one sample per message (lockstep);
+  values; held (real time) or one sample per message (lockstep). In lockstep no message may be
+  dropped: the subscription keeps all (KEEP_ALL, reliable), so messages that arrive while a step
+  runs wait for it instead of being overwritten as with KEEP_LAST 10; a message the RMW reports
+  lost (rclpy's ``message_lost`` event) is counted in ``lost`` and logged as a warning. A
+  publisher keeps its side of the contract with RELIABLE and a depth of at least the steps it
+  sends ahead of the outputs (one, if it waits for each output);
 - ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time);
 - ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
 - with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
@@ -53,19 +58,25 @@ def open_backend_node(session: Any, settings: RosViewSettings, name: str) -> Any
         from bridge.net.ros2.rclpy_backend import RclpyNode
 
         return RclpyNode(name, settings.namespace, domain_id=settings.domain_id)
+    if session is None:
+        raise ConfigError("the zenoh ROS backend needs a Zenoh session; use the rclpy backend without one")
     from bridge.net.ros2 import RosContext
 
     context = RosContext(session, domain_id=settings.domain_id, namespace=settings.namespace)
     return context.create_node(name)
 
 
-def qos_profile(settings: RosViewSettings) -> Any:
+def qos_profile(settings: RosViewSettings, *, keep_all: bool = False) -> Any:
+    """The endpoints' QoS for the backend; ``keep_all`` where no message may be overwritten."""
     if settings.backend == "rclpy":
-        return settings
-    from bridge.net.ros2 import QoS, Reliability
+        from bridge.net.ros2.rclpy_backend import RclpyQoS
+
+        return RclpyQoS(settings.reliability, settings.depth, keep_all)
+    from bridge.net.ros2 import History, QoS, Reliability
 
     reliability = Reliability.RELIABLE if settings.reliability == "reliable" else Reliability.BEST_EFFORT
-    return QoS(reliability=reliability, depth=settings.depth)
+    history = History.KEEP_ALL if keep_all else History.KEEP_LAST
+    return QoS(reliability=reliability, history=history, depth=settings.depth)
 
 
 class RosView:
@@ -90,9 +101,20 @@ class RosView:
         self.node = open_backend_node(session, settings, ros_node_name(settings.node_name or name))
         qos = qos_profile(settings)
         self._outputs = self.node.create_publisher(settings.outputs_topic, "sensor_msgs/msg/JointState", qos)
-        self.node.create_subscription(
-            settings.actions_topic, "sensor_msgs/msg/JointState", self._actions, qos
-        )
+        self.dropped = 0  # malformed or foreign messages
+        self.lost = 0  # messages the RMW reported lost before they reached us
+        if settings.backend == "rclpy":  # lockstep: KEEP_ALL, no message overwritten while a step runs
+            self.node.create_subscription(
+                settings.actions_topic,
+                "sensor_msgs/msg/JointState",
+                self._actions,
+                qos if realtime else qos_profile(settings, keep_all=True),
+                on_lost=self._on_lost,
+            )
+        else:  # Zenoh hands each message to the callback in turn: nothing is overwritten
+            self.node.create_subscription(
+                settings.actions_topic, "sensor_msgs/msg/JointState", self._actions, qos
+            )
         self.node.create_service(settings.reset_service, "std_srvs/srv/Trigger", self._reset)
         self._clock = (
             self.node.create_publisher("/clock", "rosgraph_msgs/msg/Clock", qos)
@@ -102,7 +124,15 @@ class RosView:
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
-        self.dropped = 0
+
+    def _on_lost(self, count: int) -> None:
+        self.lost += count
+        _log.warning(
+            "ROS actions: the RMW lost %d message(s) (%d in all): in lockstep each one was a step; "
+            "publish with RELIABLE and a larger depth, or wait for each output before the next action",
+            count,
+            self.lost,
+        )
 
     def _declare_per_variable(self, qos: Any) -> None:
         from bridge.net.ros2.names import name_token

@@ -2,26 +2,37 @@
 
 Errors name the connection, the component, the variable and the file: an unknown component or
 variable, a connection that does not run from an output to an input, an input driven twice,
-types that do not convert, a parameter the FMU does not take. A unit mismatch is a warning.
+types that do not convert, a parameter the FMU does not take, a transformation that does not fit
+the connectors, units of different quantities (``transform``). Units that cannot be compared (a
+name without a definition) are a warning.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import logging
 from collections.abc import Mapping
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, VariableError
 from bridge.fmu.vocab import ModelInfo, Variable
 from bridge.plant.system.description import Connection, Endpoint, SystemDescription
+from bridge.plant.system.transform import Convert, coupling
 
 _log = logging.getLogger(__name__)
 _FLOATS = ("Float32", "Float64")
 _INTEGERS = ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
 
 
-def check_system(system: SystemDescription, infos: Mapping[str, ModelInfo]) -> list[str]:
-    """Raise :class:`ConfigError` on the first invalid connection or parameter; return warnings."""
+def check_system(
+    system: SystemDescription,
+    infos: Mapping[str, ModelInfo],
+    couplings: dict[Connection, Convert | None] | None = None,
+) -> list[str]:
+    """Raise :class:`ConfigError` on the first invalid connection or parameter; return warnings.
+
+    ``couplings`` (if given) receives what each connection does to its value on the way (unit
+    conversion and transformation; None: passed unchanged)."""
     warnings: list[str] = []
     driven: dict[Endpoint, Connection] = {}
     for c in system.connections:
@@ -35,11 +46,12 @@ def check_system(system: SystemDescription, infos: Mapping[str, ModelInfo]) -> l
             )
         driven[c.target] = c
         _check_types(c, source, target, system)
-        if source.unit and target.unit and source.unit != target.unit:
-            warnings.append(
-                f"connection {c}: unit {source.unit!r} of {c.source} differs from {target.unit!r} of "
-                f"{c.target}; values pass unconverted{system.where}"
-            )
+        _check_shapes(c, source, target, system)
+        carried = coupling(c, source, target, infos, system)
+        if carried.warning:
+            warnings.append(carried.warning)
+        if couplings is not None:
+            couplings[c] = carried.convert
     for name, component in system.components.items():
         for var_name in component.parameters:
             var = _known(
@@ -68,6 +80,12 @@ def _variable(
 
 def _known(end: Endpoint, info: ModelInfo, key: str, system: SystemDescription) -> Variable:
     var = info.variables.get(end.variable)
+    if var is None and "[" in end.variable:  # one element of an FMI 3.0 array: a scalar
+        try:
+            array, _ = info.element(end.variable)
+        except VariableError as exc:
+            raise ConfigError(f"{key}: {exc}{system.where}") from None
+        return dataclasses.replace(array, name=end.variable, dimensions=(), start=None)
     if var is None:
         close = difflib.get_close_matches(end.variable, list(info.variables), n=4, cutoff=0.5)
         hint = f"did you mean {close}?" if close else f"`fmu-bridge inspect {info.path}` lists them"
@@ -97,6 +115,13 @@ def _an(word: str) -> str:
 
 
 def _check_types(c: Connection, source: Variable, target: Variable, system: SystemDescription) -> None:
+    for var, end in ((source, c.source), (target, c.target)):
+        if not var.is_numeric:
+            raise ConfigError(
+                f"connection {c}: {end} is a {var.type} variable; connections carry numbers "
+                f"(Float, Int, Boolean, Enumeration): a {var.type} output can be read and recorded, "
+                f"not connected{system.where}"
+            )
     if source.type == target.type or (source.type in _FLOATS and target.type in _FLOATS):
         return
     if source.type in (*_INTEGERS, "Boolean") and target.type in _FLOATS:
@@ -107,3 +132,19 @@ def _check_types(c: Connection, source: Variable, target: Variable, system: Syst
         f"connection {c}: {c.source} is {source.type} and {c.target} is {target.type}; there is no "
         f"lossless conversion (integers and booleans may feed floats, not the other way){system.where}"
     )
+
+
+def _check_shapes(c: Connection, source: Variable, target: Variable, system: SystemDescription) -> None:
+    """A connection joins one scalar to one scalar: an array end must name one element."""
+    shapes = [(end, var.dimensions) for end, var in ((c.source, source), (c.target, target))]
+    if any(dims for _, dims in shapes):
+        text = " and ".join(f"{end} is {_shape(dims)}" for end, dims in shapes)
+        element = next(f"{end}[{','.join('1' * len(dims))}]" for end, dims in shapes if dims)
+        raise ConfigError(
+            f"connection {c}: {text}; a connection joins one scalar to one scalar: name the array "
+            f"element, for example {element} (1-based indices, one per dimension){system.where}"
+        )
+
+
+def _shape(dims: tuple[int, ...]) -> str:
+    return f"an array of shape {list(dims)}" if dims else "a scalar"

@@ -8,12 +8,14 @@ an experiment: a macro step of ``H`` is ``n`` FMU steps of the component's own s
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, FmuError
 from bridge.experiment.validate import Timing
 from bridge.fmu import Model, read_model_info
+from bridge.fmu.backend import STATUS_NAMES
+from bridge.plant.base import FloatArray
 from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
 
@@ -31,6 +33,9 @@ def steps_per_macro(component: Component, macro_step_s: float, default_s: float 
             f"{macro_step_s} s (ratio {ratio:.6g}); choose {macro_step_s}/k{where}"
         )
     return n
+
+
+_SET_FAILED, _GET_FAILED = 16, 32  # master.c adds these to the status of a failed set or get
 
 
 class FmuComponent(FmuInstancePlant):
@@ -55,3 +60,37 @@ class FmuComponent(FmuInstancePlant):
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         return {**self.component.parameters, **values}
+
+    def native_done(self, k: int, terminated: bool) -> None:
+        """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""
+        if terminated:
+            self.model.native_terminated(k)
+        else:
+            self.model.step_index = k
+        self.terminated = terminated
+        self.sample += 1
+
+    def native_failed(self, status: int, k: int) -> None:
+        """Raise the error of a sample the native master stepped and the FMU failed (as :meth:`step`)."""
+        model = self.model
+        if status >= _SET_FAILED:
+            what, names = ("get", self.output_names) if status >= _GET_FAILED else ("set", self.input_names)
+            exc = FmuError(
+                f"{model.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[status & 15]} "
+                f"at step {k} (t={model.start_time_s + k * model.step_size_s:g} s)",
+                log=model.log,
+            )
+        else:
+            try:
+                model.native_step_failed(k, status)
+                exc = FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log)
+            except FmuError as failed:
+                exc = failed
+        raise self._failed(exc)
+
+    def settle(self, inputs: Sequence[float]) -> FloatArray:
+        """Set the inputs at the current communication point and read the outputs again, without
+        a step: direct feedthrough outputs then follow the inputs of this instant."""
+        self._write(inputs)
+        outputs: FloatArray = self._read()
+        return outputs

@@ -29,11 +29,42 @@ class Endpoint:
 
 
 @dataclass(frozen=True)
+class Transform:
+    """An SSP connection transformation (``ssc:<kind>``): ``LinearTransformation`` computes
+    ``factor * value + offset``; the three mapping kinds replace a value by its ``MapEntry``
+    target (``entries``: source and target as written, enumerations by item name)."""
+
+    kind: Literal[
+        "LinearTransformation",
+        "BooleanMappingTransformation",
+        "IntegerMappingTransformation",
+        "EnumerationMappingTransformation",
+    ]
+    factor: float = 1.0
+    offset: float = 0.0
+    entries: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
+class Unit:
+    """A unit as SSP and FMI define one: ``value_SI = factor * value + offset`` in the SI base
+    units whose exponents ``base`` gives (kg, m, s, A, K, mol, cd, rad)."""
+
+    name: str
+    base: tuple[int, ...]
+    factor: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
 class Connection:
-    """An output of one component feeding an input of another, held over each macro step."""
+    """An output of one component feeding an input of another, held over each macro step;
+    from an SSP, with the connection's transformation and whether it suppresses unit conversion."""
 
     source: Endpoint
     target: Endpoint
+    transform: Transform | None = None
+    suppress_units: bool = False
 
     def __str__(self) -> str:
         return f"{self.source} -> {self.target}"
@@ -50,6 +81,7 @@ class Component:
     interface: Literal["auto", "cs", "me"] = "auto"
     feedthrough: bool | None = None
     node: str | None = None
+    connector_units: dict[str, str] = field(default_factory=dict)  # from an SSD's connectors
 
 
 @dataclass(frozen=True)
@@ -62,8 +94,12 @@ class SystemDescription:
     max_iterations: int = 1
     tolerance: float = 1e-10
     order: tuple[str, ...] = ()
+    feedthrough_outputs: Literal["held", "updated"] = "held"
     step_size_s: float | None = None  # an SSP's default experiment step, if it gives one
     source: Path | None = None
+    units: dict[str, Unit] = field(default_factory=dict)  # an SSD's unit definitions by name
+    ssp: Path | None = None  # the .ssp/.ssd the components and connections came from, if any
+    duration_s: float | None = None  # an SSP's stopTime - startTime, if it gives one
 
     @property
     def where(self) -> str:
@@ -123,8 +159,10 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
             else (old.fmu if old else Path())
         )
         parameters = {**(old.parameters if old else {}), **spec.parameters}
+        interface = spec.interface if spec.interface != "auto" or old is None else old.interface
+        units = old.connector_units if old else {}
         components[name] = Component(
-            name, fmu, parameters, spec.step_size, spec.interface, spec.feedthrough, spec.node
+            name, fmu, parameters, spec.step_size, interface, spec.feedthrough, spec.node, units
         )
     if not components:
         raise ConfigError(f"system.components: a system needs at least one component{where}")
@@ -139,8 +177,11 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         max_iterations=iteration.max_iterations if iteration else 1,
         tolerance=iteration.tolerance if iteration else 1e-10,
         order=tuple(section.order),
+        feedthrough_outputs=section.feedthrough_outputs,
         step_size_s=base.step_size_s if base else None,
         source=experiment.source,
+        units=base.units if base else {},
+        ssp=base.source if base else None,
     )
 
 

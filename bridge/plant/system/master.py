@@ -22,9 +22,9 @@ each component before it starts.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -32,17 +32,22 @@ from bridge.errors import ConfigError
 from bridge.plant.base import FloatArray, Plant
 from bridge.plant.system.description import SystemDescription
 
+if TYPE_CHECKING:
+    from bridge.plant.system.native_master import NativeMaster
+
 _log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
 class Link:
-    """One connection as array positions: ``outputs[source][i] -> inputs[target][j]``."""
+    """One connection as array positions: ``outputs[source][i] -> inputs[target][j]``, through
+    ``convert`` (unit conversion and SSP transformation) where the connection has one."""
 
     source: str
     i: int
     target: str
     j: int
+    convert: Callable[[float], float] | None = None
 
 
 class Master:
@@ -55,12 +60,17 @@ class Master:
         links: Sequence[Link],
         order: Sequence[str],
         init_order: Sequence[str],
+        *,
+        settle: Sequence[str] = (),
     ) -> None:
         self.system, self.plants, self.links = system, dict(plants), list(links)
         self.order, self.init_order = list(order), list(init_order)
         self.iterations = system.max_iterations
         if self.iterations > 1:
             _check_rollback(system, plants)
+        updated = system.feedthrough_outputs == "updated"
+        self.settle_order = [n for n in self.init_order if n in set(settle)] if updated else []
+        _check_settle(system, plants, self.settle_order)
         self.inputs = {n: np.array([0.0] * len(p.input_names)) for n, p in plants.items()}
         self.outputs = {n: np.zeros(len(p.output_names)) for n, p in plants.items()}
         self._into: dict[str, list[Link]] = {n: [] for n in plants}
@@ -68,35 +78,60 @@ class Master:
             self._into[link.target].append(link)
         self.last_iterations = 0
         self.unconverged_steps = 0
+        self.native: NativeMaster | None = None
+        self._native_checked = False
 
     def _gather(self, name: str, ready: set[str] | None = None) -> FloatArray:
         u = self.inputs[name]
         for link in self._into[name]:
             if ready is None or link.source in ready:
-                u[link.j] = self.outputs[link.source][link.i]
+                y = self.outputs[link.source][link.i]
+                u[link.j] = y if link.convert is None else link.convert(y)
         return u
 
     def initialize(self, values: Mapping[str, Mapping[str, Any]], inputs: Mapping[str, FloatArray]) -> None:
         """Reset every component with its ``values`` and ``inputs`` (start values, then the values
-        of connected outputs as they become known at ``t0``)."""
+        of connected outputs as they become known at ``t0``); then the native macro step, where it
+        applies (:mod:`bridge.plant.system.native_master`), takes the new instances."""
+        self._initialize(values, inputs)
+        if not self._native_checked:
+            from bridge.plant.system.native_master import native_master
+
+            self.native, self._native_checked = native_master(self), True
+        if self.native is not None:
+            self.native.refresh()
+
+    def _initialize(self, values: Mapping[str, Mapping[str, Any]], inputs: Mapping[str, FloatArray]) -> None:
         for name, u in inputs.items():
             self.inputs[name] = np.array(u, dtype=np.float64)
         ready: set[str] = set()
+        used: dict[str, FloatArray] = {}  # the inputs each component was last started with
         for name in self.init_order:
-            u = self._gather(name, ready)
+            used[name] = u = self._gather(name, ready).copy()
             self.outputs[name] = np.asarray(self.plants[name].reset(values.get(name, {}), u.tolist()))
             ready.add(name)
-        for _ in range(self.iterations - 1):  # an algebraic loop at t0: reset until consistent
-            before = {n: u.copy() for n, u in self.inputs.items()}
+        for _ in range(self.iterations - 1):  # an algebraic loop at t0: restart until consistent
+            if self._close(used, {n: self._gather(n).copy() for n in used}):
+                return
             for name in self.init_order:
                 u = self._gather(name)
-                if not np.array_equal(u, before[name]):
+                if not np.array_equal(u, used[name]):
+                    used[name] = u.copy()
                     self.outputs[name] = np.asarray(self.plants[name].reset(values.get(name, {}), u.tolist()))
-            if self._close(before, {n: self._gather(n).copy() for n in before}):
-                return
 
     def step(self) -> None:
-        """One macro step from ``t`` to ``t + H`` (with fixed-point iteration where configured)."""
+        """One macro step from ``t`` to ``t + H`` (with fixed-point iteration where configured);
+        then, with ``feedthrough_outputs: updated``, the feedthrough components' outputs again
+        from the inputs of ``t + H``."""
+        if self.native is not None:
+            self.native.step()
+            return
+        self._step()
+        for name in self.settle_order:  # sources before consumers: values of t + H flow on
+            u = self._gather(name)
+            self.outputs[name] = self.plants[name].settle(u.tolist())  # type: ignore[attr-defined]
+
+    def _step(self) -> None:
         if self.iterations <= 1:
             self._pass()
             return
@@ -159,4 +194,15 @@ def _check_rollback(system: SystemDescription, plants: Mapping[str, Plant]) -> N
             f"system.iteration: fixed-point iteration rolls every component back to the start of the "
             f"macro step, and {why}; remove system.iteration, or use FMUs that can save their state "
             f"(FMI 2.0/3.0 with canGetAndSetFMUstate){system.where}"
+        )
+
+
+def _check_settle(system: SystemDescription, plants: Mapping[str, Plant], names: Sequence[str]) -> None:
+    """Updated outputs set inputs between steps: each feedthrough component must be in this process."""
+    cannot = [plants[n].name for n in names if not hasattr(plants[n], "settle")]
+    if cannot:
+        raise ConfigError(
+            f"system.feedthrough_outputs: updated sets the inputs of feedthrough components after the "
+            f"exchange and reads their outputs again, which components in nodes cannot do: {cannot}; "
+            f"use feedthrough_outputs: held, or run those components in this process{system.where}"
         )

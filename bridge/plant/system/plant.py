@@ -19,11 +19,12 @@ import numpy as np
 from bridge.errors import ConfigError, PlantDied, PlantError, StepError
 from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
 from bridge.experiment.validate import Timing, check_experiment
-from bridge.fmu.vocab import DefaultExperiment, ModelInfo, Variable
+from bridge.fmu.vocab import DefaultExperiment, ModelInfo
 from bridge.plant.base import MODEL_FAILED_HINT, FloatArray, Plant
 from bridge.plant.system.check import check_system
 from bridge.plant.system.description import (
     Component,
+    Connection,
     Endpoint,
     SystemDescription,
     from_experiment,
@@ -31,6 +32,7 @@ from bridge.plant.system.description import (
 )
 from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
 from bridge.plant.system.master import Link, Master
+from bridge.plant.system.transform import Convert
 
 
 class RemoteComponents(Protocol):
@@ -83,7 +85,8 @@ class SystemPlant(Plant):
             n: self.plants[n].info if n in self.plants else component_info(c, self._remote, system.where)
             for n, c in system.components.items()
         }
-        self.warnings = check_system(system, self.infos)
+        self.couplings: dict[Connection, Convert | None] = {}
+        self.warnings = check_system(system, self.infos, self.couplings)
         self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
         loop = find_loop(system, self.feedthrough)
         if loop and system.max_iterations <= 1:
@@ -113,9 +116,10 @@ class SystemPlant(Plant):
         outs: dict[str, list[str]] = {n: [] for n in system.components}
         external = [split_name(n, system.components, "actions", where) for n in self.input_names]
         observed = [split_name(n, system.components, "observations", where) for n in self.output_names]
-        for name, info in self.infos.items():  # every output, for the per-component recording
+        for name, info in self.infos.items():  # every numeric output, for the per-component recording
             for var in info.by_causality("output"):
-                _add(outs, Endpoint(name, var.name))
+                for element in var.element_names() if var.is_numeric else ():  # String, Binary: not bound
+                    _add(outs, Endpoint(name, element))
         for c in system.connections:  # in the order a component's node serves them
             _add(outs, c.source)
             _add(ins, c.target)
@@ -127,20 +131,22 @@ class SystemPlant(Plant):
             plant.bind(ins[name], outs[name])
         self.links = [
             Link(c.source.component, outs[c.source.component].index(c.source.variable),
-                 c.target.component, ins[c.target.component].index(c.target.variable))
+                 c.target.component, ins[c.target.component].index(c.target.variable),
+                 self.couplings.get(c))
             for c in system.connections
         ]  # fmt: skip
         self._external = [(e.component, ins[e.component].index(e.variable)) for e in external]
         self._observed = [(e.component, outs[e.component].index(e.variable)) for e in observed]
-        self._start = {
-            n: np.array([_start(self.infos[n].variables[v]) for v in ins[n]], dtype=np.float64) for n in ins
-        }
+        self._start = {n: np.array([_start(self.infos[n], v) for v in ins[n]], dtype=np.float64) for n in ins}
         if system.algorithm == "gauss_seidel":
             order = gauss_seidel_order(system, self.feedthrough)
         else:  # order-free: components here step while those in nodes do, then nodes are awaited
             order = sorted(ins, key=lambda n: system.components[n].node is not None)
         self._plant_list = list(self.plants.values())
-        self.master = Master(system, self.plants, self.links, order, init_order(system, self.feedthrough))
+        through = [n for n, f in self.feedthrough.items() if f]
+        self.master = Master(
+            system, self.plants, self.links, order, init_order(system, self.feedthrough), settle=through
+        )
 
     # -- the plant interface -----------------------------------------------------------------------
     @property
@@ -285,9 +291,14 @@ def _add(names: dict[str, list[str]], end: Endpoint) -> None:
         names[end.component].append(end.variable)
 
 
-def _start(var: Variable) -> float:
+def _start(info: ModelInfo, name: str) -> float:
+    """The start value of a variable or of one element ``u[2]`` of an array (0 without one)."""
+    var, index = info.element(name)
+    start = var.start
+    if index is not None:
+        start = start[index] if isinstance(start, (list, tuple)) and index < len(start) else None
     try:
-        return float(var.start) if var.start is not None else 0.0
+        return float(start) if start is not None else 0.0
     except (TypeError, ValueError):
         return 0.0
 

@@ -1,0 +1,126 @@
+"""Progress bars that tell the truth: what ``train`` will really run and how fast, how far
+``evaluate`` is.
+
+SB3 runs whole rollouts, so ``--timesteps 3000`` with PPO's 2,048 steps per rollout trains 4,096
+steps; the bar counts the steps that will really run, says so when the figure was rounded up, and
+its rate is env steps per second of wall time (data collection and learning updates together).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import sys
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+from rich.console import Console
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TaskID,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
+
+def rounded_timesteps(model: Any, timesteps: int) -> tuple[int, str]:
+    """(the steps ``model.learn(timesteps)`` really runs, why) for SB3's whole rollouts."""
+    from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
+
+    n_envs = int(getattr(model, "n_envs", 1) or 1)
+    if isinstance(model, OnPolicyAlgorithm):
+        unit, what = model.n_steps * n_envs, f"rollouts of {model.n_steps:,} steps x {n_envs} envs"
+    else:
+        freq = getattr(model, "train_freq", None)
+        steps = freq.frequency if freq is not None and str(freq.unit.value) == "step" else 1
+        unit, what = steps * n_envs, f"collections of {steps:,} steps x {n_envs} envs"
+    return math.ceil(timesteps / unit) * unit, f"whole {what}"
+
+
+def announce(model: Any, timesteps: int) -> int:
+    """Say on stderr when SB3 will run more steps than asked; the steps it will run."""
+    really, why = rounded_timesteps(model, timesteps)
+    if really != timesteps:
+        print(f"training {really:,} steps: {timesteps:,} rounded up to {why}", file=sys.stderr)
+    return really
+
+
+def train_progress(total: int, console: Console | None = None) -> Any:
+    """An SB3 callback drawing a bar over the ``total`` steps that will really run: done/total,
+    env steps per second of wall time, elapsed, ETA (``.done``: the steps it saw)."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class TrainProgress(BaseCallback):  # type: ignore[misc]
+        """A bar over the steps that will really run: done/total, env steps/s of wall time, elapsed, ETA."""
+
+        def __init__(self, total: int, console: Console | None = None) -> None:
+            super().__init__()
+            self.total = total
+            self.done = 0
+            self._console = console or Console(stderr=True)
+            self._bar: Progress | None = None
+            self._task: TaskID | None = None
+            self._start_steps = 0
+            self._t0 = self._last = 0.0
+
+        def _on_training_start(self) -> None:
+            self._start_steps = int(self.model.num_timesteps)
+            self._t0 = self._last = time.perf_counter()
+            self._bar = Progress(
+                TextColumn("train"),
+                BarColumn(),
+                TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+                TextColumn("{task.fields[rate]}"),
+                TimeElapsedColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                console=self._console,
+            )
+            self._bar.start()
+            self._task = self._bar.add_task("train", total=self.total, rate="")
+
+        def _update(self) -> None:
+            assert self._bar is not None and self._task is not None
+            self.done = int(self.model.num_timesteps) - self._start_steps
+            wall = max(time.perf_counter() - self._t0, 1e-9)
+            self._bar.update(self._task, completed=self.done, rate=f"{self.done / wall:,.0f} env-steps/s")
+
+        def _on_step(self) -> bool:
+            now = time.perf_counter()
+            if now - self._last >= 0.2:
+                self._last = now
+                self._update()
+            return True
+
+        def _on_training_end(self) -> None:
+            if self._bar is not None:
+                self._update()
+                self._bar.stop()
+
+    return TrainProgress(total, console)
+
+
+@contextlib.contextmanager
+def episode_bar(console: Console | None = None) -> Iterator[Callable[[int, int], None]]:
+    """A bar over evaluation episodes: done/total, elapsed, ETA; yields ``progress(done, total)``."""
+    bar = Progress(
+        TextColumn("evaluate"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("episodes"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+        console=console or Console(stderr=True),
+    )
+    task = bar.add_task("evaluate", total=None)
+
+    def progress(done: int, total: int) -> None:
+        bar.update(task, completed=done, total=total)
+
+    with bar:
+        yield progress

@@ -1,0 +1,117 @@
+"""A node's Zenoh entities and its ROS view: declared together, torn down together.
+
+``FmuNode`` hands its handlers over and gets back the outputs and clock publishers; this module
+declares the action subscriber, the reset and info queryables, the client-token subscriber and
+the node's liveliness tokens (``alive``, and ``unhealthy`` once the FMU hangs), and the optional
+ROS view (``bridge.net.ros2.view``), whose requests it turns into the node's own calls.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from bridge.errors import BridgeError
+from bridge.net import protocol as proto
+from bridge.net.lease import Lease
+from bridge.net.requests import redact
+from bridge.net.ros2.view import RosView, RosViewSettings
+from bridge.net.transport import undeclare
+
+if TYPE_CHECKING:
+    from bridge.net.node import FmuNode
+
+_log = logging.getLogger(__name__)
+Handler = Callable[[Any], None]
+
+
+class NodeLink:
+    """The Zenoh entities of one node on ``session`` (closed with them when ``own_session``)."""
+
+    def __init__(
+        self,
+        session: Any,
+        keys: proto.Keys,
+        *,
+        own_session: bool,
+        on_action: Handler,
+        on_reset: Handler,
+        on_info: Handler,
+        lease: Lease,
+    ) -> None:
+        self.session, self.keys, self.own_session, self.lease = session, keys, own_session, lease
+        self.outputs = session.declare_publisher(keys.outputs)
+        self.clock = session.declare_publisher(keys.clock)
+        self.ros: RosView | None = None
+        self._unhealthy: Any = None
+        self._declared: list[Any] = [self.outputs, self.clock]
+        self._declared += [
+            session.declare_subscriber(keys.actions, on_action),
+            session.declare_queryable(keys.reset, on_reset, complete=True),
+            session.declare_queryable(keys.info, on_info, complete=True),
+            session.liveliness().declare_subscriber(keys.client(0), self._on_client_token),
+            session.liveliness().declare_token(keys.alive),
+        ]
+
+    def add_ros(self, node: FmuNode, settings: RosViewSettings) -> None:
+        """The node's ROS view: actions and a reset Trigger by name (anonymous, never holding)."""
+        self.ros = RosView(
+            self.session,
+            settings,
+            name=node.name,
+            output_names=node.output_names,
+            input_names=node.input_names,
+            on_actions=lambda values: ros_actions(node, values),
+            on_reset=lambda: ros_reset(node),
+            realtime=node.mode == "realtime",
+        )
+
+    def _on_client_token(self, sample: Any) -> None:
+        import zenoh
+
+        if sample.kind == zenoh.SampleKind.DELETE and self.lease.release_token(str(sample.key_expr)):
+            _log.info("node %s: the lease ended, its holder's session is gone", self.keys.node)
+
+    def unhealthy(self) -> None:
+        """Declare the ``unhealthy`` liveliness token (the FMU hung); it lives until the node ends."""
+        if self._unhealthy is None:
+            self._unhealthy = self.session.liveliness().declare_token(self.keys.unhealthy)
+
+    def close(self) -> None:
+        if self.ros is not None:
+            self.ros.close()
+        for entity in reversed([*self._declared, self._unhealthy]):
+            if entity is None:
+                continue
+            try:
+                undeclare(entity, attempts=20)
+            except Exception:
+                _log.debug("undeclare failed", exc_info=True)
+        if self.own_session:
+            self.session.close()
+
+
+def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
+    """Input values by name from the ROS view: held in real time, one sample each in lockstep."""
+    if node.lease.holder is not None:
+        node.counters["ros_rejected_not_holder"] += 1
+        return
+    current = node.current_inputs()
+    merged = [float(values.get(name, current[i])) for i, name in enumerate(node.input_names)]
+    if node.rules.inputs(merged) is not None:
+        node.counters["ros_rejected_out_of_range"] += 1
+        return
+    if not node.apply(merged):
+        node.counters["ros_rejected_unhealthy"] += 1
+
+
+def ros_reset(node: FmuNode) -> tuple[bool, str]:
+    refusal = node.lease.acquire(0, "", False)
+    if refusal is not None:
+        return False, f"reset refused: {refusal}"
+    try:
+        node.reset(dict(node.served.nominal), None, node.lockstep.episode + 1)
+    except BridgeError as exc:
+        return False, redact(f"reset failed: {exc}")
+    return True, f"reset to t0 (episode {node.lockstep.episode})"

@@ -1,0 +1,121 @@
+"""A node's request/reply side: the reset and info queries, and what ``info`` says.
+
+Every request is checked before use (``bridge.net.requests``): a reset may set only what the
+node serves (``bridge.net.served``), input values must be finite and inside their range,
+payloads have a size limit; anything else gets an error reply ``<code>: <what was wrong>``,
+and error texts carry no local paths. A reset from another client than the lease's holder is
+refused unless it takes the node over (``bridge.net.lease``).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from bridge.errors import BridgeError
+from bridge.fmu.vocab import summary_of
+from bridge.net import protocol as proto
+from bridge.net.requests import BadRequest, Refused, check_empty, parse_reset, redact
+
+if TYPE_CHECKING:
+    from bridge.net.node import FmuNode
+
+_log = logging.getLogger(__name__)
+
+
+def answer_reset(node: FmuNode, query: Any) -> None:
+    """Reply to a reset query: the step-0 OUTPUTS frame, or an error reply saying why not."""
+    try:
+        payload = query.payload.to_bytes() if query.payload is not None else b""
+        reply = checked_reset(node, payload)
+    except BadRequest as exc:
+        return _reply_err(node, query, "bad_request", str(exc))
+    except Refused as exc:
+        return _reply_err(node, query, exc.code, str(exc))
+    except BridgeError as exc:
+        return _reply_err(node, query, "failed", f"reset failed: {exc}")
+    except Exception as exc:  # never let a handler die: count it, log it, answer
+        _log.exception("node %s: a reset could not be handled", node.name)
+        return _reply_err(
+            node, query, "internal", f"the node could not handle the reset ({type(exc).__name__})"
+        )
+    query.reply(node.keys.reset, reply)
+    return None
+
+
+def checked_reset(node: FmuNode, payload: bytes) -> bytes:
+    """Parse and check a reset request, take or keep the lease, reset; the step-0 frame."""
+    request = parse_reset(payload)
+    values = node.rules.values(request.values)
+    if request.inputs is not None:
+        n = len(node.input_names)
+        if len(request.inputs) != n:
+            raise BadRequest(
+                f"reset request: {len(request.inputs)} inputs, expected {n} ({list(node.input_names)})"
+            )
+        reason = node.rules.inputs(request.inputs)
+        if reason is not None:
+            raise BadRequest(f"reset request: {reason}")
+    refusal = node.lease.acquire(request.client, request.zid, request.take_over)
+    if refusal is not None:
+        raise Refused("busy", refusal)
+    return node.reset(values, request.inputs, request.episode)
+
+
+def _reply_err(node: FmuNode, query: Any, code: str, message: str) -> None:
+    node.counters[f"reset_{code}"] += 1
+    query.reply_err(f"{code}: {redact(message)}".encode())
+
+
+def answer_info(node: FmuNode, query: Any) -> None:
+    try:
+        check_empty(query.payload.to_bytes() if query.payload is not None else None, "an info request")
+        query.reply(node.keys.info, proto.encode_json(describe(node)))
+    except BadRequest as exc:
+        node.counters["info_bad_request"] += 1
+        query.reply_err(f"bad_request: {exc}".encode())
+    except Exception as exc:
+        _log.exception("node %s: an info request could not be handled", node.name)
+        query.reply_err(f"internal: the node could not describe itself ({type(exc).__name__})".encode())
+
+
+def describe(node: FmuNode) -> dict[str, Any]:
+    """What ``fmu-bridge nodes`` and remote envs learn about ``node`` (its ``info`` reply)."""
+    t, state, served = node.timing, node.lockstep, node.served
+    return {
+        "node": node.name,
+        "mode": node.mode,
+        "rate": node.rate,
+        "pid": os.getpid(),
+        "experiment": served.title,
+        "version": served.version,
+        "fmu_sha256": node.checksum,
+        "step_size_s": t.step_size_s,
+        "steps_per_sample": t.steps_per_sample,
+        "sampling_time_s": t.sampling_time_s,
+        "start_time_s": t.start_time_s,
+        "input_names": list(node.input_names),
+        "output_names": list(node.output_names),
+        "input_range": [list(pair) for pair in zip(node.rules.low, node.rules.high)],
+        "episode": state.episode,
+        "step": state.step,
+        "time_s": node.plant.time_s,
+        "health": node.health,
+        "health_detail": node.health_detail,
+        "holder": node.lease.describe(),
+        "isolated": node.isolated,
+        "can_save_state": node.saved.available,
+        "save_state_refusal": node.saved.refusal or "",
+        "step_timeout_s": node.step_timeout_s,
+        "counters": dict(node.counters),
+        "model": _summary_without_paths(summary_of(node.info)),
+    }
+
+
+def _summary_without_paths(summary: dict[str, Any]) -> dict[str, Any]:
+    """The model summary for the network: the FMU's file name, not where it lives on this machine."""
+    if "path" in summary:
+        summary = {**summary, "path": Path(str(summary["path"])).name}
+    return summary

@@ -1,0 +1,141 @@
+/* One macro step of a system of in-process co-simulation FMUs in one native call.
+ *
+ * The same FMI calls as the Python master over each component's one-call native sample, in the same
+ * order and with the same arguments: for each component, one fmi2SetReal / fmi3SetFloat64 of its
+ * inputs, `steps` doStep calls at t = t0 + k*h (k its own integer step counter), one fmi2GetReal /
+ * fmi3GetFloat64 of its outputs. Connected inputs take their source's output value as it is (no
+ * transformation: connections with one are stepped by the Python master).
+ *
+ * Jacobi: every connected input is gathered from the outputs of t, all inputs checked finite, then
+ * the components step in order. Gauss-Seidel: each component gathers, checks and steps in order.
+ * Returns 0, or 1 + the position of the component that failed (its status in status[c]:
+ * MASTER_NONFINITE for an input that is NaN or infinite, which the Python path then reports; the
+ * FMI status of a failed doStep; MASTER_SET / MASTER_GET plus the status of a failed set or get).
+ * A component that asks to stop (MASTER_TERMINATED) does not stop the others.
+ */
+#include <math.h>
+#include <stddef.h>
+
+#include "fmi2FunctionTypes.h"
+#include "fmi3FunctionTypes.h"
+
+#define MASTER_OK 0
+#define MASTER_WARNING 1
+#define MASTER_DISCARD 2
+#define MASTER_TERMINATED 5
+#define MASTER_SET 16
+#define MASTER_GET 32
+#define MASTER_NONFINITE 64
+
+typedef struct {
+    int major;          /* 2 or 3 */
+    void* set_real;     /* fmi2SetReal or fmi3SetFloat64 */
+    void* get_real;     /* fmi2GetReal or fmi3GetFloat64 */
+    void* do_step;      /* fmi2DoStep or fmi3DoStep */
+    void* bool_status;  /* fmi2GetBooleanStatus (FMI 2.0 only) */
+    void* component;
+    int n_in;
+    const unsigned int* in_vr;
+    double* u;
+    int n_out;
+    const unsigned int* out_vr;
+    double* y;
+    double t0;
+    double h;
+    int steps;
+    long long k;
+} Component;
+
+typedef struct {
+    int source;  /* position of the source component */
+    int i;       /* its output index */
+    int target;
+    int j;       /* the target's input index */
+} Link;
+
+static int do_steps2(Component* c) {
+    fmi2DoStepTYPE* do_step = (fmi2DoStepTYPE*)c->do_step;
+    for (int s = 0; s < c->steps; s++) {
+        int st = do_step(c->component, c->t0 + (double)c->k * c->h, c->h, fmi2True);
+        if (st > MASTER_WARNING) {
+            fmi2Boolean stop = fmi2False;
+            fmi2GetBooleanStatusTYPE* flag = (fmi2GetBooleanStatusTYPE*)c->bool_status;
+            if (st == MASTER_DISCARD && flag != NULL &&
+                flag(c->component, fmi2Terminated, &stop) <= MASTER_WARNING && stop) {
+                c->k += 1;
+                return MASTER_TERMINATED;
+            }
+            return st;
+        }
+        c->k += 1;
+    }
+    return MASTER_OK;
+}
+
+static int do_steps3(Component* c) {
+    fmi3DoStepTYPE* do_step = (fmi3DoStepTYPE*)c->do_step;
+    for (int s = 0; s < c->steps; s++) {
+        fmi3Boolean event = fmi3False, stop = fmi3False, early = fmi3False;
+        fmi3Float64 last = 0.0;
+        int st = do_step(c->component, c->t0 + (double)c->k * c->h, c->h, fmi3True, &event, &stop, &early, &last);
+        if (st > MASTER_WARNING) return st;
+        c->k += 1;
+        if (stop) return MASTER_TERMINATED;
+    }
+    return MASTER_OK;
+}
+
+static int sample(Component* c) {
+    int st;
+    if (c->n_in > 0) {
+        st = c->major == 3 ? ((fmi3SetFloat64TYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u, c->n_in)
+                           : ((fmi2SetRealTYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u);
+        if (st > MASTER_WARNING) return MASTER_SET + st;
+    }
+    int result = c->major == 3 ? do_steps3(c) : do_steps2(c);
+    if (result != MASTER_OK && result != MASTER_TERMINATED) return result;
+    st = c->major == 3 ? ((fmi3GetFloat64TYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y, c->n_out)
+                       : ((fmi2GetRealTYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y);
+    if (st > MASTER_WARNING) return MASTER_GET + st;
+    return result;
+}
+
+static void gather(Component* comps, const Link* links, int n_links, int target) {
+    for (int l = 0; l < n_links; l++) {
+        if (target < 0 || links[l].target == target) {
+            comps[links[l].target].u[links[l].j] = comps[links[l].source].y[links[l].i];
+        }
+    }
+}
+
+static int finite_inputs(const Component* c) {
+    for (int j = 0; j < c->n_in; j++) {
+        if (!isfinite(c->u[j])) return 0;
+    }
+    return 1;
+}
+
+int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status) {
+    for (int c = 0; c < n; c++) status[c] = MASTER_OK;
+    if (!gauss_seidel) {
+        gather(comps, links, n_links, -1);
+        for (int c = 0; c < n; c++) {
+            if (!finite_inputs(&comps[c])) {
+                status[c] = MASTER_NONFINITE;
+                return c + 1;
+            }
+        }
+    }
+    for (int c = 0; c < n; c++) {
+        if (gauss_seidel) {
+            gather(comps, links, n_links, c);
+            if (!finite_inputs(&comps[c])) {
+                status[c] = MASTER_NONFINITE;
+                return c + 1;
+            }
+        }
+        status[c] = sample(&comps[c]);
+        if (status[c] > MASTER_WARNING && status[c] != MASTER_TERMINATED) return c + 1;
+    }
+    return 0;
+}

@@ -1,0 +1,85 @@
+"""A baseline deployed like a trained agent (``agent run --runtime baseline``): the deployed agent's
+inputs are the baseline's, step by step, and it keeps the cart-pole up for a whole episode."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
+from agents.deploy_io import AgentNode
+from agents.policies import make_policy
+from agents.runtime import load_policy
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError
+from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
+from tests.conftest import Loopback, node_process
+
+CARTPOLE = example_experiment("cartpole_continuous")
+
+
+def test_deployed_lqr_acts_like_the_evaluated_one_and_balances() -> None:
+    experiment, _ = deployment_experiment(Path("lqr"), CARTPOLE)
+    policy = load_policy(Path("lqr"), "baseline", experiment)
+    sent: list[list[float]] = []
+    agent = DeployedAgent(
+        policy, experiment, model_info_for(experiment, CARTPOLE.parent, None),
+        DeploySettings(runtime="baseline"), lambda inputs, step: sent.append(inputs),
+    )  # fmt: skip
+    reference = make_policy("lqr", {"lqr": experiment.evaluation.baselines["lqr"].settings()})
+    env = FmuEnv(experiment)
+    try:
+        obs, info = env.reset(seed=2)
+        reference.reset(env.task, 2)
+        for step in range(500):
+            expected = reference.act(obs, env.task.signal_dict())
+            inputs = agent.observe(info["outputs"].tolist(), episode=1, step=step)
+            assert inputs[0] == pytest.approx(float(env.task.action_mapping.half[0] * expected[0]), abs=1e-5)
+            obs, _, terminated, truncated, info = env.step(expected)
+            assert not terminated
+        assert truncated and len(sent) == 500
+        assert abs(float(info["outputs"][2])) < 0.05  # theta: the pole is up at the end
+    finally:
+        agent.close()
+        env.close()
+
+
+def test_baseline_runtime_needs_a_baseline_of_the_experiment() -> None:
+    experiment, _ = deployment_experiment(Path("lqr"), CARTPOLE)
+    with pytest.raises(ConfigError, match=r"not in evaluation\.baselines"):
+        load_policy(Path("mpc"), "baseline", experiment)
+
+
+def test_lqr_over_zenoh_keeps_a_cartpole_node_up_for_a_whole_episode(loopback: Loopback) -> None:
+    """The deployed path of ``agent run lqr --runtime baseline``: a real node in lockstep on loopback."""
+    settings = DeploySettings(
+        transport="zenoh", node="plant", prefix=loopback.prefix, timeout_s=60.0, runtime="baseline"
+    )
+    with node_process(CARTPOLE, "plant", loopback, "--mode", "lockstep"):
+        agent = AgentNode(Path("lqr"), CARTPOLE, settings, session=loopback.session)
+        frames: list[proto.Frame] = []
+        sub = loopback.session.declare_subscriber(  # type: ignore[attr-defined]
+            proto.Keys(loopback.prefix, "plant").outputs,
+            lambda s: frames.append(proto.decode(s.payload.to_bytes())),
+        )
+        try:
+            for _ in loopback.session.get(  # type: ignore[attr-defined]
+                proto.Keys(loopback.prefix, "plant").reset,
+                payload=proto.encode_json({"episode": 3, "values": {"theta0": 0.05}}),
+            ):
+                pass
+            deadline = time.monotonic() + 120
+            while len([f for f in frames if f.episode == 3]) < 500 and time.monotonic() < deadline:
+                time.sleep(0.05)
+        finally:
+            agent.close()
+            sub.undeclare()
+    episode = [f for f in frames if f.episode == 3 and f.kind == proto.OUTPUTS][:500]
+    assert len(episode) == 500 and [f.step for f in episode] == list(range(500))
+    theta = np.array([f.values[2] for f in episode])
+    assert np.abs(theta).max() < 0.06  # from 0.05 rad the pole is brought up and kept there
+    assert np.abs(theta[-100:]).max() < 0.01

@@ -1,0 +1,107 @@
+"""The native macro step equals the Python master bit for bit, and steps aside where it cannot serve."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from bridge.experiment.config import parse_experiment
+from bridge.plant.system.plant import SystemPlant
+
+EXAMPLE = Path(__file__).parents[2] / "examples" / "dcmotor_system.yaml"
+OUTPUTS = ["load.omega", "motor.omega", "motor.current", "controller.u", "load.torque"]
+
+
+def example(tmp_path: Path, **system: Any) -> Any:
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["system"].update(system)
+    return parse_experiment(data, source=tmp_path / "system.yaml")
+
+
+def run(exp: Any, steps: int = 150) -> tuple[np.ndarray, bool]:
+    """Observations over ``steps`` samples with a varying set-point, and whether the native step ran."""
+    with SystemPlant(exp) as plant:
+        plant.bind(["controller.reference"], OUTPUTS)
+        rows = [plant.reset({}, [0.0])]
+        rows += [plant.step([20.0 + 10.0 * np.sin(0.05 * i)]) for i in range(steps)]
+        rows.append(np.array(list(plant.component_values())))
+        native = plant.master.native is not None
+    return np.array(rows[:-1]), native
+
+
+@pytest.mark.parametrize("algorithm", ["jacobi", "gauss_seidel"])
+def test_the_native_master_equals_the_python_master_bit_for_bit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, algorithm: str
+) -> None:
+    """The example system: three FMUs, the motor multi-rate (two FMU steps per macro step)."""
+    exp = example(tmp_path, algorithm=algorithm)
+    native, used = run(exp)
+    assert used
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")  # the Python master over native samples
+    python, used = run(exp)
+    assert not used
+    np.testing.assert_array_equal(native, python)
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE", "1")  # the Python master and Python FMI calls
+    np.testing.assert_array_equal(native, run(exp)[0])
+    assert np.max(np.abs(native[:, 0])) > 10.0
+
+
+def test_the_python_master_serves_what_the_native_one_cannot(tmp_path: Path) -> None:
+    assert not run(example(tmp_path, iteration={"max_iterations": 5}), steps=3)[1]
+    assert not run(example(tmp_path, feedthrough_outputs="updated"), steps=3)[1]
+
+
+def cartpole(tmp_path: Path) -> Any:
+    data = {
+        "model": {"step_size": 0.02, "episode_duration": 10.0},
+        "system": {
+            "components": {
+                "gain": {"fmu": "example:feedthrough"},
+                "cart": {"fmu": "example:cartpole", "parameters": {"track_limit": 0.5}},
+            },
+            "connections": ["gain.y -> cart.force"],
+        },
+        "actions": {"inputs": ["gain.u"], "low": {"gain.u": -10.0}, "high": {"gain.u": 10.0}},
+        "observations": {"outputs": ["cart.x", "cart.theta"]},
+        "reward": {"terms": [{"alive": 1.0}]},
+    }
+    return parse_experiment(data, source=tmp_path / "cart.yaml")
+
+
+def push(exp: Any, force: float) -> tuple[list[np.ndarray], bool, float, bool]:
+    with SystemPlant(exp) as plant:
+        plant.bind(["gain.u"], ["cart.x", "cart.theta"])
+        rows = [plant.reset({}, [force])]
+        while not plant.terminated and plant.time_s < 5.0:
+            rows.append(plant.step([force]))
+        return rows, plant.terminated, plant.time_s, plant.master.native is not None
+
+
+def test_a_component_that_asks_to_stop_stops_the_system_alike(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The cart leaves its track (terminate request): the same step, time and values both ways."""
+    rows, terminated, t, used = push(cartpole(tmp_path), 10.0)
+    assert used and terminated and 0.2 < t < 5.0
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    python_rows, python_terminated, python_t, used = push(cartpole(tmp_path), 10.0)
+    assert not used and python_terminated and python_t == t
+    np.testing.assert_array_equal(np.array(rows), np.array(python_rows))
+
+
+def test_a_non_finite_input_is_refused_as_in_python(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    def fail() -> str:
+        with SystemPlant(cartpole(tmp_path)) as plant:
+            plant.bind(["gain.u"], ["cart.x"])
+            plant.reset({}, [0.0])
+            with pytest.raises(Exception) as info:
+                plant.step([float("nan")])
+            return f"{type(info.value).__name__}: {info.value}"
+
+    native = fail()
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    assert native == fail() and "nan" in native.lower()

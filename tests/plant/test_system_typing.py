@@ -1,0 +1,140 @@
+"""Initialisation and typing of systems: algebraic loops at t0, String/Binary outputs, FMI 3.0 arrays."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from bridge.errors import ConfigError
+from bridge.experiment.config import parse_experiment
+from bridge.plant.system.plant import SystemPlant
+
+
+def experiment(tmp_path: Path, components: dict[str, Any], connections: list[str], **extra: Any) -> Any:
+    data: dict[str, Any] = {
+        "model": {"step_size": 0.1, "episode_duration": 1.0},
+        "system": {"components": components, "connections": connections, **extra.pop("system", {})},
+        "observations": {"outputs": extra.pop("outputs")},
+        "reward": {"terms": [{"alive": 0.0}]},
+        **extra,
+    }
+    return parse_experiment(data, source=tmp_path / "system.yaml")
+
+
+def controllers(ka: float, kb: float, ra: float, rb: float) -> dict[str, Any]:
+    """Two proportional controllers, each measuring the other's output: u_a = ka (ra - u_b), ..."""
+    return {
+        "a": {"fmu": "example:pi_controller", "parameters": {"kp": ka, "ki": 0.0, "reference": ra}},
+        "b": {"fmu": "example:pi_controller", "parameters": {"kp": kb, "ki": 0.0, "reference": rb}},
+    }
+
+
+LOOP = ["a.u -> b.measurement", "b.u -> a.measurement"]
+
+
+@pytest.mark.parametrize(("ka", "kb", "ra", "rb"), [(0.5, 0.5, 1.0, 0.0), (0.8, -0.6, 2.0, 3.0)])
+def test_an_algebraic_loop_starts_on_its_closed_form_solution(
+    tmp_path: Path, ka: float, kb: float, ra: float, rb: float
+) -> None:
+    """u_a = ka (ra - kb rb) / (1 - ka kb) and u_b = kb (rb - u_a) solve the loop at t0."""
+    iteration = {"max_iterations": 100, "tolerance": 1e-13}
+    exp = experiment(
+        tmp_path, controllers(ka, kb, ra, rb), LOOP, outputs=["a.u", "b.u"], system={"iteration": iteration}
+    )
+    ua = ka * (ra - kb * rb) / (1 - ka * kb)
+    ub = kb * (rb - ua)
+    with SystemPlant(exp) as plant:
+        plant.bind([], ["a.u", "b.u"])
+        start = plant.reset({}, None)
+        np.testing.assert_allclose(start, [ua, ub], rtol=1e-11)
+        np.testing.assert_allclose(plant.step(None), [ua, ub], rtol=1e-11)  # and stays there
+        again = plant.reset({}, None)
+    np.testing.assert_array_equal(start, again)
+
+
+def test_an_algebraic_loop_without_iteration_is_refused_with_its_cycle(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError) as info:
+        SystemPlant(experiment(tmp_path, controllers(0.5, 0.5, 1.0, 0.0), LOOP, outputs=["a.u"]))
+    assert "algebraic loop: a.u -> b.measurement, b.u -> a.measurement" in str(info.value)
+
+
+def test_string_and_binary_outputs_do_not_break_a_system(tmp_path: Path) -> None:
+    """typed has a String output, typed3 a Binary one and a 2-D array: none read, all run."""
+    components = {
+        "t": {"fmu": "example:typed:2.0"},
+        "t3": {"fmu": "example:typed3:3.0"},
+    }
+    exp = experiment(
+        tmp_path,
+        components,
+        ["t.real_out -> t3.u[2]"],
+        outputs=["t3.y[1,2]", "t3.y[1,1]"],
+        actions={"inputs": ["t.real_in"], "low": {"t.real_in": -5.0}, "high": {"t.real_in": 5.0}},
+    )
+    with SystemPlant(exp) as plant:
+        plant.bind(["t.real_in"], ["t3.y[1,2]", "t3.y[1,1]"])
+        plant.reset({}, [1.5])
+        plant.step([1.5])  # t copies real_in to real_out
+        y12, y11 = plant.step([1.5])  # t3 got it in u[2] and holds it in y[1,2]
+        recorded = plant.component_outputs()
+    assert (y12, y11) == (1.5, 1.0)  # u[1] keeps its start value 1.0
+    assert "string_out" not in recorded["t"] and "real_out" in recorded["t"]
+    assert "data_out" not in recorded["t3"] and recorded["t3"]["y[1,2]"] == 1.5
+
+
+def test_a_string_connection_is_refused(tmp_path: Path) -> None:
+    components = {"a": {"fmu": "example:typed:2.0"}, "b": {"fmu": "example:typed:2.0"}}
+    with pytest.raises(ConfigError) as info:
+        SystemPlant(experiment(tmp_path, components, ["a.string_out -> b.string_in"], outputs=["a.real_out"]))
+    message = str(info.value)
+    assert "a.string_out is a String variable" in message and "not connected" in message
+
+
+def test_a_scalar_connected_to_an_array_is_refused_with_both_shapes(tmp_path: Path) -> None:
+    components = {"t": {"fmu": "example:typed:2.0"}, "t3": {"fmu": "example:typed3:3.0"}}
+    with pytest.raises(ConfigError) as info:
+        SystemPlant(experiment(tmp_path, components, ["t.real_out -> t3.u"], outputs=["t.real_out"]))
+    message = str(info.value)
+    for text in ("t.real_out is a scalar", "t3.u is an array of shape [3]", "t3.u[1]", "system.yaml"):
+        assert text in message, message
+
+
+def test_an_element_out_of_range_is_refused(tmp_path: Path) -> None:
+    components = {"t": {"fmu": "example:typed:2.0"}, "t3": {"fmu": "example:typed3:3.0"}}
+    with pytest.raises(ConfigError, match=r"index out of range for array u\[3\]"):
+        SystemPlant(experiment(tmp_path, components, ["t.real_out -> t3.u[4]"], outputs=["t.real_out"]))
+
+
+def motor_controller(tmp_path: Path, mode: str) -> Any:
+    components = {
+        "motor": {"fmu": "example:dcmotor", "feedthrough": False},
+        "ctrl": {"fmu": "example:pi_controller", "parameters": {"kp": 0.5, "ki": 0.0, "reference": 10.0}},
+    }
+    return experiment(
+        tmp_path,
+        components,
+        ["motor.omega -> ctrl.measurement", "ctrl.u -> motor.voltage"],
+        outputs=["motor.omega", "ctrl.u"],
+        system={"feedthrough_outputs": mode},
+        model={"step_size": 0.001, "episode_duration": 1.0},
+    )
+
+
+def run_motor_controller(tmp_path: Path, mode: str) -> np.ndarray:
+    with SystemPlant(motor_controller(tmp_path, mode)) as plant:
+        plant.bind([], ["motor.omega", "ctrl.u"])
+        rows = [plant.reset({}, None)] + [plant.step(None) for _ in range(200)]
+    return np.array(rows)
+
+
+def test_updated_feedthrough_outputs_are_of_one_instant(tmp_path: Path) -> None:
+    """The controller's u = kp (reference - omega): updated, it is computed from omega at t + H."""
+    updated = run_motor_controller(tmp_path, "updated")
+    np.testing.assert_allclose(updated[:, 1], 0.5 * (10.0 - updated[:, 0]), rtol=0, atol=1e-12)
+    held = run_motor_controller(tmp_path, "held")  # the default: u from omega at t, held over the step
+    np.testing.assert_allclose(held[1:, 1], 0.5 * (10.0 - held[:-1, 0]), rtol=0, atol=1e-12)
+    assert np.max(np.abs(held[:, 1] - 0.5 * (10.0 - held[:, 0]))) > 1e-3
+    assert np.max(np.abs(updated[:, 0])) > 1.0

@@ -1,0 +1,204 @@
+"""Real ROS 2 (Jazzy's rclpy with Fast DDS, from PyPI) in the tests.
+
+Every test here runs in a random ROS domain with discovery kept on this machine, and looks at
+fmu-bridge from ``probe.py``: a separate plain-rclpy process that imports nothing of the project.
+Where rclpy is missing the tests skip with the install line; with ``FMU_BRIDGE_REQUIRE_ROS=1``
+(.ci/ros) they fail instead.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from bridge.net.ros2.rclpy_backend import INSTALL_HINT
+
+PROBE = Path(__file__).parent / "probe.py"
+INSTALL = INSTALL_HINT  # pip install 'fmu-bridge[ros]' ...
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    here = Path(__file__).parent
+    for item in items:
+        if here in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.ros)
+            item.add_marker(pytest.mark.integration)
+
+
+def rclpy_installed() -> bool:
+    return all(importlib.util.find_spec(m) is not None for m in ("rclpy", "sensor_msgs", "std_srvs"))
+
+
+@pytest.fixture(autouse=True)
+def ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """A random ROS_DOMAIN_ID for this test and every process it starts; discovery on localhost."""
+    if not rclpy_installed():
+        message = f"ROS 2 (rclpy) is not installed; install it with: {INSTALL}"
+        if os.environ.get("FMU_BRIDGE_REQUIRE_ROS") == "1":
+            pytest.fail(message)
+        pytest.skip(message)
+    domain = random.SystemRandom().randint(1, 100)
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain))
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
+    monkeypatch.setenv("PYTHONUNBUFFERED", "1")
+    return domain
+
+
+class Probe:
+    """The plain-rclpy process: ``ask(op, **fields)`` sends a command and returns its answer."""
+
+    def __init__(self, env: dict[str, str]) -> None:
+        self.process = subprocess.Popen(
+            [sys.executable, str(PROBE)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        first = self._line(60.0)
+        assert first == {"ready": True}, first
+
+    def _line(self, timeout_s: float) -> Any:
+        assert self.process.stdout is not None
+        result: list[str] = []
+        reader = threading.Thread(target=lambda: result.append(self.process.stdout.readline()))  # type: ignore[union-attr]
+        reader.daemon = True
+        reader.start()
+        reader.join(timeout_s)
+        if not result or not result[0]:
+            self.process.kill()
+            _, err = self.process.communicate(timeout=5)
+            pytest.fail(f"the rclpy probe did not answer within {timeout_s} s:\n{err}")
+        return json.loads(result[0])
+
+    def ask(self, op: str, timeout_s: float = 60.0, **fields: Any) -> Any:
+        assert self.process.stdin is not None
+        self.process.stdin.write(json.dumps({"op": op, **fields}) + "\n")
+        self.process.stdin.flush()
+        answer = self._line(timeout_s)
+        if "error" in answer:
+            pytest.fail(f"probe {op}: {answer['error']}")
+        return answer["ok"]
+
+    def wait(self, probe: Any, timeout_s: float = 20.0, what: str = "condition") -> Any:
+        """Ask until ``probe()`` returns something true."""
+        deadline = time.monotonic() + timeout_s
+        value = None
+        while time.monotonic() < deadline:
+            value = probe()
+            if value:
+                return value
+            time.sleep(0.1)
+        pytest.fail(f"{what} not met within {timeout_s} s (last: {value!r})")
+
+    def close(self) -> None:
+        if self.process.poll() is None:
+            assert self.process.stdin is not None
+            with contextlib.suppress(OSError):
+                self.process.stdin.write('{"op": "quit"}\n')
+                self.process.stdin.flush()
+            try:
+                self.process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+                self.process.wait(timeout=5)
+        for stream in (self.process.stdin, self.process.stdout, self.process.stderr):
+            if stream is not None:
+                stream.close()
+
+
+@pytest.fixture
+def probe(ros_domain: int) -> Iterator[Probe]:
+    p = Probe(dict(os.environ))
+    try:
+        yield p
+    finally:
+        p.close()
+
+
+class Command:
+    """A ``fmu-bridge`` subprocess whose output is read on a thread (never blocks on a full pipe)."""
+
+    def __init__(self, args: list[str], env: dict[str, str] | None = None) -> None:
+        self.args = args
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "bridge.cli", *args],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env or dict(os.environ),
+        )
+        self.lines: list[str] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.process.stdout is not None
+        for line in self.process.stdout:
+            self.lines.append(line)
+
+    @property
+    def name(self) -> str:
+        return "fmu-bridge " + " ".join(self.args)
+
+    @property
+    def output(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, text: str, timeout_s: float = 60.0) -> None:
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if text in self.output:
+                return
+            if self.process.poll() is not None:
+                self._reader.join(5)
+                pytest.fail(f"`{self.name}` exited {self.process.returncode}:\n{self.output}")
+            time.sleep(0.05)
+        pytest.fail(f"`{self.name}` did not print {text!r} in {timeout_s} s:\n{self.output}")
+
+    def stop(self, sig: int = signal.SIGTERM, timeout_s: float = 10.0) -> float:
+        """Send ``sig``; the seconds until the process exited (it is killed after ``timeout_s``)."""
+        if self.process.poll() is not None:
+            return 0.0
+        start = time.monotonic()
+        self.process.send_signal(sig)
+        try:
+            self.process.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            self.process.wait(timeout=5)
+        elapsed = time.monotonic() - start
+        self._reader.join(5)
+        return elapsed
+
+    def close(self) -> None:
+        self.stop(signal.SIGKILL if self.process.poll() is None else signal.SIGTERM)
+        if self.process.stdout is not None:
+            self.process.stdout.close()
+
+
+@contextlib.contextmanager
+def command(*args: str, ready: str = "serving", timeout_s: float = 90.0) -> Iterator[Command]:
+    """Start ``fmu-bridge ARGS``, wait for ``ready`` in its output, kill it at the end."""
+    cmd = Command(list(args))
+    try:
+        if ready:
+            cmd.wait_for(ready, timeout_s)
+        yield cmd
+    finally:
+        cmd.close()

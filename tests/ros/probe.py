@@ -1,0 +1,260 @@
+"""A plain rclpy process that looks at the ROS graph the way any ROS 2 user's node would.
+
+It imports rclpy and message packages only (nothing of fmu-bridge), reads one JSON command per
+line on stdin and answers one JSON line on stdout. The tests drive it through ``tests/ros/conftest.py``.
+Its domain is ``ROS_DOMAIN_ID`` of its environment.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+import threading
+import time
+from typing import Any
+
+import rclpy
+from lifecycle_msgs.msg import Transition
+from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+TYPES: dict[str, Any] = {
+    "sensor_msgs/msg/JointState": JointState,
+    "rosgraph_msgs/msg/Clock": Clock,
+    "std_msgs/msg/Float64": Float64,
+}
+
+
+def stamp_ns(stamp: Any) -> int:
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def as_dict(message: Any) -> dict[str, Any]:
+    if isinstance(message, JointState):
+        return {
+            "stamp_ns": stamp_ns(message.header.stamp),
+            "name": list(message.name),
+            "position": list(message.position),
+        }
+    if isinstance(message, Clock):
+        return {"stamp_ns": stamp_ns(message.clock)}
+    if isinstance(message, Float64):
+        return {"data": message.data}
+    raise TypeError(type(message))
+
+
+def qos(command: dict[str, Any]) -> QoSProfile:
+    reliability = (
+        ReliabilityPolicy.BEST_EFFORT
+        if command.get("reliability") == "best_effort"
+        else ReliabilityPolicy.RELIABLE
+    )
+    if command.get("keep_all"):
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=reliability)
+    return QoSProfile(depth=int(command.get("depth", 10)), reliability=reliability)
+
+
+class Probe:
+    def __init__(self) -> None:
+        rclpy.init(args=[])
+        self.node = rclpy.create_node("probe")
+        self.lock = threading.Lock()
+        self.received: dict[str, list[dict[str, Any]]] = {}
+        self.subscriptions: dict[str, Any] = {}
+        self.publishers: dict[str, Any] = {}
+        self.executor = MultiThreadedExecutor(num_threads=2)
+        self.executor.add_node(self.node)
+        self.thread = threading.Thread(target=self.spin, daemon=True)
+        self.thread.start()
+
+    def spin(self) -> None:
+        with contextlib.suppress(ExternalShutdownException):
+            self.executor.spin()
+
+    # -- the graph --------------------------------------------------------------------------------
+    def op_nodes(self, command: dict[str, Any]) -> Any:
+        return [f"{ns.rstrip('/')}/{name}" for name, ns in self.node.get_node_names_and_namespaces()]
+
+    def op_node_info(self, command: dict[str, Any]) -> Any:
+        name, ns = command["name"], command.get("namespace", "/")
+        return {
+            "publishers": dict(self.node.get_publisher_names_and_types_by_node(name, ns)),
+            "subscriptions": dict(self.node.get_subscriber_names_and_types_by_node(name, ns)),
+            "services": dict(self.node.get_service_names_and_types_by_node(name, ns)),
+        }
+
+    def op_topic_info(self, command: dict[str, Any]) -> Any:
+        kind = command.get("kind", "publishers")
+        getter = (
+            self.node.get_publishers_info_by_topic
+            if kind == "publishers"
+            else self.node.get_subscriptions_info_by_topic
+        )
+        out = []
+        for info in getter(command["topic"]):
+            profile = info.qos_profile
+            out.append(
+                {
+                    "node": f"{info.node_namespace.rstrip('/')}/{info.node_name}",
+                    "type": info.topic_type,
+                    "type_hash": str(info.topic_type_hash),
+                    "reliability": profile.reliability.name.lower(),
+                    "durability": profile.durability.name.lower(),
+                    "history": profile.history.name.lower(),
+                    "depth": profile.depth,
+                }
+            )
+        return out
+
+    # -- topics -----------------------------------------------------------------------------------
+    def op_subscribe(self, command: dict[str, Any]) -> Any:
+        key, topic = command["id"], command["topic"]
+        cls = TYPES[command["type"]]
+        with self.lock:
+            self.received[key] = []
+
+        def on_message(message: Any) -> None:
+            entry = {"t": time.monotonic(), **as_dict(message)}
+            with self.lock:
+                self.received[key].append(entry)
+
+        profile = qos(command)
+        if command.get("transient_local"):
+            profile.durability = DurabilityPolicy.TRANSIENT_LOCAL
+        self.subscriptions[key] = self.node.create_subscription(cls, topic, on_message, profile)
+        return True
+
+    def op_wait_count(self, command: dict[str, Any]) -> Any:
+        key, count = command["id"], int(command["count"])
+        deadline = time.monotonic() + float(command.get("timeout", 20.0))
+        while time.monotonic() < deadline:
+            with self.lock:
+                if len(self.received[key]) >= count:
+                    return list(self.received[key])
+            time.sleep(0.01)
+        with self.lock:
+            return {"timeout": True, "messages": list(self.received[key])}
+
+    def op_take(self, command: dict[str, Any]) -> Any:
+        with self.lock:
+            messages = list(self.received[command["id"]])
+            if command.get("clear", True):
+                self.received[command["id"]].clear()
+        return messages
+
+    def op_wait_subscribers(self, command: dict[str, Any]) -> Any:
+        deadline = time.monotonic() + float(command.get("timeout", 20.0))
+        while time.monotonic() < deadline:
+            if self.node.count_subscribers(command["topic"]) >= int(command.get("count", 1)):
+                return True
+            time.sleep(0.02)
+        return False
+
+    def op_publish(self, command: dict[str, Any]) -> Any:
+        topic, type_name = command["topic"], command["type"]
+        key = f"{topic}|{type_name}|{command.get('depth', 10)}"
+        if key not in self.publishers:
+            self.publishers[key] = self.node.create_publisher(TYPES[type_name], topic, qos(command))
+        publisher = self.publishers[key]
+        if command.get("wait_subscribers", True):
+            deadline = time.monotonic() + 20.0
+            while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+                time.sleep(0.02)
+        for message in command["messages"]:
+            publisher.publish(self.message(type_name, message))
+        return len(command["messages"])
+
+    @staticmethod
+    def message(type_name: str, fields: dict[str, Any]) -> Any:
+        if type_name == "sensor_msgs/msg/JointState":
+            message = JointState()
+            ns = int(fields.get("stamp_ns", 0))
+            message.header.stamp.sec, message.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+            message.name = list(fields["name"])
+            message.position = [float(v) for v in fields["position"]]
+            return message
+        if type_name == "rosgraph_msgs/msg/Clock":
+            message = Clock()
+            message.clock.sec, message.clock.nanosec = divmod(int(fields["stamp_ns"]), 1_000_000_000)
+            return message
+        if type_name == "std_msgs/msg/Float64":
+            return Float64(data=float(fields["data"]))
+        raise TypeError(type_name)
+
+    # -- services ---------------------------------------------------------------------------------
+    def _call(self, srv: Any, name: str, request: Any, timeout: float) -> Any:
+        client = self.node.create_client(srv, name)
+        try:
+            if not client.wait_for_service(timeout_sec=timeout):
+                return {"error": f"service {name} not available"}
+            future = client.call_async(request)
+            deadline = time.monotonic() + timeout
+            while not future.done() and time.monotonic() < deadline:
+                time.sleep(0.01)
+            if not future.done():
+                return {"error": f"service {name} did not answer"}
+            return future.result()
+        finally:
+            self.node.destroy_client(client)
+
+    def op_trigger(self, command: dict[str, Any]) -> Any:
+        answer = self._call(Trigger, command["service"], Trigger.Request(), command.get("timeout", 20.0))
+        if isinstance(answer, dict):
+            return answer
+        return {"success": answer.success, "message": answer.message}
+
+    def op_lifecycle_get(self, command: dict[str, Any]) -> Any:
+        answer = self._call(
+            GetState, f"{command['node']}/get_state", GetState.Request(), command.get("timeout", 20.0)
+        )
+        if isinstance(answer, dict):
+            return answer
+        return {"id": answer.current_state.id, "label": answer.current_state.label}
+
+    def op_lifecycle_change(self, command: dict[str, Any]) -> Any:
+        ids = {
+            "configure": Transition.TRANSITION_CONFIGURE,
+            "activate": Transition.TRANSITION_ACTIVATE,
+            "deactivate": Transition.TRANSITION_DEACTIVATE,
+            "cleanup": Transition.TRANSITION_CLEANUP,
+            "shutdown": Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+        }
+        request = ChangeState.Request()
+        request.transition.id = ids[command["transition"]]
+        answer = self._call(
+            ChangeState, f"{command['node']}/change_state", request, command.get("timeout", 30.0)
+        )
+        if isinstance(answer, dict):
+            return answer
+        return {"success": answer.success}
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown()
+
+
+def main() -> None:
+    probe = Probe()
+    print(json.dumps({"ready": True}), flush=True)
+    for line in sys.stdin:
+        command = json.loads(line)
+        if command["op"] == "quit":
+            break
+        try:
+            result: Any = getattr(probe, f"op_{command['op']}")(command)
+            answer = {"ok": result}
+        except Exception as exc:
+            answer = {"error": f"{type(exc).__name__}: {exc}"}
+        print(json.dumps(answer), flush=True)
+    probe.close()
+
+
+if __name__ == "__main__":
+    main()

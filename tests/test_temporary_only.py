@@ -1,0 +1,49 @@
+"""A test run writes only to temporary folders: no tracked file under docs/ is rewritten unless asked."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from reliability_table import RUN_DIR, WRITE_DOCS, counts_dir
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _snapshot(folder: Path) -> dict[str, tuple[int, int]]:
+    return {str(p): (p.stat().st_mtime_ns, p.stat().st_size) for p in folder.rglob("*") if p.is_file()}
+
+
+def test_the_counts_of_a_run_go_to_a_temporary_folder() -> None:
+    if os.environ.get(WRITE_DOCS) == "1":
+        return  # this run was asked to rewrite docs/reliability
+    assert ROOT not in counts_dir().parents
+
+
+def test_a_test_session_rewrites_nothing_under_docs(tmp_path: Path) -> None:
+    """A whole pytest session, with its end-of-session hooks, in a subprocess."""
+    before = _snapshot(ROOT / "docs")
+    env = {k: v for k, v in os.environ.items() if k not in (WRITE_DOCS, RUN_DIR)}
+    run = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "--basetemp",
+            str(tmp_path / "t"),
+            "tests/task/test_codegen.py",
+        ],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+    assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
+    assert _snapshot(ROOT / "docs") == before
