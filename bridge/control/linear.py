@@ -12,11 +12,9 @@ the states, so the FMU must offer model exchange (every example model with state
 
 from __future__ import annotations
 
-import ctypes
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -122,16 +120,7 @@ def linearize(
         state_values = {k: v for k, v in point.items() if k in every}
         settings = {k: v for k, v in point.items() if k not in every and k not in inputs}
         model.initialize(settings)
-        fmu_obj: Any = model._backend.fmu  # the FMPy object: model exchange's state calls
-        n_all = len(every)
-        x_all = np.zeros(n_all)
-        dx_all = np.zeros(n_all)
-        x_ptr = x_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        dx_ptr = dx_all.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        get_dx = (
-            fmu_obj.getContinuousStateDerivatives if model.info.fmi_major == 3 else fmu_obj.getDerivatives
-        )
-        fmu_obj.getContinuousStates(x_ptr, n_all)
+        x_all = model.continuous_states()
         for name, value in state_values.items():
             x_all[every.index(name)] = value
         base_x = x_all.copy()
@@ -139,10 +128,9 @@ def linearize(
         index = [every.index(s) for s in chosen]
 
         def evaluate(x: Matrix, u: Matrix) -> tuple[Matrix, Matrix]:
-            x_all[:] = x
-            fmu_obj.setContinuousStates(x_ptr, n_all)
+            model.set_continuous_states(x)
             model.set(dict(zip(inputs, (float(v) for v in u))))
-            get_dx(dx_ptr, n_all)
+            dx_all = model.derivatives()
             values = model.get(outputs) if outputs else {}
             return dx_all[index].copy(), np.array([float(values[o]) for o in outputs])
 

@@ -187,9 +187,7 @@ def test_a_fixed_step_solver_needs_model_exchange(tmp_path: Path) -> None:
     ):
         load_experiment(write(tmp_path, data))
     data["model"].update(interface="me", solver_substeps=0)
-    with pytest.raises(
-        ConfigError, match=r"model\.solver_substeps: .*\(got 0\)"
-    ):
+    with pytest.raises(ConfigError, match=r"model\.solver_substeps: .*\(got 0\)"):
         load_experiment(write(tmp_path, data))
     data["model"].update(solver_substeps=50)
     loaded = load_experiment(write(tmp_path, data))
