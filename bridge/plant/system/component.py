@@ -69,6 +69,8 @@ class FmuComponent(FmuInstancePlant):
         self.model._native_sampled(k, False)
         raise self._failed(sample_failure(self.model, status, self.input_names, self.output_names))
 
+    can_settle = True
+
     def settle(self, inputs: Sequence[float]) -> FloatArray:
         """Set the inputs at the current communication point and read the outputs again, without
         a step: direct feedthrough outputs then follow the inputs of this instant."""
