@@ -110,11 +110,6 @@ def test_only_bridge_fmu_speaks_ctypes_and_fmi_statuses() -> None:
     assert leaks == {}, f"move these into bridge/fmu (abi.py holds the status codes): {leaks}"
 
 
-# Being reworked on its own (SSP semantics): the system description's data classes move out of
-# description.py so that ssp.py, which builds them, no longer closes a circle with it.
-_PENDING_CIRCLES = {("bridge.plant.system.description", "bridge.plant.system.ssp")}
-
-
 def test_no_import_circles_closed_at_call_time() -> None:
     """An import inside a function that only breaks a circle hides a tangle: modules import each
     other one way (grimp reads function-level imports too; TYPE_CHECKING ones excluded)."""
@@ -125,4 +120,4 @@ def test_no_import_circles_closed_at_call_time() -> None:
         for imported in graph.find_modules_directly_imported_by(module):
             if module < imported and graph.find_shortest_chain(imported=module, importer=imported):
                 circles.add((module, imported))
-    assert circles - _PENDING_CIRCLES == set(), "modules that import each other (through a chain)"
+    assert circles == set(), "modules that import each other (through a chain)"

@@ -28,7 +28,8 @@ from typing import Any
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment
-from bridge.plant.system.description import (
+from bridge.plant.system.osp import is_osp_file, read_osp
+from bridge.plant.system.structure import (
     Component,
     Connection,
     Endpoint,
@@ -59,8 +60,6 @@ _TYPES: dict[str, Callable[[str], Any]] = {
 def read_ssp(path: Path) -> SystemDescription:
     """The system of an ``.ssp`` archive (``SystemStructure.ssd`` inside), an ``.ssd`` file, or
     OSP's ``OspSystemStructure.xml`` (:mod:`bridge.plant.system.osp`)."""
-    from bridge.plant.system.osp import is_osp_file, read_osp
-
     if is_osp_file(path):
         return read_osp(path)
     if path.suffix.lower() == ".ssp":
