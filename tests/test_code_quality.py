@@ -108,3 +108,16 @@ def test_only_bridge_fmu_speaks_ctypes_and_fmi_statuses() -> None:
         if (found := fmi_leaks(path.read_text()))
     }
     assert leaks == {}, f"move these into bridge/fmu (abi.py holds the status codes): {leaks}"
+
+
+def test_no_import_circles_closed_at_call_time() -> None:
+    """An import inside a function that only breaks a circle hides a tangle: modules import each
+    other one way (grimp reads function-level imports too; TYPE_CHECKING ones excluded)."""
+    grimp = pytest.importorskip("grimp")
+    graph = grimp.build_graph("bridge", exclude_type_checking_imports=True)
+    circles = set()
+    for module in graph.modules:
+        for imported in graph.find_modules_directly_imported_by(module):
+            if module < imported and graph.find_shortest_chain(imported=module, importer=imported):
+                circles.add((module, imported))
+    assert circles == set(), "modules that import each other (through a chain)"

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from bridge.errors import ConfigError
 from bridge.fmu.model import Model
-from bridge.fmu.states import ContinuousStates, state_names
+from bridge.fmu.states import state_names
 
 Matrix = NDArray[np.float64]
 
@@ -107,8 +107,7 @@ def linearize(
         state_values = {k: v for k, v in point.items() if k in every}
         settings = {k: v for k, v in point.items() if k not in every and k not in inputs}
         model.initialize(settings)
-        vector = ContinuousStates(model)
-        x_all = vector.get()
+        x_all = model.continuous_states()
         for name, value in state_values.items():
             x_all[every.index(name)] = value
         base_x = x_all.copy()
@@ -116,11 +115,11 @@ def linearize(
         index = [every.index(s) for s in chosen]
 
         def evaluate(x: Matrix, u: Matrix) -> tuple[Matrix, Matrix]:
-            vector.set(x)
+            model.set_continuous_states(x)
             model.set(dict(zip(inputs, (float(v) for v in u))))
-            dx = vector.derivatives()
+            dx_all = model.derivatives()
             values = model.get(outputs) if outputs else {}
-            return dx[index], np.array([float(values[o]) for o in outputs])
+            return dx_all[index].copy(), np.array([float(values[o]) for o in outputs])
 
         f0, y0 = evaluate(base_x, u0)
         nominal_x = np.array([_nominal(model, s) for s in chosen])

@@ -20,6 +20,7 @@ TERMINATED: Final = 5  # the FMU asked to stop (FMI 2.0: Discard with fmi2Termin
 SET_FAILED: Final = 16  # + the status of the failed set
 GET_FAILED: Final = 32  # + the status of the failed get
 INACTIVE: Final = -1  # the instance was not stepped
+NONFINITE: Final = 64  # master.c: a component's input was NaN or infinite (nothing called)
 
 # -- fixed_step.c: why the integration loop returned ---------------------------------------------------
 END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE = 0, 1, 2, 3, 4
@@ -105,6 +106,35 @@ class FixedBatchSpec(ctypes.Structure):
         ("steps", ctypes.c_int),
         ("substeps", ctypes.c_int),
     ]
+
+
+class MasterComponent(ctypes.Structure):
+    """``master.c``'s ``Component``: one component's functions, signals, grid and step counter."""
+
+    _fields_ = [
+        ("major", ctypes.c_int),
+        ("set_real", ctypes.c_void_p),
+        ("get_real", ctypes.c_void_p),
+        ("do_step", ctypes.c_void_p),
+        ("bool_status", ctypes.c_void_p),
+        ("component", ctypes.c_void_p),
+        ("n_in", ctypes.c_int),
+        ("in_vr", ctypes.c_void_p),
+        ("u", ctypes.c_void_p),
+        ("n_out", ctypes.c_int),
+        ("out_vr", ctypes.c_void_p),
+        ("y", ctypes.c_void_p),
+        ("t0", ctypes.c_double),
+        ("h", ctypes.c_double),
+        ("steps", ctypes.c_int),
+        ("k", ctypes.c_longlong),
+    ]
+
+
+class MasterLink(ctypes.Structure):
+    """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``."""
+
+    _fields_ = [("source", ctypes.c_int), ("i", ctypes.c_int), ("target", ctypes.c_int), ("j", ctypes.c_int)]
 
 
 Clock = ctypes.c_longlong

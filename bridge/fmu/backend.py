@@ -2,8 +2,9 @@
 
 The adapters speak FMI (camelCase, value references, status codes) so nothing above
 ``bridge.fmu`` has to. Set-up calls go through FMPy's checked wrappers; the per-step calls
-(get/set/doStep) use the raw ctypes functions FMPy has already bound, with preallocated
-arguments, which is what keeps stepping cheaper than FMPy's own convenience API.
+(get/set/doStep) and the restore of a reset (set FMU state) use the raw ctypes functions FMPy
+has already bound, with preallocated arguments, which is what keeps stepping and resetting
+cheaper than FMPy's own convenience API. Status codes come from ``bridge.fmu.abi``.
 """
 
 from __future__ import annotations
@@ -139,23 +140,28 @@ class Backend:
     def get_state(self) -> ctypes.c_void_p:
         raise FmuError(f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states")
 
+    _SET_STATE = ""  # fmi2SetFMUstate / fmi3SetFMUState; FMI 1.0 has none
+
     def set_state(self, state: ctypes.c_void_p) -> None:
-        raise FmuError(f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states")
-
-    def free_state(self, state: ctypes.c_void_p) -> None:
-        pass
-
-    def _raw_set_state(self, name: str, state: ctypes.c_void_p) -> None:
-        """``name`` (fmi2SetFMUstate / fmi3SetFMUState) called directly, as the step calls are:
-        a restore is a reset's hot path, and FMPy's checked wrapper costs several Python frames."""
+        """The FMU's ``SetFMUstate`` called directly, as the step calls are: a restore is a
+        reset's hot path, and FMPy's checked wrapper costs several Python frames."""
         fn = self._set_state_fn
         if fn is None:
-            fn = self._set_state_fn = rebind(self.functions[name], ctypes.c_void_p, ctypes.c_void_p)
+            if not self._SET_STATE:
+                raise FmuError(
+                    f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states"
+                )
+            fn = rebind(self.functions[self._SET_STATE], ctypes.c_void_p, ctypes.c_void_p)
+            self._set_state_fn = fn
         status = fn(self.component, state)
         if status > WARNING:
             raise FmuError(
-                f"{self.info.model_name}: {name} returned {status_name(status)}", log=self.log.recent()
+                f"{self.info.model_name}: {self._SET_STATE} returned {status_name(status)}",
+                log=self.log.recent(),
             )
+
+    def free_state(self, state: ctypes.c_void_p) -> None:
+        pass
 
     def unload(self) -> None:
         self.fmu.freeLibrary()
@@ -281,6 +287,7 @@ class Fmi1Backend(Backend):
 
 class Fmi2Backend(Backend):
     major = 2
+    _SET_STATE = "fmi2SetFMUstate"
 
     def _load(self, unzip_dir: pathlib.Path) -> Any:
         self._callbacks = logs.fmi2_callbacks(self.log)
@@ -348,9 +355,6 @@ class Fmi2Backend(Backend):
         self.call("fmi2GetFMUstate", lambda: self.fmu.fmi2GetFMUstate(self.component, ctypes.byref(state)))
         return state
 
-    def set_state(self, state: ctypes.c_void_p) -> None:
-        self._raw_set_state("fmi2SetFMUstate", state)
-
     def free_state(self, state: ctypes.c_void_p) -> None:
         if self.component and state:
             self.fmu.fmi2FreeFMUstate(self.component, ctypes.byref(state))
@@ -358,6 +362,7 @@ class Fmi2Backend(Backend):
 
 class Fmi3Backend(Backend):
     major = 3
+    _SET_STATE = "fmi3SetFMUState"
 
     def _load(self, unzip_dir: pathlib.Path) -> Any:
         cls = fmi3.FMU3Slave if self.interface == "cs" else fmi3.FMU3Model
@@ -440,9 +445,6 @@ class Fmi3Backend(Backend):
         state = ctypes.c_void_p()
         self.call("fmi3GetFMUState", lambda: self.fmu.fmi3GetFMUState(self.component, ctypes.byref(state)))
         return state
-
-    def set_state(self, state: ctypes.c_void_p) -> None:
-        self._raw_set_state("fmi3SetFMUState", state)
 
     def free_state(self, state: ctypes.c_void_p) -> None:
         if self.component and state:

@@ -86,6 +86,7 @@ class ModelBatch:
         self._spec: BatchSpec | None = None
         self._me: MeBatch | None = None
         self._comps = np.zeros(self.n, dtype=np.uintp)
+        self._status = np.zeros(self.n, dtype=np.int32)
         self._handles: dict[str, int] = {}
 
     @property
@@ -215,18 +216,19 @@ class ModelBatch:
 
     def _step_native(self, inputs: FloatArray, active: npt.NDArray[np.bool_]) -> BatchOutcome:
         assert self._stepper is not None and self._spec is not None  # step() checked
-        status = np.empty(self.n, dtype=np.int32)
-        self._stepper.step(
+        status = self._status
+        unfinished = self._stepper.step(
             self._spec, comps=self._comps, active=active.view(np.uint8), inputs=inputs,
             outputs=self._outputs_buf, k=self._clock, status=status, threads=self.threads,
         )  # fmt: skip
         terminated = status == TERMINATED
         result = BatchOutcome(self._outputs_buf, terminated)
-        for i in np.flatnonzero(terminated).tolist():
-            self.models[i]._native_terminated()
-        names = (self.input_names, self.output_names)
-        for i in np.flatnonzero((status > WARNING) & ~terminated).tolist():
-            result.errors[i] = batch_stepper.native_failure(self.models[i], int(status[i]), *names)
+        if unfinished:  # terminations and failures: rare, accounted in each model
+            for i in np.flatnonzero(terminated).tolist():
+                self.models[i]._native_terminated()
+            names = (self.input_names, self.output_names)
+            for i in np.flatnonzero((status > WARNING) & ~terminated).tolist():
+                result.errors[i] = batch_stepper.native_failure(self.models[i], int(status[i]), *names)
         return result
 
     def _step_me(self, inputs: FloatArray, active: npt.NDArray[np.bool_]) -> BatchOutcome:

@@ -18,6 +18,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
+import numpy.typing as npt
+
 from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
 from bridge.fmu import access, archive, once
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
@@ -69,6 +72,11 @@ class Model:
             ``"euler"``: fixed steps of ``step_size_s / solver_substeps`` in native code
             (``bridge.fmu.fixed_step``; FMI 2.0/3.0).
         solver_substeps: fixed-step integration steps per FMU step.
+        instance_name: the FMU instance's name (default: ``<model name>#<counter>``).
+
+    The model keeps the only clock of its instance: :attr:`step_index` ``k`` (time
+    ``t0 + k * h``), advanced by :meth:`advance` and, in place, by the native steppers of this
+    package (``bridge.fmu.sample``, ``bridge.fmu.batch``).
     """
 
     def __init__(
@@ -469,6 +477,40 @@ class Model:
         clock.value = k
         return False
 
+    # -- continuous states (model exchange) -----------------------------------------------------
+    def continuous_states(self) -> npt.NDArray[np.float64]:
+        """The continuous states ``x`` now (model exchange, initialised), in the FMU's order."""
+        x = np.zeros(self.info.number_of_states)
+        self._me_call("getContinuousStates", x)
+        return x
+
+    def set_continuous_states(self, x: npt.ArrayLike) -> None:
+        """Set the continuous states ``x`` (model exchange, in continuous-time mode)."""
+        values = np.ascontiguousarray(x, dtype=np.float64)
+        if values.shape != (self.info.number_of_states,):
+            raise VariableError(
+                f"{self.info.model_name}: {self.info.number_of_states} continuous states expected, "
+                f"got an array of shape {values.shape}"
+            )
+        self._me_call("setContinuousStates", values)
+        self._inputs_dirty = True
+
+    def derivatives(self) -> npt.NDArray[np.float64]:
+        """The state derivatives ``dx/dt`` at the current states and inputs (model exchange)."""
+        dx = np.zeros(self.info.number_of_states)
+        self._me_call("getContinuousStateDerivatives" if self._backend.major == 3 else "getDerivatives", dx)
+        return dx
+
+    def _me_call(self, name: str, array: npt.NDArray[np.float64]) -> None:
+        if self.interface != "me" or not self._initialized:
+            raise FmuError(
+                f"{self.info.model_name}: {name} needs an initialised model-exchange instance "
+                f"(open the Model with interface='me' and initialize() it)"
+            )
+        fmu = self._backend.fmu
+        pointer = array.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+        self._backend.call(name, lambda: getattr(fmu, name)(pointer, len(array)))
+
     # -- for the native steppers of this package (bridge.fmu.sample, bridge.fmu.batch) ------------
     def _native_handles(self) -> dict[str, int]:
         """Addresses for a native stepper that calls this instance's FMI functions directly.
@@ -531,6 +573,13 @@ class Model:
         """Account for a native doStep after which the FMU asked to terminate (the clock already
         counts the step): the model refuses further steps until reset."""
         self.terminated = True
+
+    def _native_sampled(self, step_index: int, terminated: bool) -> None:
+        """Account a native sample that left the counter it was given at ``step_index`` (the
+        system's native master keeps one per component for its call)."""
+        self._clock.value = step_index
+        if terminated:
+            self.terminated = True
 
     def _native_step_failed(self, status: int) -> bool:
         """Account for a native doStep at the current step index that returned ``status``

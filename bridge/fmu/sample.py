@@ -23,6 +23,15 @@ from bridge.fmu.model import Model
 from bridge.fmu.signals import FloatArray, SignalGroup
 
 
+def sample_failure(
+    model: Model, status: int, input_names: Sequence[str], output_names: Sequence[str]
+) -> FmuError:
+    """The error of a native sample of ``model`` that ended in ``status`` (above Warning, not a
+    termination) at its current step: as :class:`NativeSample` raises it, for the system's native
+    master (``bridge.fmu.system_step``), whose samples make the same calls."""
+    return nat.native_failure(model, status, input_names, output_names)
+
+
 class NativeSample:
     """``sample(inputs) -> outputs`` for one model; ``terminated`` after each call.
 

@@ -145,6 +145,17 @@ class Plant(ABC):
             "or on a lockstep node)"
         )
 
+    # -- outputs again without a step (a system's feedthrough_outputs: updated) -----------------------
+    can_settle: bool = False  # whether settle() works (a model in this process)
+
+    def settle(self, inputs: Sequence[float]) -> FloatArray:
+        """Set ``inputs`` at the current communication point and read the outputs again, without
+        a step (direct feedthrough outputs then follow the inputs of this instant)."""
+        raise ConfigError(
+            f"{self.name} cannot set its inputs and read its outputs again between steps; run it in "
+            "this process (system.feedthrough_outputs: updated needs that)"
+        )
+
     # -- components (a system of models) -------------------------------------------------------------
     def component_outputs(self) -> dict[str, dict[str, float]]:
         """Each component's output values now, by component name (a system of models, for

@@ -1,10 +1,12 @@
 """``FmuInstancePlant``: one FMU instance in this process as a plant.
 
-What ``LocalFmuPlant`` (an experiment's FMU) and a system's ``FmuComponent`` share: writing the
-inputs, advancing ``n`` FMU steps a sample, reading the outputs, and turning FMU errors into the
-plant's :class:`StepError`, and saving and restoring the state (a system's fixed-point
-iteration rolls components back to the start of a macro step, here or in a node). Subclasses
-build ``model``, ``info``, ``timing``, ``name`` and ``fmu_path``.
+What ``LocalFmuPlant`` (an experiment's FMU) and a system's ``FmuComponent`` share: a sample
+(inputs written, ``n`` FMU steps, outputs read) as one native call where the instance allows it
+(``bridge.fmu.sample``, re-pointed after every reset), else through the model's signal groups
+and ``Model.advance``; FMU errors turned into the plant's :class:`StepError`; and saving and
+restoring the state through the Plant interface (a system's fixed-point iteration rolls
+components back to the start of a macro step, here or in a node). Every FMU call is made by
+``bridge.fmu``. Subclasses build ``model``, ``info``, ``timing``, ``name`` and ``fmu_path``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,9 @@
 """``LocalFmuPlant``: one FMU instance in this process (the fastest plant, and what nodes serve).
 
-A step writes the inputs through a typed ``SignalGroup``, advances ``n`` FMU steps
-(``sampling_time = n * h``) and reads the outputs; FMU errors become :class:`StepError` with the
-FMU's own log (``bridge.plant.instance``, shared with a system's in-process components).
+A step writes the inputs, advances ``n`` FMU steps (``sampling_time = n * h``) and reads the
+outputs, in one native call where the FMU allows it (``bridge.fmu.sample``), else through typed
+``SignalGroup`` calls; FMU errors become :class:`StepError` with the FMU's own log
+(``bridge.plant.instance``, shared with a system's in-process components).
 """
 
 from __future__ import annotations

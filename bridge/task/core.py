@@ -337,7 +337,7 @@ class Task:
             self._inputs[: len(self.action_inputs)] = self._action_starts
         self._previous_inputs[:] = self._inputs
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
-        self._action_noise_table = noise_table(self._action_noise, rng, n + 1)
+        self._action_noise_table = noise_table(self._action_noise, rng, n + 1) if self._action_noise else []
         self.observer.new_episode(rng, n + 1)
         return spec
 

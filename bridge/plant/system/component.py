@@ -11,10 +11,10 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from bridge.errors import ConfigError, FmuError
+from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
 from bridge.fmu import Model, read_model_info
-from bridge.fmu.backend import STATUS_NAMES
+from bridge.fmu.sample import sample_failure
 from bridge.plant.base import FloatArray
 from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
@@ -33,9 +33,6 @@ def steps_per_macro(component: Component, macro_step_s: float, default_s: float 
             f"{macro_step_s} s (ratio {ratio:.6g}); choose {macro_step_s}/k{where}"
         )
     return n
-
-
-_SET_FAILED, _GET_FAILED = 16, 32  # master.c adds these to the status of a failed set or get
 
 
 class FmuComponent(FmuInstancePlant):
@@ -63,30 +60,16 @@ class FmuComponent(FmuInstancePlant):
 
     def native_done(self, k: int, terminated: bool) -> None:
         """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""
-        if terminated:
-            self.model.native_terminated(k)
-        else:
-            self.model.step_index = k
+        self.model._native_sampled(k, terminated)
         self.terminated = terminated
         self.sample += 1
 
     def native_failed(self, status: int, k: int) -> None:
         """Raise the error of a sample the native master stepped and the FMU failed (as :meth:`step`)."""
-        model = self.model
-        if status >= _SET_FAILED:
-            what, names = ("get", self.output_names) if status >= _GET_FAILED else ("set", self.input_names)
-            exc = FmuError(
-                f"{model.info.model_name}: {what} of {list(names)} returned {STATUS_NAMES[status & 15]} "
-                f"at step {k} (t={model.start_time_s + k * model.step_size_s:g} s)",
-                log=model.log,
-            )
-        else:
-            try:
-                model.native_step_failed(k, status)
-                exc = FmuError(f"doStep returned {STATUS_NAMES[min(status, 5)]}", log=model.log)
-            except FmuError as failed:
-                exc = failed
-        raise self._failed(exc)
+        self.model._native_sampled(k, False)
+        raise self._failed(sample_failure(self.model, status, self.input_names, self.output_names))
+
+    can_settle = True
 
     def settle(self, inputs: Sequence[float]) -> FloatArray:
         """Set the inputs at the current communication point and read the outputs again, without

@@ -1,113 +1,40 @@
 """What a system is: components (FMUs), connections and parameter bindings.
 
 Built from the experiment's ``system:`` section (:func:`from_experiment`) or from an SSP 1.0
-file (:mod:`bridge.plant.system.ssp`); the two give the same :class:`SystemDescription`.
+file (:mod:`bridge.plant.system.ssp`); the two give the same :class:`SystemDescription` (its
+parts are data in :mod:`bridge.plant.system.structure`, re-exported here).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment
 from bridge.experiment.system import CONNECTION, SystemSection, is_system_file
+from bridge.plant.system.ssp import read_ssp
+from bridge.plant.system.structure import (
+    Algorithm,
+    Component,
+    Connection,
+    Endpoint,
+    SystemDescription,
+    Transform,
+    Unit,
+)
 
-Algorithm = Literal["jacobi", "gauss_seidel"]
-
-
-@dataclass(frozen=True)
-class Endpoint:
-    """``component.variable``; the variable name may itself contain dots (Modelica names)."""
-
-    component: str
-    variable: str
-
-    def __str__(self) -> str:
-        return f"{self.component}.{self.variable}"
-
-
-@dataclass(frozen=True)
-class Transform:
-    """An SSP connection transformation (``ssc:<kind>``): ``LinearTransformation`` computes
-    ``factor * value + offset``; the three mapping kinds replace a value by its ``MapEntry``
-    target (``entries``: source and target as written, enumerations by item name)."""
-
-    kind: Literal[
-        "LinearTransformation",
-        "BooleanMappingTransformation",
-        "IntegerMappingTransformation",
-        "EnumerationMappingTransformation",
-    ]
-    factor: float = 1.0
-    offset: float = 0.0
-    entries: tuple[tuple[str, str], ...] = ()
-
-
-@dataclass(frozen=True)
-class Unit:
-    """A unit as SSP and FMI define one: ``value_SI = factor * value + offset`` in the SI base
-    units whose exponents ``base`` gives (kg, m, s, A, K, mol, cd, rad)."""
-
-    name: str
-    base: tuple[int, ...]
-    factor: float = 1.0
-    offset: float = 0.0
-
-
-@dataclass(frozen=True)
-class Connection:
-    """An output of one component feeding an input of another, held over each macro step;
-    from an SSP, with the connection's transformation and whether it suppresses unit conversion."""
-
-    source: Endpoint
-    target: Endpoint
-    transform: Transform | None = None
-    suppress_units: bool = False
-
-    def __str__(self) -> str:
-        return f"{self.source} -> {self.target}"
-
-
-@dataclass(frozen=True)
-class Component:
-    """One FMU of the system; ``step_size_s`` None means one FMU step per macro step."""
-
-    name: str
-    fmu: Path
-    parameters: dict[str, Any] = field(default_factory=dict)
-    step_size_s: float | None = None
-    interface: Literal["auto", "cs", "me"] = "auto"
-    feedthrough: bool | None = None
-    node: str | None = None
-    connector_units: dict[str, str] = field(default_factory=dict)  # from an SSD's connectors
-
-
-@dataclass(frozen=True)
-class SystemDescription:
-    """Components in declaration order, connections, and how to step them."""
-
-    components: dict[str, Component]
-    connections: tuple[Connection, ...]
-    algorithm: Algorithm = "jacobi"
-    max_iterations: int = 1
-    tolerance: float = 1e-10
-    order: tuple[str, ...] = ()
-    feedthrough_outputs: Literal["held", "updated"] = "held"
-    step_size_s: float | None = None  # an SSP's default experiment step, if it gives one
-    source: Path | None = None
-    units: dict[str, Unit] = field(default_factory=dict)  # an SSD's unit definitions by name
-    ssp: Path | None = None  # the .ssp/.ssd the components and connections came from, if any
-    duration_s: float | None = None  # an SSP's stopTime - startTime, if it gives one
-
-    @property
-    def where(self) -> str:
-        return f" [{self.source}]" if self.source else ""
-
-    def inputs_driven(self) -> dict[Endpoint, Connection]:
-        """Each connected input and the connection that drives it."""
-        return {c.target: c for c in self.connections}
+__all__ = [
+    "Algorithm",
+    "Component",
+    "Connection",
+    "Endpoint",
+    "SystemDescription",
+    "Transform",
+    "Unit",
+    "from_experiment",
+    "parse_connection",
+    "split_name",
+]
 
 
 def parse_connection(text: str, where: str = "") -> Connection:
@@ -145,8 +72,6 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
     where = f" [{experiment.source}]" if experiment.source else ""
     base: SystemDescription | None = None
     if is_system_file(experiment.model.fmu):
-        from bridge.plant.system.ssp import read_ssp
-
         base = read_ssp(_path(experiment.model.fmu, experiment, "model.fmu"))
     components = dict(base.components) if base else {}
     for name, spec in section.components.items():

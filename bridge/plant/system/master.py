@@ -140,7 +140,7 @@ class Master:
         self._step()
         for name in self.settle_order:  # sources before consumers: values of t + H flow on
             u = self._gather(name)
-            self.outputs[name] = self.plants[name].settle(u.tolist())  # type: ignore[attr-defined]
+            self.outputs[name] = self.plants[name].settle(u.tolist())
 
     def _step(self) -> None:
         if self.iterations <= 1:
@@ -210,7 +210,7 @@ def _check_rollback(system: SystemDescription, plants: Mapping[str, Plant]) -> N
 
 def _check_settle(system: SystemDescription, plants: Mapping[str, Plant], names: Sequence[str]) -> None:
     """Updated outputs set inputs between steps: each feedthrough component must be in this process."""
-    cannot = [plants[n].name for n in names if not hasattr(plants[n], "settle")]
+    cannot = [plants[n].name for n in names if not plants[n].can_settle]
     if cannot:
         raise ConfigError(
             f"system.feedthrough_outputs: updated sets the inputs of feedthrough components after the "

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.errors import ConfigError
-from bridge.plant.system.description import Component, Connection, Endpoint, SystemDescription, Transform
+from bridge.plant.system.structure import Component, Connection, Endpoint, SystemDescription, Transform
 
 _VALUES = {"Real": float, "Integer": int, "Enumeration": int, "String": str}
 

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from bridge.errors import ConfigError
-from bridge.plant.system.description import Connection, Endpoint
+from bridge.plant.system.structure import Connection, Endpoint
 
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSB = "{http://ssp-standard.org/SSP1/SystemStructureSignalDictionary}"

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from bridge.errors import ConfigError
-from bridge.plant.system.description import Transform
+from bridge.plant.system.structure import Transform
 
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSM = "{http://ssp-standard.org/SSP1/SystemStructureParameterMapping}"

@@ -29,7 +29,10 @@ from pathlib import Path
 from typing import Any
 
 from bridge.errors import ConfigError
-from bridge.plant.system.description import (
+from bridge.plant.system.osp import is_osp_file, read_osp
+from bridge.plant.system.ssb import Bus, read_dictionaries
+from bridge.plant.system.ssm import apply, read_mapping
+from bridge.plant.system.structure import (
     Component,
     Connection,
     Endpoint,
@@ -37,8 +40,6 @@ from bridge.plant.system.description import (
     Transform,
     Unit,
 )
-from bridge.plant.system.ssb import Bus, read_dictionaries
-from bridge.plant.system.ssm import apply, read_mapping
 
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
@@ -70,8 +71,6 @@ class _Read:
 def read_ssp(path: Path) -> SystemDescription:
     """The system of an ``.ssp`` archive (``SystemStructure.ssd`` inside), an ``.ssd`` file, or
     OSP's ``OspSystemStructure.xml`` (:mod:`bridge.plant.system.osp`)."""
-    from bridge.plant.system.osp import is_osp_file, read_osp
-
     if is_osp_file(path):
         return read_osp(path)
     if path.suffix.lower() == ".ssp":
