@@ -73,11 +73,12 @@ class EventWaiting:
 
     def _on_sample(self, sample: Any) -> None:
         client = self._client
+        payload = sample.payload.to_bytes()
         try:
-            frame = proto.decode(sample.payload.to_bytes())
+            frame = proto.decode(payload)
         except TransportError:
             return
-        if client is not None and client.take(frame):
+        if client is not None and client.take(frame, payload):
             self.wake()
 
     def wake(self) -> None:
@@ -113,7 +114,7 @@ class ChannelWaiting:
 
     def start(self, client: NodeClient) -> Any:
         self._client = client
-        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(client.description["output_names"]))
+        self._outputs = proto.PlainFrames(proto.OUTPUTS, client.outputs, signed=True)
         self._channel = FrameChannel(client.session, client.keys.outputs)
         self._watchdog = Watchdog(client.timeout_s, self._on_overdue, name=f"client-{client.name}")
         return self._channel
@@ -137,7 +138,7 @@ class ChannelWaiting:
         try:
             while (payload := self._channel.recv()) is not None:
                 frame = self._read(payload)
-                if frame is not None and client.take(frame):
+                if frame is not None and client.take(frame, payload):
                     return True
         finally:
             self._watchdog.end()
@@ -151,7 +152,7 @@ class ChannelWaiting:
         """The frame (None if malformed): outputs with one struct call, the rest decoded."""
         fields = self._outputs.read(payload)
         if fields is not None:
-            return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:])
+            return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:-1])
         try:
             return proto.decode(payload)
         except TransportError:

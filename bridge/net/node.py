@@ -104,7 +104,9 @@ class FmuNode:
         self.rules = RequestRules(self.served, self.info.variables)
         self.lease = Lease(name)
         self.lockstep = ls.Lockstep(self.lease, self.rules.inputs)
-        self._actions = proto.PlainFrames(proto.ACTION, len(self.input_names))
+        self._inputs = len(self.input_names)
+        self._actions = proto.PlainFrames(proto.ACTION, self._inputs)
+        self._signed = proto.PlainFrames(proto.ACTION, self._inputs, signed=True)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
         self.health, self.health_detail = "ok", ""
@@ -119,7 +121,20 @@ class FmuNode:
         self._driver: RealtimeDriver | None = None
         self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
         self.closed_cleanly = True
-        self._declare(session if session is not None else open_session(options), ros, pacing)
+        session = session if session is not None else open_session(options)
+        try:
+            self._declare(session, ros, pacing)
+        except BaseException:
+            self.watchdog.stop()
+            plant.close()
+            if self._own_session:
+                session.close()
+            raise
+
+    @property
+    def zid(self) -> str:
+        """The node's Zenoh session id: clients take answers from this session only."""
+        return self._link.zid
 
     @property
     def isolated(self) -> bool:
@@ -193,8 +208,8 @@ class FmuNode:
     def _on_action(self, sample: Any) -> None:
         payload = sample.payload.to_bytes()
         try:
-            fields = self._actions.read(payload)
-            if fields is None or fields[2] or not self._plain_step(fields, payload):
+            fields = self._signed.read(payload) or self._actions.read(payload)
+            if fields is None or fields[2] & ~proto.SIGNED or not self._plain_step(fields, payload):
                 self._any_action(payload)
         except Exception:  # never let a handler die: count it, log it, keep serving
             self.counters["internal_errors"] += 1
@@ -203,13 +218,13 @@ class FmuNode:
     def _plain_step(self, fields: tuple[Any, ...], payload: bytes) -> bool:
         """The fast path: the next step from the holder, in range (``Lockstep.plain``)."""
         episode, step, client = fields[3:6]
-        values = list(fields[7:])
-        if self._driver is not None or not self.lockstep.plain(episode, step, client, values):
+        values = list(fields[7 : 7 + self._inputs])
+        if self._driver is not None or not self.lockstep.plain(episode, step, client, values, payload):
             return False
         if not self._lock.acquire(blocking=False):
             return False
         try:
-            if not self.lockstep.plain(episode, step, client, values):  # changed meanwhile
+            if not self.lockstep.is_next(episode, step):  # changed meanwhile
                 return False
             self._advance(values, (client, payload[_BODY:]))
         finally:
@@ -222,13 +237,13 @@ class FmuNode:
         except TransportError as exc:
             self._malformed(str(exc))
             return
-        self._accept(frame, (frame.sim_time_ns, payload[_BODY:]))
+        self._accept(frame, (frame.sim_time_ns, payload[_BODY:]), payload)
 
-    def _accept(self, frame: proto.Frame, action: tuple[int, bytes]) -> None:
+    def _accept(self, frame: proto.Frame, action: tuple[int, bytes], payload: bytes) -> None:
         values = list(frame.floats)
-        refused = self.lockstep.admit(action[0], values, frame.flags, self.saved.refusal)
+        refused = self.lockstep.admit(action[0], values, frame.flags, self.saved.refusal, payload)
         if refused is not None:
-            return self._reject(frame, refused)
+            return self._reject(frame, refused, payload)
         if not self._lock.acquire(timeout=self.step_timeout_s):
             return self._reject(frame, ls.Reject(ls.BUSY, "the node is busy with a step or reset"))
         try:
@@ -315,11 +330,12 @@ class FmuNode:
         self._link.unhealthy()
         self._pub.put(self.lockstep.error(self.health_detail, self._time_ns, hung=True))  # t: where it hung
 
-    def _reject(self, frame: proto.Frame, reject: ls.Reject) -> None:
+    def _reject(self, frame: proto.Frame, reject: ls.Reject, payload: bytes = b"") -> None:
         self.counters[f"rejected_{reject.reason}"] += 1
         if _log.isEnabledFor(logging.INFO):
             _log.info("node %s rejected an action (%s): %s", self.name, reject.reason, reject.detail)
-        self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns))
+        key = self.lockstep.reject_key(reject, frame.sim_time_ns, payload)
+        self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns, key))
 
     def _malformed(self, reason: str) -> None:
         self.counters["malformed"] += 1
@@ -345,7 +361,7 @@ class FmuNode:
             self.health, self.health_detail = "ok", ""
             self.counters["resets"] += 1
             self._time_ns = time_ns = round(self.plant.time_s * 1e9)
-            frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs)
+            frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs, key=self.lease.key)
             self.lockstep.started(episode, frame)
             # step 0 goes on the outputs key too: recorders and deployed agents see every sample
             self._pub.put(frame)

@@ -12,7 +12,7 @@ import logging
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from bridge.errors import BridgeError
+from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.requests import redact
@@ -41,6 +41,8 @@ class NodeLink:
         lease: Lease,
     ) -> None:
         self.session, self.keys, self.own_session, self.lease = session, keys, own_session, lease
+        self.zid = str(session.zid())
+        _refuse_a_second_node(session, keys)
         self.outputs = session.declare_publisher(keys.outputs)
         self.clock = session.declare_publisher(keys.clock)
         self.ros: RosView | None = None
@@ -50,7 +52,7 @@ class NodeLink:
             session.declare_subscriber(keys.actions, on_action),
             session.declare_queryable(keys.reset, on_reset, complete=True),
             session.declare_queryable(keys.info, on_info, complete=True),
-            session.liveliness().declare_subscriber(keys.client(0), self._on_client_token),
+            session.liveliness().declare_subscriber(keys.client(0), self._on_client_token, history=True),
             session.liveliness().declare_token(keys.alive),
         ]
 
@@ -70,7 +72,11 @@ class NodeLink:
     def _on_client_token(self, sample: Any) -> None:
         import zenoh
 
-        if sample.kind == zenoh.SampleKind.DELETE and self.lease.release_token(str(sample.key_expr)):
+        try:
+            client = int(str(sample.key_expr).rpartition("/")[2], 16)
+        except ValueError:
+            return  # not a client id: nothing a lease could be backed by
+        if self.lease.token(client, alive=sample.kind != zenoh.SampleKind.DELETE):
             _log.info("node %s: the lease ended, its holder's session is gone", self.keys.node)
 
     def unhealthy(self) -> None:
@@ -90,6 +96,16 @@ class NodeLink:
                 _log.debug("undeclare failed", exc_info=True)
         if self.own_session:
             self.session.close()
+
+
+def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
+    """A node of this name already serves: two would answer the same keys, so this one refuses."""
+    for reply in session.liveliness().get(keys.alive, timeout=1.0):
+        if reply.ok is not None:
+            raise TransportError(
+                f"a node named {keys.node!r} already serves on {keys.base}/*; stop it, or give this "
+                "one another name (--name)"
+            )
 
 
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
