@@ -75,14 +75,14 @@ class Lease:
                     "<prefix>/<node>/clients/<id> before its first reset (NodeClient does)"
                 )
             holder = self.holder
-            if holder is not None and holder.client == client and client:
+            if holder is not None and holder.client == client and client and not take_over:
                 if proof != reset_proof(holder.key, client, episode):
                     return (
                         f"node {self.node!r} is held by {holder.describe()}, and this reset does not "
                         "prove it comes from that session"
                     )
                 return None
-            if holder is None or (take_over and client):
+            if holder is None or (take_over and client):  # a take-over always starts a new session
                 if client:
                     self.holder = Holder(client, zid, time.time(), secrets.token_bytes(proto.KEY_SIZE))
                     if holder is not None:
