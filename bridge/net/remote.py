@@ -66,6 +66,63 @@ class NodeInfo(BaseModel):
     model: dict[str, Any]
 
 
+class _HolderEntry(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    client: str
+    zid: str = ""
+
+
+class _ModelEntry(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    model_name: str = "?"
+
+
+class NodeListing(BaseModel):
+    """A node's ``info`` as ``fmu-bridge nodes`` lists it: every field typed, the missing ones
+    filled (a recording published with ``replay --publish`` answers with fewer)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    node: str
+    zid: str = Field(default="", max_length=64)
+    mode: str = "?"
+    experiment: str = ""
+    version: str = ""
+    health: str = "?"
+    holder: _HolderEntry | None = None
+    episode: int = 0
+    step: int = -1
+    time_s: float = 0.0
+    pid: int = 0
+    counters: dict[str, int] = {}
+    model: _ModelEntry = _ModelEntry()
+    input_names: list[str] = []
+    output_names: list[str] = []
+
+
+def listed_info(payload: bytes, node: str, replier: str | None) -> dict[str, Any]:
+    """A node's ``info`` reply for a listing (:class:`NodeListing`); TransportError if malformed."""
+    data = proto.decode_json(payload, f"the info reply of node {node!r}", limit=proto.MAX_INFO_BYTES)
+    try:
+        listing = NodeListing.model_validate(data)
+    except ValidationError as exc:
+        raise _malformed_info(node, exc) from None
+    if listing.node != node or (replier is not None and listing.zid not in ("", replier)):
+        raise TransportError(
+            f"the info reply for node {node!r} names node {listing.node!r}: not the node asked for"
+        )
+    return listing.model_dump()
+
+
+def _malformed_info(node: str, exc: Exception) -> TransportError:
+    first = exc.errors()[0] if isinstance(exc, ValidationError) else {"msg": repr(exc)[:200], "loc": ()}
+    where = ".".join(str(p) for p in first.get("loc", ()))
+    return TransportError(
+        f"node {node!r} sent an info reply that the protocol does not allow"
+        f"{f' ({where})' if where else ''}: {first['msg']}; is it a node of another version?"
+    )
+
+
 def checked_info(payload: bytes, node: str, replier: str | None) -> dict[str, Any]:
     """A node's ``info`` reply, checked against :class:`NodeInfo` (and its model summary), from
     the session it names; a TransportError naming the node says what is wrong otherwise."""
@@ -74,12 +131,7 @@ def checked_info(payload: bytes, node: str, replier: str | None) -> dict[str, An
         info = NodeInfo.model_validate(data)
         info_from_summary(info.model)
     except (ValidationError, KeyError, TypeError, ValueError, AttributeError) as exc:
-        first = exc.errors()[0] if isinstance(exc, ValidationError) else {"msg": repr(exc)[:200], "loc": ()}
-        where = ".".join(str(p) for p in first.get("loc", ()))
-        raise TransportError(
-            f"node {node!r} sent an info reply that the protocol does not allow"
-            f"{f' ({where})' if where else ''}: {first['msg']}; is it a node of another version?"
-        ) from None
+        raise _malformed_info(node, exc) from None
     if info.node != node or (replier is not None and info.zid not in ("", replier)):
         raise TransportError(
             f"the info reply for node {node!r} names node {info.node!r} of session {info.zid}, "
@@ -634,7 +686,7 @@ def describe_nodes(
         for reply in session.get(keys.info, timeout=timeout_s):
             if reply.ok is not None:
                 try:
-                    entry = checked_info(reply.ok.payload.to_bytes(), name, _replier(reply))
+                    entry = listed_info(reply.ok.payload.to_bytes(), name, _replier(reply))
                 except TransportError as exc:
                     entry = {"node": name, "error": str(exc)}
                 break
