@@ -218,6 +218,12 @@ def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: L
             RemoteFmuEnv(CARTPOLE, "liar", session=loopback.session, prefix=loopback.prefix, timeout_s=5)
         listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
         assert "not JSON" in listed["error"]
+        replies["liar"] = b'{"node": "liar", "counters": "many", "holder": {"client": 7}}'
+        listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
+        assert listed["node"] == "liar" and "info reply that the protocol does not allow" in listed["error"]
+        replies["liar"] = b'{"node": "liar", "mode": "replay"}'  # few words, well formed: listed
+        listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
+        assert "error" not in listed and listed["mode"] == "replay" and listed["counters"] == {}
     finally:
         queryable.undeclare()
         peer.close()
