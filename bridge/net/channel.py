@@ -69,15 +69,14 @@ class EventWaiting:
 
     def start(self, client: NodeClient) -> Any:
         self._client = client
+        self._outputs = proto.PlainFrames(proto.OUTPUTS, client.outputs, signed=True)
         return client.session.declare_subscriber(client.keys.outputs, self._on_sample)
 
     def _on_sample(self, sample: Any) -> None:
         client = self._client
-        try:
-            frame = proto.decode(sample.payload.to_bytes())
-        except TransportError:
-            return
-        if client is not None and client.take(frame):
+        payload = sample.payload.to_bytes()
+        frame = read_frame(self._outputs, payload)
+        if frame is not None and client is not None and client.take(frame, payload):
             self.wake()
 
     def wake(self) -> None:
@@ -113,7 +112,7 @@ class ChannelWaiting:
 
     def start(self, client: NodeClient) -> Any:
         self._client = client
-        self._outputs = proto.PlainFrames(proto.OUTPUTS, len(client.description["output_names"]))
+        self._outputs = proto.PlainFrames(proto.OUTPUTS, client.outputs, signed=True)
         self._channel = FrameChannel(client.session, client.keys.outputs)
         self._watchdog = Watchdog(client.timeout_s, self._on_overdue, name=f"client-{client.name}")
         return self._channel
@@ -136,8 +135,8 @@ class ChannelWaiting:
         assert client is not None
         try:
             while (payload := self._channel.recv()) is not None:
-                frame = self._read(payload)
-                if frame is not None and client.take(frame):
+                frame = read_frame(self._outputs, payload)
+                if frame is not None and client.take(frame, payload):
                     return True
         finally:
             self._watchdog.end()
@@ -147,21 +146,23 @@ class ChannelWaiting:
     def ready(self) -> bool:
         return not self._channel.is_open
 
-    def _read(self, payload: bytes) -> proto.Frame | None:
-        """The frame (None if malformed): outputs with one struct call, the rest decoded."""
-        fields = self._outputs.read(payload)
-        if fields is not None:
-            return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:])
-        try:
-            return proto.decode(payload)
-        except TransportError:
-            return None
-
     def wake(self) -> None:
         self._channel.close()
 
     def close(self) -> None:
         self._watchdog.stop()
+
+
+def read_frame(outputs: proto.PlainFrames, payload: bytes) -> proto.Frame | None:
+    """A frame from a node (None if malformed): a signed OUTPUTS frame of the node's size with one
+    struct call, anything else decoded in full."""
+    fields = outputs.read(payload)
+    if fields is not None:
+        return proto.Frame(proto.OUTPUTS, fields[3], fields[4], fields[5], fields[2], fields[7:-1])
+    try:
+        return proto.decode(payload)
+    except TransportError:
+        return None
 
 
 class FrameChannel:

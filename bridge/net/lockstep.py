@@ -40,10 +40,11 @@ class Reject:
     reason: str
     detail: str
 
-    def frame(self, episode: int, step: int, client: int) -> bytes:
-        """The REJECT frame, stamped with the refused client's id: no other client takes it for
-        its own answer."""
-        return proto.encode_message(proto.REJECT, episode, step, client, f"{self.reason}: {self.detail}")
+    def frame(self, episode: int, step: int, client: int, key: bytes | None) -> bytes:
+        """The REJECT frame, stamped with the refused client's id (no other client takes it for
+        its own answer), signed with ``key`` (see ``Lockstep.reject_key``)."""
+        message = f"{self.reason}: {self.detail}"
+        return proto.encode_message(proto.REJECT, episode, step, client, message, key=key)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,18 +77,24 @@ class Lockstep:
         self.last_frame = b""
         self.last_action: tuple[int, bytes] = (0, b"")
 
-    def plain(self, episode: int, step: int, client: int, values: Sequence[float]) -> bool:
-        """Whether a flagless action from ``client`` is the next step of this episode, from the
-        holder, in range: then it is served by a step, with no other rule to apply."""
+    def plain(self, episode: int, step: int, client: int, values: Sequence[float], payload: bytes) -> bool:
+        """Whether an action ``payload`` (no flags but SIGNED) from ``client`` is the next step of
+        this episode, from the holder's session, in range: then it is served by a step, with no
+        other rule to apply."""
         if episode != self.episode or step != self.step + 1 or self.ended or client < 0 or self.unhealthy:
             return False
-        return self.lease.allows(client) and self.check_inputs(values) is None
+        return self.lease.allows(client, payload) and self.check_inputs(values) is None
+
+    def is_next(self, episode: int, step: int) -> bool:
+        """Whether ``step`` of ``episode`` is still the next one (``plain`` checked, then locked)."""
+        return episode == self.episode and step == self.step + 1 and not self.ended
 
     def admit(
-        self, client: int, values: Sequence[float], flags: int, state_refusal: str | None
+        self, client: int, values: Sequence[float], flags: int, state_refusal: str | None, payload: bytes
     ) -> Reject | None:
-        """The checks that need no lock: the lease, the values, the node's health, the flags."""
-        if not self.lease.allows(client):
+        """The checks that need no lock: the lease and the session, the values, the node's
+        health, the flags."""
+        if not self.lease.allows(client, payload):
             return Reject(NOT_HOLDER, self.lease.refusal(client))
         reason = self.check_inputs(values)
         if reason is not None:
@@ -96,7 +103,7 @@ class Lockstep:
             return Reject(UNHEALTHY, self.unhealthy)
         if flags & proto.SAVE_STATE and flags & proto.RESTORE_STATE:
             return Reject(STATE, "an action saves the state or restores it, not both")
-        if flags and state_refusal is not None:
+        if flags & ~proto.SIGNED and state_refusal is not None:
             return Reject(STATE, state_refusal)
         return None
 
@@ -118,7 +125,16 @@ class Lockstep:
             return Reject(OUT_OF_ORDER, f"action for step {step}; next is {self.step + 1}")
         if self.ended:
             return Reject(ENDED, "the episode is over: reset first")
-        return Step(save=bool(flags & proto.SAVE_STATE)) if flags else ADVANCE
+        return Step(save=True) if flags & proto.SAVE_STATE else ADVANCE
+
+    def reject_key(self, reject: Reject, client: int, payload: bytes) -> bytes | None:
+        """The key a REJECT of ``payload`` is signed with: the session's, once the action proved
+        it comes from the holder; for ``not_holder`` none (the holder must not take a reject
+        caused by a peer for its answer), or the key of a holder that was taken over, so that it
+        learns so."""
+        if reject.reason != NOT_HOLDER:
+            return self.lease.key
+        return self.lease.former_key(client, payload)
 
     # -- what happened: the node reports each outcome ------------------------------------------------
     def started(self, episode: int, frame: bytes) -> None:
@@ -135,7 +151,10 @@ class Lockstep:
     ) -> bytes:
         """One step was taken for ``action``: its OUTPUTS frame (kept to answer retries)."""
         flags = proto.TERMINATED if terminated else 0
-        frame = proto.encode_values(proto.OUTPUTS, self.episode, self.step + 1, time_ns, values, flags=flags)
+        key = self.lease.key
+        frame = proto.encode_values(
+            proto.OUTPUTS, self.episode, self.step + 1, time_ns, values, flags=flags, key=key
+        )
         self.step += 1
         self.ended = terminated
         self.last_frame, self.last_action = frame, action
@@ -153,4 +172,5 @@ class Lockstep:
     def error(self, detail: str, time_ns: int, hung: bool) -> bytes:
         """An ERROR frame for the next step (flagged HUNG: the model did not return in time)."""
         flags = proto.FAILED | (proto.HUNG if hung else 0)
-        return proto.encode_message(proto.ERROR, self.episode, self.step + 1, time_ns, detail, flags=flags)
+        step, key = self.step + 1, self.lease.key
+        return proto.encode_message(proto.ERROR, self.episode, step, time_ns, detail, flags=flags, key=key)

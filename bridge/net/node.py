@@ -31,12 +31,13 @@ from typing import Any, Literal
 
 import numpy as np
 
-from bridge.errors import BridgeError, PlantError, StepTimeout, TransportError
+from bridge.errors import BridgeError, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
+from bridge.net.node_health import Health
 from bridge.net.node_link import NodeLink
 from bridge.net.node_state import SavedState
 from bridge.net.realtime import Pacing, RealtimeDriver
@@ -104,10 +105,10 @@ class FmuNode:
         self.rules = RequestRules(self.served, self.info.variables)
         self.lease = Lease(name)
         self.lockstep = ls.Lockstep(self.lease, self.rules.inputs)
-        self._actions = proto.PlainFrames(proto.ACTION, len(self.input_names))
+        self._inputs = len(self.input_names)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
-        self.health, self.health_detail = "ok", ""
+        self.health = Health(name, step_timeout_s, self.counters)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
@@ -119,7 +120,18 @@ class FmuNode:
         self._driver: RealtimeDriver | None = None
         self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
         self.closed_cleanly = True
-        self._declare(session if session is not None else open_session(options), ros, pacing)
+        session = session if session is not None else open_session(options)
+        try:
+            self._declare(session, ros, pacing)
+        except BaseException:
+            self.watchdog.stop()
+            plant.close()
+            if self._own_session:
+                session.close()
+            raise
+
+    health_detail = property(lambda self: self.health.detail, doc="Why the node is not ``ok``.")
+    zid = property(lambda self: self._link.zid, doc="The node's Zenoh session id (answers come from it).")
 
     @property
     def isolated(self) -> bool:
@@ -132,7 +144,7 @@ class FmuNode:
             session,
             self.keys,
             own_session=self._own_session,
-            on_action=self._on_action,
+            node=self,
             on_reset=lambda query: replies.answer_reset(self, query),
             on_info=lambda query: replies.answer_info(self, query),
             lease=self.lease,
@@ -148,7 +160,7 @@ class FmuNode:
             )
             self._driver.start()
         _log.info(
-            "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, self.keys.base
+            "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, link.keys.base
         )
 
     def __enter__(self) -> FmuNode:
@@ -177,58 +189,40 @@ class FmuNode:
         if not locked and self.isolated:
             self.plant.close()  # kills the child: the blocked step returns with PlantDied
             locked = self._lock.acquire(timeout=timeout_s)
-        teardown = threading.Thread(target=self._link.close, name=f"close-{self.name}", daemon=True)
-        teardown.start()
-        teardown.join(timeout=timeout_s)
+        released = self._link.close_within(timeout_s)
         if locked:
             try:
                 self.saved.clear()
                 self.plant.close()
             finally:
                 self._lock.release()
-        self.closed_cleanly = locked and not teardown.is_alive()
+        self.closed_cleanly = locked and released
         return self.closed_cleanly
 
-    # -- actions (run on Zenoh's threads) ------------------------------------------------------------
-    def _on_action(self, sample: Any) -> None:
-        payload = sample.payload.to_bytes()
-        try:
-            fields = self._actions.read(payload)
-            if fields is None or fields[2] or not self._plain_step(fields, payload):
-                self._any_action(payload)
-        except Exception:  # never let a handler die: count it, log it, keep serving
-            self.counters["internal_errors"] += 1
-            _log.exception("node %s: an action could not be handled", self.name)
-
-    def _plain_step(self, fields: tuple[Any, ...], payload: bytes) -> bool:
-        """The fast path: the next step from the holder, in range (``Lockstep.plain``)."""
+    # -- actions (decoded by NodeLink on Zenoh's threads) -----------------------------------------------
+    def plain_step(self, fields: tuple[Any, ...], payload: bytes) -> bool:
+        """The fast path: the next step from the holder, in range (``Lockstep.plain``); False
+        leaves the action to :meth:`accept`."""
         episode, step, client = fields[3:6]
-        values = list(fields[7:])
-        if self._driver is not None or not self.lockstep.plain(episode, step, client, values):
+        values = list(fields[7 : 7 + self._inputs])
+        if self._driver is not None or not self.lockstep.plain(episode, step, client, values, payload):
             return False
         if not self._lock.acquire(blocking=False):
             return False
         try:
-            if not self.lockstep.plain(episode, step, client, values):  # changed meanwhile
+            if not self.lockstep.is_next(episode, step):  # changed meanwhile
                 return False
             self._advance(values, (client, payload[_BODY:]))
         finally:
             self._lock.release()
         return True
 
-    def _any_action(self, payload: bytes) -> None:
-        try:
-            frame = proto.decode_action(payload, len(self.input_names))
-        except TransportError as exc:
-            self._malformed(str(exc))
-            return
-        self._accept(frame, (frame.sim_time_ns, payload[_BODY:]))
-
-    def _accept(self, frame: proto.Frame, action: tuple[int, bytes]) -> None:
-        values = list(frame.floats)
-        refused = self.lockstep.admit(action[0], values, frame.flags, self.saved.refusal)
+    def accept(self, frame: proto.Frame, payload: bytes) -> None:
+        """Any well-formed action: admitted, ordered and served, or rejected with its reason."""
+        values, action = list(frame.floats), (frame.sim_time_ns, payload[_BODY:])
+        refused = self.lockstep.admit(action[0], values, frame.flags, self.saved.refusal, payload)
         if refused is not None:
-            return self._reject(frame, refused)
+            return self._reject(frame, refused, payload)
         if not self._lock.acquire(timeout=self.step_timeout_s):
             return self._reject(frame, ls.Reject(ls.BUSY, "the node is busy with a step or reset"))
         try:
@@ -290,47 +284,29 @@ class FmuNode:
             self._link.ros.publish(time_ns, values)
 
     def _fail(self, exc: PlantError, action: tuple[int, bytes]) -> None:
-        hung, state = isinstance(exc, StepTimeout), self.lockstep
-        self.counters["hung" if hung else "fmu_errors"] += 1
-        self.health = "failed"
-        self.health_detail = redact(f"episode {state.episode} ended at step {state.step + 1}: {exc.detail}")
-        _log.warning("node %s: episode %d ended by a plant error: %s", self.name, state.episode, exc)
-        # The cause in the plant's words (and the FMU's log); the client puts it in its own error.
-        log = getattr(exc, "log", [])
-        detail = exc.detail + ("\nFMU log (most recent last):\n  " + "\n  ".join(log[-20:]) if log else "")
-        self._pub.put(state.failed(action, redact(detail), self._time_ns, hung))
+        state = self.lockstep
+        detail = self.health.failed(exc, state.episode, state.step + 1)
+        self._pub.put(state.failed(action, detail, self._time_ns, isinstance(exc, StepTimeout)))
 
     def _on_hung(self, what: str, elapsed_s: float) -> None:
         """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code)."""
         if self.isolated:  # the plant kills its child at the deadline itself
             return
-        self.counters["hung"] += 1
-        self.health = "hung"
-        self.health_detail = self.lockstep.unhealthy = (
-            f"the FMU has not returned from {what} for {elapsed_s:.1f} s "
-            f"(deadline {self.step_timeout_s:g} s); "
-            "it cannot be interrupted in this process: restart the node, and run unstable FMUs with --isolate"
-        )
-        _log.error("node %s: %s", self.name, self.health_detail)
+        self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s)
         self._link.unhealthy()
-        self._pub.put(self.lockstep.error(self.health_detail, self._time_ns, hung=True))  # t: where it hung
+        self._pub.put(self.lockstep.error(detail, self._time_ns, hung=True))  # t: where it hung
 
-    def _reject(self, frame: proto.Frame, reject: ls.Reject) -> None:
+    def _reject(self, frame: proto.Frame, reject: ls.Reject, payload: bytes = b"") -> None:
         self.counters[f"rejected_{reject.reason}"] += 1
         if _log.isEnabledFor(logging.INFO):
             _log.info("node %s rejected an action (%s): %s", self.name, reject.reason, reject.detail)
-        self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns))
-
-    def _malformed(self, reason: str) -> None:
-        self.counters["malformed"] += 1
-        n = self.counters["malformed"]
-        if n <= 5 or n % 1000 == 0:
-            _log.warning("node %s dropped a malformed payload (%d so far): %s", self.name, n, reason)
+        key = self.lockstep.reject_key(reject, frame.sim_time_ns, payload)
+        self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns, key))
 
     def reset(self, values: dict[str, Any], inputs: list[float] | None, episode: int) -> bytes:
         """Reset the model for ``episode``; returns the OUTPUTS frame of step 0."""
-        if self.health == "hung":
-            raise Refused("unhealthy", f"node {self.name!r} is unhealthy: {self.health_detail}")
+        if self.health.is_hung:
+            raise Refused("unhealthy", f"node {self.name!r} is unhealthy: {self.health.detail}")
         if not self._lock.acquire(timeout=self.step_timeout_s):
             raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned")
         try:
@@ -342,10 +318,10 @@ class FmuNode:
                 self.watchdog.end()
             if inputs is not None:
                 self._latest_inputs = self._held_inputs = list(inputs)
-            self.health, self.health_detail = "ok", ""
+            self.health.ok()
             self.counters["resets"] += 1
             self._time_ns = time_ns = round(self.plant.time_s * 1e9)
-            frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs)
+            frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs, key=self.lease.key)
             self.lockstep.started(episode, frame)
             # step 0 goes on the outputs key too: recorders and deployed agents see every sample
             self._pub.put(frame)
@@ -365,7 +341,7 @@ class FmuNode:
     def apply(self, inputs: list[float]) -> bool:
         """Anonymous inputs (the ROS view): held in real time, one step in lockstep; False when
         the node is unhealthy or busy."""
-        if self.health == "hung" or not self._lock.acquire(timeout=self.step_timeout_s):
+        if self.health.is_hung or not self._lock.acquire(timeout=self.step_timeout_s):
             return False
         try:
             if self._driver is not None:

@@ -9,10 +9,11 @@ ROS view (``bridge.net.ros2.view``), whose requests it turns into the node's own
 from __future__ import annotations
 
 import logging
+import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from bridge.errors import BridgeError
+from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.requests import redact
@@ -35,22 +36,30 @@ class NodeLink:
         keys: proto.Keys,
         *,
         own_session: bool,
-        on_action: Handler,
+        node: FmuNode,
         on_reset: Handler,
         on_info: Handler,
         lease: Lease,
     ) -> None:
         self.session, self.keys, self.own_session, self.lease = session, keys, own_session, lease
+        self.node, self.counters = node, node.counters
+        n = len(node.input_names)
+        self._plain, self._signed = (
+            proto.PlainFrames(proto.ACTION, n),
+            proto.PlainFrames(proto.ACTION, n, signed=True),
+        )
+        self.zid = str(session.zid())
+        _refuse_a_second_node(session, keys)
         self.outputs = session.declare_publisher(keys.outputs)
         self.clock = session.declare_publisher(keys.clock)
         self.ros: RosView | None = None
         self._unhealthy: Any = None
         self._declared: list[Any] = [self.outputs, self.clock]
         self._declared += [
-            session.declare_subscriber(keys.actions, on_action),
+            session.declare_subscriber(keys.actions, self._on_action),
             session.declare_queryable(keys.reset, on_reset, complete=True),
             session.declare_queryable(keys.info, on_info, complete=True),
-            session.liveliness().declare_subscriber(keys.client(0), self._on_client_token),
+            session.liveliness().declare_subscriber(keys.client(0), self._on_client_token, history=True),
             session.liveliness().declare_token(keys.alive),
         ]
 
@@ -67,16 +76,52 @@ class NodeLink:
             realtime=node.mode == "realtime",
         )
 
+    def _on_action(self, sample: Any) -> None:
+        """An ACTION payload: a plain next step read with one struct call and stepped at once,
+        anything else decoded in full and judged; malformed payloads counted and dropped."""
+        node, payload = self.node, sample.payload.to_bytes()
+        try:
+            fields = self._signed.read(payload) or self._plain.read(payload)
+            if fields is not None and not fields[2] & ~proto.SIGNED and node.plain_step(fields, payload):
+                return
+            try:
+                frame = proto.decode_action(payload, len(node.input_names))
+            except TransportError as exc:
+                self._malformed(str(exc))
+                return
+            node.accept(frame, payload)
+        except Exception:  # never let a handler die: count it, log it, keep serving
+            self.counters["internal_errors"] += 1
+            _log.exception("node %s: an action could not be handled", self.keys.node)
+
+    def _malformed(self, reason: str) -> None:
+        self.counters["malformed"] += 1
+        n = self.counters["malformed"]
+        if n <= 5 or n % 1000 == 0:
+            _log.warning("node %s dropped a malformed payload (%d so far): %s", self.keys.node, n, reason)
+
     def _on_client_token(self, sample: Any) -> None:
         import zenoh
 
-        if sample.kind == zenoh.SampleKind.DELETE and self.lease.release_token(str(sample.key_expr)):
+        try:
+            client = int(str(sample.key_expr).rpartition("/")[2], 16)
+        except ValueError:
+            return  # not a client id: nothing a lease could be backed by
+        if self.lease.token(client, alive=sample.kind != zenoh.SampleKind.DELETE):
             _log.info("node %s: the lease ended, its holder's session is gone", self.keys.node)
 
     def unhealthy(self) -> None:
         """Declare the ``unhealthy`` liveliness token (the FMU hung); it lives until the node ends."""
         if self._unhealthy is None:
             self._unhealthy = self.session.liveliness().declare_token(self.keys.unhealthy)
+
+    def close_within(self, timeout_s: float) -> bool:
+        """Undeclare everything (and close an own session) within ``timeout_s``; whether it was
+        done in time (a callback stuck in a hung FMU keeps its entity busy)."""
+        teardown = threading.Thread(target=self.close, name=f"close-{self.keys.node}", daemon=True)
+        teardown.start()
+        teardown.join(timeout=timeout_s)
+        return not teardown.is_alive()
 
     def close(self) -> None:
         if self.ros is not None:
@@ -90,6 +135,16 @@ class NodeLink:
                 _log.debug("undeclare failed", exc_info=True)
         if self.own_session:
             self.session.close()
+
+
+def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
+    """A node of this name already serves: two would answer the same keys, so this one refuses."""
+    for reply in session.liveliness().get(keys.alive, timeout=1.0):
+        if reply.ok is not None:
+            raise TransportError(
+                f"a node named {keys.node!r} already serves on {keys.base}/*; stop it, or give this "
+                "one another name (--name)"
+            )
 
 
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:

@@ -29,7 +29,7 @@ def answer_reset(node: FmuNode, query: Any) -> None:
     """Reply to a reset query: the step-0 OUTPUTS frame, or an error reply saying why not."""
     try:
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        reply = checked_reset(node, payload)
+        reply, key = checked_reset(node, payload)
     except BadRequest as exc:
         return _reply_err(node, query, "bad_request", str(exc))
     except Refused as exc:
@@ -41,12 +41,14 @@ def answer_reset(node: FmuNode, query: Any) -> None:
         return _reply_err(
             node, query, "internal", f"the node could not handle the reset ({type(exc).__name__})"
         )
-    query.reply(node.keys.reset, reply)
+    # the session key goes to the querier alone, beside the step-0 frame it signs
+    query.reply(node.keys.reset, reply, attachment=key)
     return None
 
 
-def checked_reset(node: FmuNode, payload: bytes) -> bytes:
-    """Parse and check a reset request, take or keep the lease, reset; the step-0 frame."""
+def checked_reset(node: FmuNode, payload: bytes) -> tuple[bytes, bytes | None]:
+    """Parse and check a reset request, take or keep the lease, reset; the step-0 frame and
+    the lease's session key (None for an anonymous reset)."""
     request = parse_reset(payload)
     values = node.rules.values(request.values)
     if request.inputs is not None:
@@ -58,10 +60,14 @@ def checked_reset(node: FmuNode, payload: bytes) -> bytes:
         reason = node.rules.inputs(request.inputs)
         if reason is not None:
             raise BadRequest(f"reset request: {reason}")
-    refusal = node.lease.acquire(request.client, request.zid, request.take_over)
+    lease = node.lease
+    refusal = lease.acquire(
+        request.client, request.zid, request.take_over, episode=request.episode, proof=request.proof
+    )
     if refusal is not None:
         raise Refused("busy", refusal)
-    return node.reset(values, request.inputs, request.episode)
+    frame = node.reset(values, request.inputs, request.episode)
+    return frame, lease.key if request.client else None
 
 
 def _reply_err(node: FmuNode, query: Any, code: str, message: str) -> None:
@@ -86,6 +92,7 @@ def describe(node: FmuNode) -> dict[str, Any]:
     t, state, served = node.timing, node.lockstep, node.served
     return {
         "node": node.name,
+        "zid": node.zid,
         "mode": node.mode,
         "rate": node.rate,
         "pid": os.getpid(),
@@ -102,8 +109,8 @@ def describe(node: FmuNode) -> dict[str, Any]:
         "episode": state.episode,
         "step": state.step,
         "time_s": node.plant.time_s,
-        "health": node.health,
-        "health_detail": node.health_detail,
+        "health": node.health.state,
+        "health_detail": node.health.detail,
         "holder": node.lease.describe(),
         "isolated": node.isolated,
         "can_save_state": node.saved.available,

@@ -30,6 +30,8 @@ without a round trip of its own (``bridge.net.node_state``).
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 import json
 import struct
 from dataclasses import dataclass
@@ -51,9 +53,14 @@ FAILED = 2  # the step failed (ERROR frames): the episode is over
 HUNG = 4  # (with FAILED) the FMU did not return within the node's step deadline
 SAVE_STATE = 8  # (ACTION) save the FMU state, then step
 RESTORE_STATE = 16  # (ACTION) back to the saved state (the step before this action), then step
-ACTION_FLAGS = SAVE_STATE | RESTORE_STATE
+SIGNED = 32  # the frame ends in a MAC of everything before it, keyed by the lease's session key
+ACTION_FLAGS = SAVE_STATE | RESTORE_STATE | SIGNED
+MAC_SIZE = 16  # keyed BLAKE2b, 128 bits
+KEY_SIZE = 32  # a session key: random, learnt only from the reset reply
 
 MAX_REQUEST_BYTES = 64 * 1024  # a reset request larger than this is refused unread
+MAX_INFO_BYTES = 16 * 1024 * 1024  # an info reply larger than this is refused unread
+MAX_SIGNALS = 100_000  # inputs or outputs a node may declare
 MAX_JSON_DEPTH = 8  # reset requests are flat: deeper nesting is refused before parsing
 EPISODE_MAX = 2**32 - 1  # the header's uint32
 CLIENT_MAX = 2**63 - 1  # client ids travel in an int64 header field
@@ -139,22 +146,57 @@ class Frame:
 
 
 def encode_values(
-    kind: int, episode: int, step: int, sim_time_ns: int, values: Any, *, flags: int = 0
+    kind: int,
+    episode: int,
+    step: int,
+    sim_time_ns: int,
+    values: Any,
+    *,
+    flags: int = 0,
+    key: bytes | None = None,
 ) -> bytes:
-    """A frame carrying float64 values (OUTPUTS or ACTION): an array, or a sequence of numbers."""
+    """A frame carrying float64 values (OUTPUTS or ACTION): an array, or a sequence of numbers;
+    with ``key``, flagged SIGNED and ending in its MAC."""
+    if key is not None:
+        flags |= SIGNED
     if isinstance(values, (list, tuple)):  # the hot path of nodes and clients: one struct call
         n = len(values)
-        return _values_frame(n).pack(VERSION, kind, flags, episode, step, sim_time_ns, n, *values)
-    array = np.ascontiguousarray(values, dtype="<f8")
-    header = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
-    return header + COUNT.pack(array.size) + array.tobytes()
+        frame = _values_frame(n).pack(VERSION, kind, flags, episode, step, sim_time_ns, n, *values)
+    else:
+        array = np.ascontiguousarray(values, dtype="<f8")
+        header = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns)
+        frame = header + COUNT.pack(array.size) + array.tobytes()
+    return frame if key is None else frame + mac(key, frame)
 
 
 def encode_message(
-    kind: int, episode: int, step: int, sim_time_ns: int, message: str, *, flags: int = 0
+    kind: int,
+    episode: int,
+    step: int,
+    sim_time_ns: int,
+    message: str,
+    *,
+    flags: int = 0,
+    key: bytes | None = None,
 ) -> bytes:
-    """A frame carrying a text message (ERROR or REJECT)."""
-    return HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns) + message.encode("utf-8", "replace")
+    """A frame carrying a text message (ERROR or REJECT); with ``key``, signed."""
+    if key is not None:
+        flags |= SIGNED
+    frame = HEADER.pack(VERSION, kind, flags, episode, step, sim_time_ns) + message.encode("utf-8", "replace")
+    return frame if key is None else frame + mac(key, frame)
+
+
+def mac(key: bytes, data: bytes) -> bytes:
+    """The MAC of ``data`` under a session ``key`` (keyed BLAKE2b, ``MAC_SIZE`` bytes)."""
+    return hashlib.blake2b(data, key=key, digest_size=MAC_SIZE).digest()
+
+
+def verify(payload: bytes, key: bytes) -> bool:
+    """Whether ``payload`` is a frame flagged SIGNED whose MAC is right under ``key``: it was sent
+    by the other end of the session (the node, or the client that holds it)."""
+    if len(payload) < HEADER.size + MAC_SIZE or not payload[2] & SIGNED:
+        return False
+    return hmac.compare_digest(payload[-MAC_SIZE:], mac(key, payload[:-MAC_SIZE]))
 
 
 def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
@@ -162,6 +204,10 @@ def decode(payload: bytes, *, expected_values: int | None = None) -> Frame:
     if len(payload) < HEADER.size:
         raise TransportError(f"payload of {len(payload)} bytes is shorter than the {HEADER.size}-byte header")
     version, kind, flags, episode, step, sim_time_ns = HEADER.unpack_from(payload)
+    if flags & SIGNED:  # the MAC is the receiver's to check (``verify``): the frame is read without it
+        if len(payload) < HEADER.size + MAC_SIZE:
+            raise TransportError(f"a signed frame of {len(payload)} bytes has no room for its MAC")
+        payload = payload[:-MAC_SIZE]
     if version != VERSION:
         raise TransportError(f"protocol version {version} is not supported (expected {VERSION})")
     if kind not in KIND_NAMES:
@@ -201,17 +247,20 @@ class PlainFrames:
     the frames :func:`decode` accepts with that kind and count. ``read`` returns None for any other
     payload, which is then :func:`decode`'s to refuse."""
 
-    def __init__(self, kind: int, count: int) -> None:
-        self._struct = _values_frame(count)
-        self._kind, self._count = kind, count
+    def __init__(self, kind: int, count: int, *, signed: bool = False) -> None:
+        self._struct = _values_frame(count, signed)
+        self._kind, self._count, self._signed = kind, count, SIGNED if signed else 0
 
     def read(self, payload: bytes) -> tuple[Any, ...] | None:
-        """``(version, kind, flags, episode, step, stamp, count, *values)``, the stamp being the
-        simulation time (outputs) or the client id (actions); None if not such a frame."""
+        """``(version, kind, flags, episode, step, stamp, count, *values[, mac])``, the stamp
+        being the simulation time (outputs) or the client id (actions), the MAC last when signed
+        (unchecked: see ``verify``); None if not such a frame."""
         if len(payload) != self._struct.size:
             return None
         fields = self._struct.unpack(payload)
         if fields[0] != VERSION or fields[1] != self._kind or fields[6] != self._count:
+            return None
+        if fields[2] & SIGNED != self._signed:
             return None
         return fields
 
@@ -221,10 +270,10 @@ def _float64s(count: int) -> struct.Struct:
     return struct.Struct(f"<{count}d")
 
 
-@lru_cache(maxsize=64)
-def _values_frame(count: int) -> struct.Struct:
-    """A whole values frame of ``count`` values: header, count, values."""
-    return struct.Struct(f"<BBHIqqI{count}d")
+@lru_cache(maxsize=128)
+def _values_frame(count: int, signed: bool = False) -> struct.Struct:
+    """A whole values frame of ``count`` values: header, count, values (and a MAC when signed)."""
+    return struct.Struct(f"<BBHIqqI{count}d" + (f"{MAC_SIZE}s" if signed else ""))
 
 
 def encode_json(data: dict[str, Any]) -> bytes:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from bridge.errors import (
     FMU_LOG_HEADER,
@@ -35,6 +36,7 @@ from bridge.experiment.validate import Timing, check_experiment, timing
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.channel import ChannelWaiting, EventWaiting, Waiting
+from bridge.net.lease import NO_TOKEN, reset_proof
 from bridge.net.transport import ZenohOptions, open_session, undeclare
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
@@ -44,16 +46,134 @@ if TYPE_CHECKING:
 _log = logging.getLogger(__name__)
 
 
+class NodeInfo(BaseModel):
+    """What a client needs from a node's ``info`` reply; anything else in it is kept as is."""
+
+    model_config = ConfigDict(extra="allow")
+
+    node: str
+    zid: str = Field(default="", max_length=64)  # "": a publisher of recorded frames
+    experiment: str = ""
+    fmu_sha256: str = ""
+    input_names: list[str] = Field(max_length=proto.MAX_SIGNALS)
+    output_names: list[str] = Field(max_length=proto.MAX_SIGNALS)
+    step_size_s: float = Field(gt=0)
+    steps_per_sample: int = Field(ge=1)
+    sampling_time_s: float = Field(gt=0)
+    start_time_s: float
+    can_save_state: bool = False
+    save_state_refusal: str = ""
+    model: dict[str, Any]
+
+
+class _HolderEntry(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    client: str
+    zid: str = ""
+
+
+class _ModelEntry(BaseModel):
+    model_config = ConfigDict(extra="allow")
+    model_name: str = "?"
+
+
+class NodeListing(BaseModel):
+    """A node's ``info`` as ``fmu-bridge nodes`` lists it: every field typed, the missing ones
+    filled (a recording published with ``replay --publish`` answers with fewer)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    node: str
+    zid: str = Field(default="", max_length=64)
+    mode: str = "?"
+    experiment: str = ""
+    version: str = ""
+    health: str = "?"
+    holder: _HolderEntry | None = None
+    episode: int = 0
+    step: int = -1
+    time_s: float = 0.0
+    pid: int = 0
+    counters: dict[str, int] = {}
+    model: _ModelEntry = _ModelEntry()
+    input_names: list[str] = []
+    output_names: list[str] = []
+
+
+def listed_info(payload: bytes, node: str, replier: str | None) -> dict[str, Any]:
+    """A node's ``info`` reply for a listing (:class:`NodeListing`); TransportError if malformed."""
+    data = proto.decode_json(payload, f"the info reply of node {node!r}", limit=proto.MAX_INFO_BYTES)
+    try:
+        listing = NodeListing.model_validate(data)
+    except ValidationError as exc:
+        raise _malformed_info(node, exc) from None
+    if listing.node != node or (replier is not None and listing.zid not in ("", replier)):
+        raise TransportError(
+            f"the info reply for node {node!r} names node {listing.node!r}: not the node asked for"
+        )
+    return listing.model_dump()
+
+
+def _malformed_info(node: str, exc: Exception) -> TransportError:
+    first = exc.errors()[0] if isinstance(exc, ValidationError) else {"msg": repr(exc)[:200], "loc": ()}
+    where = ".".join(str(p) for p in first.get("loc", ()))
+    return TransportError(
+        f"node {node!r} sent an info reply that the protocol does not allow"
+        f"{f' ({where})' if where else ''}: {first['msg']}; is it a node of another version?"
+    )
+
+
+def checked_info(payload: bytes, node: str, replier: str | None) -> dict[str, Any]:
+    """A node's ``info`` reply, checked against :class:`NodeInfo` (and its model summary), from
+    the session it names; a TransportError naming the node says what is wrong otherwise."""
+    data = proto.decode_json(payload, f"the info reply of node {node!r}", limit=proto.MAX_INFO_BYTES)
+    try:
+        info = NodeInfo.model_validate(data)
+        info_from_summary(info.model)
+    except (ValidationError, KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise _malformed_info(node, exc) from None
+    if info.node != node or (replier is not None and info.zid not in ("", replier)):
+        raise TransportError(
+            f"the info reply for node {node!r} names node {info.node!r} of session {info.zid}, "
+            f"and came from session {replier}: not the node asked for"
+        )
+    return data
+
+
+def _all() -> Any:
+    """Ask every queryable of a key, not the best one: an impostor cannot hide the node."""
+    import zenoh
+
+    return zenoh.QueryTarget.ALL
+
+
+def _replier(reply: Any) -> str | None:
+    rid = getattr(reply, "replier_id", None)
+    return str(rid.zid) if rid is not None else None
+
+
 def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, Any]:
-    """The node's ``info`` reply; TransportError if no node of that name answers in ``timeout_s``."""
+    """The node's ``info`` reply; TransportError if no node of that name answers in
+    ``timeout_s``, if two sessions answer as that node, or if the reply is malformed."""
     # A query sent before routes exist finds no queryable and returns at once: retry until the
     # timeout, so a just-opened session or a node that is still starting is found.
     deadline = time.monotonic() + timeout_s
     while True:
         remaining = deadline - time.monotonic()
-        for reply in session.get(keys.info, timeout=max(0.05, min(remaining, 1.0))):
-            if reply.ok is not None:
-                return proto.decode_json(reply.ok.payload.to_bytes(), f"info of node {keys.node!r}")
+        answers = [
+            (reply.ok.payload.to_bytes(), _replier(reply))
+            for reply in session.get(keys.info, target=_all(), timeout=max(0.05, min(remaining, 1.0)))
+            if reply.ok is not None
+        ]
+        sessions = {zid for _, zid in answers}
+        if len(sessions) > 1:
+            raise TransportError(
+                f"{len(sessions)} Zenoh sessions answer as node {keys.node!r} "
+                f"({sorted(map(str, sessions))}); "
+                "a node's name must be its own: stop the impostor, or use another name"
+            )
+        if answers:
+            return checked_info(answers[0][0], keys.node, answers[0][1])
         if remaining <= 0:
             break
         time.sleep(min(0.1, max(remaining, 0.0)))
@@ -94,22 +214,35 @@ class NodeClient:
         self.deadline = 0.0
         self.frame: proto.Frame | None = None
         self.alive = True
-        self.description = query_info(session, self.keys, timeout_s)
+        self.key: bytes | None = None  # the session key of the lease, from the reset reply
+        # the token first: it reaches the node before any reset (a lease needs it), and its
+        # declaration has gone through long before the info query's round trip is over
+        token = session.liveliness().declare_token(self.keys.client(self.client_id))
+        try:
+            self.description = query_info(session, self.keys, timeout_s)
+        except BaseException:
+            undeclare(token)
+            raise
+        self.node_zid = str(self.description.get("zid") or "")  # answers come from this session only
+        self.outputs = len(self.description["output_names"])
         self._declared = [
-            session.liveliness().declare_token(self.keys.client(self.client_id)),
+            token,
             self.waiting.start(self),
             session.liveliness().declare_subscriber(self.keys.alive, self._on_liveliness, history=True),
         ]
         self._pub = session.declare_publisher(self.keys.actions)
         self._declared.append(self._pub)
 
-    def take(self, frame: proto.Frame) -> bool:
-        """Keep ``frame`` if it answers the last action (its step, and not another client's
-        reject); whether it did."""
+    def take(self, frame: proto.Frame, payload: bytes) -> bool:
+        """Keep ``frame`` if it answers the last action: its step, from the leased node's session
+        (its MAC is right under the session key), and not another client's reject; whether it did."""
         if (frame.episode, frame.step) != self.want:
             return False
         if frame.kind == proto.REJECT and frame.sim_time_ns not in (0, self.client_id):
             return False
+        key = self.key
+        if key is not None and not proto.verify(payload, key):
+            return False  # not from the node this client leased: another peer's frame
         self.frame = frame
         return True
 
@@ -132,7 +265,10 @@ class NodeClient:
         self.waiting.arm()
         self.want = (episode, step)
         self.deadline = time.monotonic() + self.timeout_s
-        self._pub.put(proto.encode_values(proto.ACTION, episode, step, self.client_id, inputs, flags=flags))
+        action = proto.encode_values(
+            proto.ACTION, episode, step, self.client_id, inputs, flags=flags, key=self.key
+        )
+        self._pub.put(action)
         self.waiting.sent()
 
     def ready(self) -> bool:
@@ -168,23 +304,39 @@ class NodeClient:
         if not self.alive:
             raise self._dead(plant, step=None)
         episode = plant.episode
-        request = proto.encode_json(
-            {
-                "episode": episode,
-                "values": values,
-                "inputs": inputs,
-                "client": self.client_id,
-                "zid": str(self.session.zid()),
-                "take_over": self.take_over,
-            }
-        )
+        request: dict[str, Any] = {
+            "episode": episode,
+            "values": values,
+            "inputs": inputs,
+            "client": self.client_id,
+            "zid": str(self.session.zid()),
+            "take_over": self.take_over,
+        }
+        if self.key is not None:  # the holder shows it holds the session key
+            request["proof"] = reset_proof(self.key, self.client_id, episode)
         self.want = (episode, 0)
+        payload = proto.encode_json(request)
         start = time.monotonic()
-        for reply in self.session.get(self.keys.reset, payload=request, timeout=self.timeout_s):
-            if reply.ok is not None:
-                return proto.decode(reply.ok.payload.to_bytes())
-            raise self._reset_refused(plant, reply.err.payload.to_bytes().decode(errors="replace"))
-        if not self.alive or time.monotonic() - start < 0.5 * self.timeout_s:
+        while True:
+            sent = time.monotonic()
+            refusal = ""
+            replies = self.session.get(
+                self.keys.reset, payload=payload, target=_all(), timeout=self.timeout_s
+            )
+            for reply in replies:
+                if self.node_zid and _replier(reply) not in (None, self.node_zid):
+                    continue  # another session answering for the node: not believed
+                if reply.ok is not None:
+                    return self._session(plant, reply.ok, episode)
+                refusal = reply.err.payload.to_bytes().decode(errors="replace")
+                break
+            if NO_TOKEN in refusal and time.monotonic() - start < 0.5 * self.timeout_s:
+                time.sleep(0.05)  # the node has not seen this client's token yet: ask again
+                continue
+            if refusal:
+                raise self._reset_refused(plant, refusal)
+            break
+        if not self.alive or time.monotonic() - sent < 0.5 * self.timeout_s:
             # No queryable answered long before the deadline: nothing serves the reset key any more.
             raise plant.failure(
                 PlantDied,
@@ -200,6 +352,26 @@ class NodeClient:
             f"the node may be overloaded, hung or unreachable [{self.keys.reset}]",
             step=None,
         )
+
+    def _session(self, plant: Plant, sample: Any, episode: int) -> proto.Frame:
+        """The step-0 frame of a reset reply, and the session key beside it, both checked."""
+        payload = sample.payload.to_bytes()
+        key = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        try:
+            if len(key) != proto.KEY_SIZE:
+                raise TransportError(f"a session key of {len(key)} bytes, expected {proto.KEY_SIZE}")
+            if not proto.verify(payload, key):
+                raise TransportError("its step-0 frame is not signed with the session key")
+            frame = proto.decode(payload, expected_values=self.outputs)
+            if (frame.kind, frame.episode, frame.step) != (proto.OUTPUTS, episode, 0):
+                raise TransportError(
+                    f"a {proto.KIND_NAMES[frame.kind]} frame for step {frame.step} of episode "
+                    f"{frame.episode}, expected the outputs of step 0 of episode {episode}"
+                )
+        except TransportError as exc:
+            raise TransportError(f"{plant.name}: the reset reply is malformed: {exc}") from None
+        self.key = key
+        return frame
 
     def _reset_refused(self, plant: Plant, message: str) -> BridgeError:
         code, _, detail = message.partition(": ")
@@ -217,13 +389,18 @@ class NodeClient:
         self._declared = []
 
 
-def answer(plant: Plant, frame: proto.Frame, episode: int, step: int) -> proto.Frame:
+def answer(plant: Plant, frame: proto.Frame, episode: int, step: int, outputs: int) -> proto.Frame:
     """The one reading of a node's answer to ``step`` of ``episode``: an OUTPUTS frame is
     returned; an ERROR frame is the model's failure (:class:`StepError`, or :class:`StepTimeout`
     when flagged HUNG), at the frame's simulation time; a REJECT is the node refusing the action
     (:class:`TransportError`). Every remote plant reads frames through this function, so a node
     gives the same error through a remote env and through a system."""
     if frame.kind == proto.OUTPUTS:
+        if len(frame.floats) != outputs:
+            raise TransportError(
+                f"{plant.name} answered step {step} of episode {episode} with {len(frame.floats)} "
+                f"values; it serves {outputs} outputs"
+            )
         return frame
     if frame.kind == proto.REJECT:
         raise TransportError(f"{plant.name} rejected step {step} of episode {episode}: {frame.message}")
@@ -410,7 +587,7 @@ class RemotePlant(Plant):
         step = self.sample + 1
         if frame.kind != proto.REJECT:  # a refused action took no step
             self._time_s, self.sample = frame.sim_time_ns / 1e9, step
-        frame = answer(self, frame, self.episode, step)
+        frame = answer(self, frame, self.episode, step, self.client.outputs)
         self.terminated = frame.terminated
         return frame.values if self._all_outputs else frame.values[self._out_index]
 
@@ -514,7 +691,10 @@ def describe_nodes(
         entry: dict[str, Any] = {"node": name, "error": f"no answer within {timeout_s:g} s"}
         for reply in session.get(keys.info, timeout=timeout_s):
             if reply.ok is not None:
-                entry = proto.decode_json(reply.ok.payload.to_bytes(), f"info of {name}")
+                try:
+                    entry = listed_info(reply.ok.payload.to_bytes(), name, _replier(reply))
+                except TransportError as exc:
+                    entry = {"node": name, "error": str(exc)}
                 break
         found.append(entry)
     return found

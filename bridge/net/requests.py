@@ -27,7 +27,7 @@ from bridge.net.served import Served
 
 MAX_STRING = 1024
 MAX_VALUES = 1000
-REQUEST_KEYS = {"episode", "values", "inputs", "client", "zid", "take_over"}
+REQUEST_KEYS = {"episode", "values", "inputs", "client", "zid", "take_over", "proof"}
 
 
 class BadRequest(TransportError):
@@ -44,6 +44,7 @@ class ResetRequest:
     client: int
     zid: str
     take_over: bool
+    proof: str = ""  # a holder's reset: the MAC that shows it holds the session key
 
 
 def parse_reset(payload: bytes) -> ResetRequest:
@@ -64,6 +65,9 @@ def parse_reset(payload: bytes) -> ResetRequest:
     zid = data.get("zid", "")
     if not isinstance(zid, str) or len(zid) > 64:
         raise BadRequest("reset request: 'zid' must be a string of at most 64 characters")
+    proof = data.get("proof", "")
+    if not isinstance(proof, str) or len(proof) > 64:
+        raise BadRequest("reset request: 'proof' must be a string of at most 64 characters")
     take_over = data.get("take_over", False)
     if not isinstance(take_over, bool):
         raise BadRequest(f"reset request: 'take_over' must be true or false, got {_show(take_over)}")
@@ -74,6 +78,7 @@ def parse_reset(payload: bytes) -> ResetRequest:
         client=_int_in(data.get("client", 0), "client", 0, proto.CLIENT_MAX),
         zid=zid,
         take_over=take_over,
+        proof=proof,
     )
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from bridge.net import lockstep as ls
 from bridge.net import protocol as proto
-from bridge.net.lease import Lease
+from bridge.net.lease import Lease, reset_proof
 
 HOLDER, OTHER = 0x1111, 0x2222
 STATE_OK = None
@@ -19,13 +19,28 @@ def in_range(values: Sequence[float]) -> str | None:
     return None if all(-1.0 <= v <= 1.0 for v in values) else f"{list(values)} is outside [-1, 1]"
 
 
+def held() -> Lease:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    assert lease.acquire(HOLDER, "zid", False) is None
+    return lease
+
+
+def action(
+    state: ls.Lockstep, episode: int, step: int, *, client: int = HOLDER, values: Sequence[float] = (0.5,),
+    flags: int = 0, signed: bool = True,
+) -> bytes:  # fmt: skip
+    """An ACTION payload, signed with the session key when ``signed`` (as the holder signs)."""
+    key = state.lease.key if signed else None
+    return proto.encode_values(proto.ACTION, episode, step, client, list(values), flags=flags, key=key)
+
+
 def started(episode: int = 3) -> ls.Lockstep:
     """Episode ``episode`` held by HOLDER, stepped once (step 1 done, step 2 next)."""
-    lease = Lease("n")
-    assert lease.acquire(HOLDER, "zid", False) is None
-    state = ls.Lockstep(lease, in_range)
+    state = ls.Lockstep(held(), in_range)
     state.started(episode, b"step-0")
-    state.stepped((HOLDER, b"a1"), [0.0], 1_000, terminated=False)
+    first = action(state, episode, 1)
+    state.stepped((HOLDER, first[proto.HEADER.size :]), [0.0], 1_000, terminated=False)
     return state
 
 
@@ -37,13 +52,15 @@ def verdict(
     client: int = HOLDER,
     values: Sequence[float] = (0.5,),
     flags: int = 0,
-    action: bytes = b"a2",
     refusal: str | None = STATE_OK,
+    signed: bool = True,
 ) -> ls.Step | ls.Reject:
-    refused = state.admit(client, values, flags, refusal)
+    payload = action(state, episode, step, client=client, values=values, flags=flags, signed=signed)
+    sent = flags | (proto.SIGNED if signed and state.lease.key is not None else 0)
+    refused = state.admit(client, values, sent, refusal, payload)
     if refused is not None:
         return refused
-    return state.order(episode, step, flags, (client, action))
+    return state.order(episode, step, sent, (client, payload[proto.HEADER.size :]))
 
 
 def reason(result: ls.Step | ls.Reject) -> str:
@@ -61,7 +78,7 @@ def reason(result: ls.Step | ls.Reject) -> str:
         ("out of order: a step behind", {"episode": 3, "step": 0}, ls.OUT_OF_ORDER),
         (
             "conflict: the last step with other values",
-            {"episode": 3, "step": 1, "action": b"other"},
+            {"episode": 3, "step": 1, "values": (0.25,)},
             ls.CONFLICT,
         ),
         ("not holder", {"episode": 3, "step": 2, "client": OTHER}, ls.NOT_HOLDER),
@@ -93,42 +110,46 @@ def test_the_holders_check_comes_first_then_the_values_then_the_health() -> None
     assert reason(verdict(state, 3, 2, values=(9.0,))) == ls.OUT_OF_RANGE
     refused = verdict(state, 3, 2)
     assert reason(refused) == ls.UNHEALTHY and isinstance(refused, ls.Reject) and "hung" in refused.detail
-    assert not state.plain(3, 2, HOLDER, [0.5])
+    assert not state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
 
 
 def test_a_duplicate_of_the_last_step_is_a_retry_never_a_second_step() -> None:
     state = started()
-    assert verdict(state, 3, 1, action=b"a1") == ls.RETRY
-    assert state.last_frame.startswith(proto.HEADER.pack(proto.VERSION, proto.OUTPUTS, 0, 3, 1, 1_000))
+    assert verdict(state, 3, 1) == ls.RETRY
+    assert state.last_frame.startswith(
+        proto.HEADER.pack(proto.VERSION, proto.OUTPUTS, proto.SIGNED, 3, 1, 1_000)
+    )
     assert state.step == 1
 
 
 def test_the_next_step_advances_and_an_ended_episode_refuses_more() -> None:
     state = started()
     assert verdict(state, 3, 2) == ls.ADVANCE
-    assert state.plain(3, 2, HOLDER, [0.5])
-    frame = state.stepped((HOLDER, b"a2"), [0.25], 2_000, terminated=True)
+    assert state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
+    frame = state.stepped((HOLDER, action(state, 3, 2)[proto.HEADER.size :]), [0.25], 2_000, terminated=True)
     decoded = proto.decode(frame)
     assert (decoded.episode, decoded.step, decoded.terminated, decoded.floats) == (3, 2, True, (0.25,))
     assert reason(verdict(state, 3, 3)) == ls.ENDED
-    assert not state.plain(3, 3, HOLDER, [0.5])
+    assert not state.plain(3, 3, HOLDER, [0.5], action(state, 3, 3))
     state.started(4, b"step-0")
     assert verdict(state, 4, 1) == ls.ADVANCE
 
 
 def test_a_failed_step_ends_the_episode_and_its_retry_gets_the_error_again() -> None:
     state = started()
-    frame = state.failed((HOLDER, b"a2"), "the model failed", 1_000, hung=True)
+    frame = state.failed(
+        (HOLDER, action(state, 3, 2)[proto.HEADER.size :]), "the model failed", 1_000, hung=True
+    )
     decoded = proto.decode(frame)
-    assert decoded.kind == proto.ERROR and decoded.flags == proto.FAILED | proto.HUNG
+    assert decoded.kind == proto.ERROR and decoded.flags == proto.FAILED | proto.HUNG | proto.SIGNED
     assert (decoded.step, decoded.sim_time_ns) == (2, 1_000)  # the time the step started at, not 0
-    assert verdict(state, 3, 2, action=b"a2") == ls.RETRY and state.last_frame == frame
+    assert verdict(state, 3, 2) == ls.RETRY and state.last_frame == frame
     assert reason(verdict(state, 3, 3)) == ls.ENDED
 
 
 def test_a_restore_makes_the_step_it_names_the_next_one_again() -> None:
     state = started()
-    state.stepped((HOLDER, b"a2"), [0.0], 2_000, terminated=False)  # steps 1, 2 done
+    state.stepped((HOLDER, action(state, 3, 2)[proto.HEADER.size :]), [0.0], 2_000, terminated=False)
     order = verdict(state, 3, 2, flags=proto.RESTORE_STATE)
     assert order == ls.Step(restore=True)
     state.restored(2)
@@ -139,7 +160,7 @@ def test_a_restore_makes_the_step_it_names_the_next_one_again() -> None:
 
 def test_the_fast_path_accepts_exactly_the_plain_next_step() -> None:
     state = started()
-    assert state.plain(3, 2, HOLDER, [0.5])
+    assert state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
     for episode, step, client, values in [
         (2, 2, HOLDER, [0.5]),
         (3, 3, HOLDER, [0.5]),
@@ -148,7 +169,8 @@ def test_the_fast_path_accepts_exactly_the_plain_next_step() -> None:
         (3, 2, -1, [0.5]),
         (3, 2, HOLDER, [2.0]),
     ]:
-        assert not state.plain(episode, step, client, values), (episode, step, client, values)
+        payload = action(state, episode, step, client=client, values=values)
+        assert not state.plain(episode, step, client, values, payload), (episode, step, client, values)
         sender = client if client >= 0 else OTHER
         assert verdict(state, episode, step, client=sender, values=values) != ls.ADVANCE
 
@@ -157,6 +179,48 @@ def test_nobody_holds_a_fresh_node_so_anyone_may_step_it_and_the_reject_frame_na
     state = ls.Lockstep(Lease("n"), in_range)
     state.started(1, b"")
     assert verdict(state, 1, 1, client=0) == ls.ADVANCE
-    frame = proto.decode(ls.Reject(ls.STALE, "old").frame(7, 8, OTHER))
+    frame = proto.decode(ls.Reject(ls.STALE, "old").frame(7, 8, OTHER, None))
     assert (frame.kind, frame.episode, frame.step, frame.sim_time_ns) == (proto.REJECT, 7, 8, OTHER)
     assert frame.message == "stale: old"
+
+
+# -- sessions: the holder proves itself on every action and reset ---------------------------------------
+def test_a_peer_with_the_holders_id_but_not_its_session_key_is_not_the_holder() -> None:
+    state = started()
+    genuine = action(state, 3, 2)
+    forged = bytearray(genuine)
+    forged[proto.HEADER.size + proto.COUNT.size] ^= 1  # other values under the holder's MAC
+    assert not state.lease.allows(HOLDER, bytes(forged)) and state.lease.allows(HOLDER, genuine)
+    unsigned = action(state, 3, 2, signed=False)
+    assert reason(state.admit(HOLDER, [0.5], 0, None, unsigned) or ls.ADVANCE) == ls.NOT_HOLDER
+    other_key = proto.encode_values(proto.ACTION, 3, 2, HOLDER, [0.5], key=bytes(proto.KEY_SIZE))
+    assert not state.lease.allows(HOLDER, other_key)
+    reject = ls.Reject(ls.NOT_HOLDER, "x")
+    assert state.reject_key(reject, HOLDER, unsigned) is None  # unsigned: the holder ignores it
+    assert state.reject_key(ls.Reject(ls.STALE, "x"), HOLDER, genuine) == state.lease.key
+
+
+def test_a_lease_needs_a_live_token_and_ends_with_it() -> None:
+    lease = Lease("n")
+    refusal = lease.acquire(OTHER, "zid", False)
+    assert refusal is not None and "no liveliness token" in refusal and lease.holder is None
+    lease.token(OTHER, alive=True)
+    assert lease.acquire(OTHER, "zid", False) is None and lease.key is not None
+    assert lease.token(OTHER, alive=False) and lease.holder is None
+
+
+def test_a_reset_by_the_holder_must_prove_its_session_and_a_take_over_gets_a_new_key() -> None:
+    lease = held()
+    key = lease.key
+    assert key is not None
+    refusal = lease.acquire(HOLDER, "zid", False, episode=2)
+    assert refusal is not None and "does not prove" in refusal
+    assert lease.acquire(HOLDER, "zid", False, episode=2, proof=reset_proof(key, HOLDER, 2)) is None
+    assert lease.key == key
+    lease.token(OTHER, alive=True)
+    assert lease.acquire(OTHER, "z2", False) is not None  # held
+    assert lease.acquire(OTHER, "z2", True) is None and lease.key not in (None, key)
+    old = proto.encode_values(proto.ACTION, 1, 1, HOLDER, [0.0], key=key)
+    assert lease.former_key(HOLDER, old) == key  # the taken-over holder's reject is signed for it
+    assert lease.former_key(HOLDER, proto.encode_values(proto.ACTION, 1, 1, HOLDER, [0.0])) is None
+    assert lease.acquire(0, "", False) is not None  # anonymous: never while held

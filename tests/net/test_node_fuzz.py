@@ -83,7 +83,9 @@ def rss_mb(pid: int) -> float:
 
 # -- malformed requests ------------------------------------------------------------------------------
 def reset_payload(rng: np.random.Generator) -> bytes:
-    good: dict[str, Any] = {"episode": 3, "values": {"theta0": 0.05}, "inputs": [0.0], "client": 7}
+    good: dict[str, Any] = {
+        "episode": 3, "values": {"theta0": 0.05}, "inputs": [0.0], "client": 7, "take_over": True
+    }  # fmt: skip  # client 7 has a token (fuzz_node); taking over needs no proof of the last session
     kind = int(rng.integers(14))
     if kind == 0:
         return rng.bytes(int(rng.integers(0, 200)))
@@ -187,6 +189,7 @@ def fuzz_node(net: Loopback, name: str, rng: np.random.Generator, counts: Counte
     keys = proto.Keys(net.prefix, name)
     ros_actions, ros_reset = f"0/{name}/actions/{JOINT_STATE}", f"0/{name}/reset/{TRIGGER}"
     gid = bytes(range(16))
+    token = session.liveliness().declare_token(keys.client(7))  # a lease is backed by a token
     for i in range(PER_NODE["reset"]):
         answer = query(session, keys.reset, reset_payload(rng), counts, "reset")
         if answer is not None:
@@ -222,6 +225,7 @@ def fuzz_node(net: Loopback, name: str, rng: np.random.Generator, counts: Counte
         payload = bytes(replies[0].ok.payload.to_bytes())
         assert payload[:4] == b"\x00\x01\x00\x00"
         counts["ros_reset_ok" if payload[4] == 1 else "ros_reset_refused"] += 1
+    token.undeclare()
     counts["nodes_done"] += 1
 
 

@@ -106,8 +106,11 @@ def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(lo
             env.step(np.zeros(1, dtype=np.float32))  # now at step 1 of episode 1
             action, me = [0.0], env.plant.client.client_id  # type: ignore[attr-defined]
 
+            key = env.plant.client.key  # type: ignore[attr-defined]  # the session of the lease
+
             def send(episode: int, step: int, values: list[float], client: int = me) -> proto.Frame:
-                payload = proto.encode_values(proto.ACTION, episode, step, client, values)
+                signed = key if client == me else None
+                payload = proto.encode_values(proto.ACTION, episode, step, client, values, key=signed)
                 return _send(loopback, "cp", payload, frames, event)
 
             dup = send(1, 1, action)

@@ -176,9 +176,11 @@ def test_unknown_action_flags_and_negative_client_ids_are_malformed_and_never_st
     plant.reset({}, [10.0])
     keys = proto.Keys(own.prefix, "proto-motor")
     holder = plant.plants["motor"].client.client_id  # type: ignore[attr-defined]
-    action = proto.encode_values(proto.ACTION, 1, 1, holder, [1.0, 0.0], flags=proto.ACTION_FLAGS << 1)
+    key = plant.plants["motor"].client.key  # type: ignore[attr-defined]  # the holder's session
+    action = proto.encode_values(proto.ACTION, 1, 1, holder, [1.0, 0.0], flags=1 << 10, key=key)
     net.session.put(keys.actions, action)  # type: ignore[attr-defined]
-    both = proto.encode_values(proto.ACTION, 1, 1, holder, [1.0, 0.0], flags=proto.ACTION_FLAGS)
+    state = proto.SAVE_STATE | proto.RESTORE_STATE
+    both = proto.encode_values(proto.ACTION, 1, 1, holder, [1.0, 0.0], flags=state, key=key)
     net.session.put(keys.actions, both)  # type: ignore[attr-defined]
     negative = proto.encode_values(proto.ACTION, 1, 1, -holder, [1.0, 0.0])  # a plain step but the id
     net.session.put(keys.actions, negative)  # type: ignore[attr-defined]

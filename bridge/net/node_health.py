@@ -1,0 +1,50 @@
+"""A node's health: ``ok``, ``failed`` (the last episode ended by a plant error) or ``hung`` (a
+call into the FMU outlived the deadline and, in this process, cannot be interrupted)."""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+
+from bridge.errors import PlantError, StepTimeout
+from bridge.net.requests import redact
+
+_log = logging.getLogger(__name__)
+
+
+class Health:
+    """What ``info`` reports as ``health`` and ``health_detail``; counts ``hung`` and ``fmu_errors``."""
+
+    def __init__(self, node: str, deadline_s: float, counters: Counter[str]) -> None:
+        self.node, self.deadline_s, self.counters = node, deadline_s, counters
+        self.state, self.detail = "ok", ""
+
+    @property
+    def is_hung(self) -> bool:
+        return self.state == "hung"
+
+    def ok(self) -> None:
+        self.state, self.detail = "ok", ""
+
+    def failed(self, exc: PlantError, episode: int, step: int) -> str:
+        """A plant error ended ``episode`` at ``step``; the ERROR frame's text: the cause in the
+        plant's words and the FMU's log (the client puts both in its own error), paths left out."""
+        self.counters["hung" if isinstance(exc, StepTimeout) else "fmu_errors"] += 1
+        self.state = "failed"
+        self.detail = redact(f"episode {episode} ended at step {step}: {exc.detail}")
+        _log.warning("node %s: episode %d ended by a plant error: %s", self.node, episode, exc)
+        log = getattr(exc, "log", [])
+        return redact(
+            exc.detail + ("\nFMU log (most recent last):\n  " + "\n  ".join(log[-20:]) if log else "")
+        )
+
+    def hung(self, what: str, elapsed_s: float) -> str:
+        """``what`` has not returned for ``elapsed_s``: the node is unhealthy until restarted."""
+        self.counters["hung"] += 1
+        self.state = "hung"
+        self.detail = (
+            f"the FMU has not returned from {what} for {elapsed_s:.1f} s (deadline {self.deadline_s:g} s); "
+            "it cannot be interrupted in this process: restart the node, and run unstable FMUs with --isolate"
+        )
+        _log.error("node %s: %s", self.node, self.detail)
+        return self.detail

@@ -1,0 +1,240 @@
+"""Sessions that cannot be forged: hostile peers (a real process and real sessions) on loopback.
+
+A holder proves itself with the session key it learnt from its reset reply; a client believes
+only frames signed with that key, from the node's own session; a lease needs a live token."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from bridge.env import RemoteFmuEnv
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import TransportError
+from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
+from bridge.net.node import FmuNode
+from bridge.net.remote import answer, describe_nodes
+from bridge.net.transport import ZenohOptions, open_session
+from tests.conftest import Loopback, _wait_for_line, node_process, stop_process
+
+pytestmark = pytest.mark.integration
+CARTPOLE = example_experiment("cartpole_continuous")
+
+# A hostile peer: for every action it sees, it answers first with made-up OUTPUTS, ERROR (hung)
+# and REJECT frames for that step, and sends two actions of its own for the next step stamped with
+# the sender's client id: one with the genuine MAC over other values, one unsigned. It also
+# answers reset queries as if it were the node, with a made-up session key.
+HOSTILE = """
+import os, secrets, struct, sys, threading, zenoh
+from bridge.net import protocol as proto
+endpoint, prefix, node = sys.argv[1:]
+zenoh.init_log_from_env_or("error")
+conf = zenoh.Config()
+conf.insert_json5("connect/endpoints", '["%s"]' % endpoint)
+conf.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(conf)
+keys = proto.Keys(prefix, node)
+out, act = s.declare_publisher(keys.outputs), s.declare_publisher(keys.actions)
+fake_key = secrets.token_bytes(proto.KEY_SIZE)
+sent = {"n": 0}
+
+def on_action(sample):
+    payload = sample.payload.to_bytes()
+    _, kind, flags, episode, step, client = proto.HEADER.unpack_from(payload)
+    if kind != proto.ACTION or client == 0:
+        return
+    out.put(proto.encode_values(proto.OUTPUTS, episode, step, 0, [9.0, 9.0, 9.0, 9.0]))
+    out.put(proto.encode_values(proto.OUTPUTS, episode, step, 0, [9.0] * 4, key=fake_key))
+    hung = proto.FAILED | proto.HUNG
+    out.put(proto.encode_message(proto.ERROR, episode, step, 0, "hostile: hung", flags=hung))
+    out.put(proto.encode_message(proto.REJECT, episode, step, client, "conflict: hostile"))
+    tampered = bytearray(payload)
+    struct.pack_into("<I", tampered, 8, step + 1)  # the next step, under the old MAC
+    act.put(bytes(tampered))
+    act.put(proto.encode_values(proto.ACTION, episode, step + 1, client, [0.0]))
+    sent["n"] += 1
+
+def on_reset(query):
+    query.reply(keys.reset, proto.encode_values(proto.OUTPUTS, 1, 0, 0, [9.0] * 4, key=fake_key),
+                attachment=fake_key)
+
+entities = [s.declare_subscriber(keys.actions, on_action), s.declare_queryable(keys.reset, on_reset)]
+print("hostile ready", flush=True)
+sys.stdin.readline()
+print("sent", sent["n"], flush=True)
+"""
+
+
+@contextlib.contextmanager
+def hostile_peer(net: Loopback, node: str) -> Iterator[subprocess.Popen[str]]:
+    cmd = [sys.executable, "-c", HOSTILE, net.endpoint, net.prefix, node]
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    process = subprocess.Popen(
+        cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env
+    )
+    try:
+        _wait_for_line(process, "hostile ready", timeout_s=60)
+        yield process
+    finally:
+        stop_process(process, timeout_s=10)
+
+
+def hostile_count(process: subprocess.Popen[str]) -> int:
+    assert process.stdin is not None and process.stdout is not None
+    process.stdin.write("\n")
+    process.stdin.flush()
+    line = process.stdout.readline()
+    assert line.startswith("sent"), line
+    return int(line.split()[1])
+
+
+def counters(net: Loopback, node: str) -> dict[str, int]:
+    return describe_nodes(net.session, [node], prefix=net.prefix, timeout_s=10)[0]["counters"]  # type: ignore[no-any-return]
+
+
+def test_a_peer_answering_first_or_replaying_the_holders_id_changes_nothing(loopback: Loopback) -> None:
+    """Made-up answers are ignored and forged actions refused as not_holder: the trajectory is
+    exactly the in-process one, episode after episode."""
+    with node_process(CARTPOLE, "victim", loopback), hostile_peer(loopback, "victim") as hostile:
+        with (
+            RemoteFmuEnv(CARTPOLE, "victim", session=loopback.session, prefix=loopback.prefix) as remote,
+            FmuEnv(CARTPOLE) as local,
+        ):
+            rng = np.random.default_rng(3)
+            steps = 0
+            for seed in (11, 12):
+                np.testing.assert_array_equal(remote.reset(seed=seed)[0], local.reset(seed=seed)[0])
+                for _ in range(40):
+                    action = rng.uniform(-1, 1, size=1).astype(np.float32)
+                    mine, theirs = remote.step(action), local.step(action)
+                    np.testing.assert_array_equal(mine[0], theirs[0])
+                    assert mine[1:4] == theirs[1:4]
+                    steps += 1
+                    if mine[2] or mine[3]:
+                        break
+            seen = hostile_count(hostile)
+        assert seen > 0, f"the hostile peer saw none of {steps} actions"
+        refused = counters(loopback, "victim")
+        assert refused["steps"] == steps and refused["rejected_not_holder"] >= seen
+
+
+def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> None:
+    with (
+        node_process(CARTPOLE, "held", loopback),
+        RemoteFmuEnv(CARTPOLE, "held", session=loopback.session, prefix=loopback.prefix) as env,
+    ):
+        env.reset(seed=0)
+        env.step(np.zeros(1, dtype=np.float32))
+        holder = describe_nodes(loopback.session, ["held"], prefix=loopback.prefix)[0]["holder"]
+        client = int(holder["client"], 16)
+        peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+        try:
+            keys = proto.Keys(loopback.prefix, "held")
+            answers: list[proto.Frame] = []
+            sub = peer.declare_subscriber(
+                keys.outputs, lambda s: answers.append(proto.decode(s.payload.to_bytes()))
+            )
+            forged = proto.encode_values(proto.ACTION, 1, 2, client, [0.0])
+            deadline = time.monotonic() + 10  # sent again until the subscription has reached the node
+            while not any(a.kind == proto.REJECT for a in answers) and time.monotonic() < deadline:
+                peer.put(keys.actions, forged)
+                time.sleep(0.05)
+            reject = next(a for a in answers if a.kind == proto.REJECT)
+            assert reject.message.startswith("not_holder") and not reject.flags & proto.SIGNED
+            assert reject.sim_time_ns == client
+            sub.undeclare()
+        finally:
+            peer.close()
+        with FmuEnv(CARTPOLE) as local:  # the holder's episode goes on, untouched
+            local.reset(seed=0)
+            local.step(np.zeros(1, dtype=np.float32))
+            for _ in range(3):
+                zero = np.zeros(1, dtype=np.float32)
+                np.testing.assert_array_equal(env.step(zero)[0], local.step(zero)[0])
+
+
+def refused_resets(peer: Any, keys: proto.Keys, request: dict[str, Any]) -> list[str]:
+    replies = peer.get(keys.reset, payload=json.dumps(request), timeout=10)
+    return [r.err.payload.to_bytes().decode() for r in replies if r.err is not None]
+
+
+def test_a_forged_lease_is_refused_and_a_reset_with_the_holders_id_needs_its_session(
+    loopback: Loopback,
+) -> None:
+    with node_process(CARTPOLE, "lease", loopback):
+        peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+        keys = proto.Keys(loopback.prefix, "lease")
+        try:
+            request = {"episode": 1, "client": 0x1234567, "zid": "forged", "inputs": [0.0]}
+            refusals = refused_resets(peer, keys, request)
+            assert refusals and "no liveliness token" in refusals[0]
+            assert describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"] is None
+            with RemoteFmuEnv(CARTPOLE, "lease", session=loopback.session, prefix=loopback.prefix) as env:
+                env.reset(seed=0)
+                holder = int(
+                    describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"]["client"], 16
+                )
+                stolen = {**request, "client": holder, "episode": 2}
+                refused = refused_resets(peer, keys, stolen)
+                assert refused and "does not prove" in refused[0]
+                env.step(np.zeros(1, dtype=np.float32))  # still the holder's episode
+                env.reset(seed=1)  # the holder's own next reset proves itself
+        finally:
+            peer.close()
+
+
+def test_a_second_node_with_the_same_name_refuses_to_start(loopback: Loopback) -> None:
+    with (
+        node_process(CARTPOLE, "only", loopback),
+        pytest.raises(TransportError, match="a node named 'only' already serves"),
+    ):
+        FmuNode(CARTPOLE, name="only", options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
+
+
+def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
+    peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+    keys = proto.Keys(loopback.prefix, "liar")
+    replies = {"liar": b'{"node": "liar", "input_names": 3}'}
+    queryable = peer.declare_queryable(
+        keys.info, lambda q: q.reply(keys.info, replies["liar"]), complete=True
+    )
+    try:
+        time.sleep(0.5)
+        with pytest.raises(TransportError, match=r"node 'liar' sent an info reply .*input_names"):
+            RemoteFmuEnv(CARTPOLE, "liar", session=loopback.session, prefix=loopback.prefix, timeout_s=5)
+        replies["liar"] = b"[1, 2"
+        with pytest.raises(TransportError, match=r"liar.*not JSON"):
+            RemoteFmuEnv(CARTPOLE, "liar", session=loopback.session, prefix=loopback.prefix, timeout_s=5)
+        listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
+        assert "not JSON" in listed["error"]
+        replies["liar"] = b'{"node": "liar", "counters": "many", "holder": {"client": 7}}'
+        listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
+        assert listed["node"] == "liar" and "info reply that the protocol does not allow" in listed["error"]
+        replies["liar"] = b'{"node": "liar", "mode": "replay"}'  # few words, well formed: listed
+        listed = describe_nodes(loopback.session, ["liar"], prefix=loopback.prefix)[0]
+        assert "error" not in listed and listed["mode"] == "replay" and listed["counters"] == {}
+    finally:
+        queryable.undeclare()
+        peer.close()
+
+
+def test_an_outputs_frame_with_the_wrong_value_count_is_a_transport_error(tmp_path: Path) -> None:
+    from bridge.experiment.config import load_experiment
+    from bridge.plant.local import LocalFmuPlant
+
+    with LocalFmuPlant(load_experiment(CARTPOLE)) as plant:
+        three = proto.decode(proto.encode_values(proto.OUTPUTS, 1, 1, 0, [0.0, 1.0, 2.0]))
+        with pytest.raises(TransportError, match="with 3 values; it serves 4 outputs"):
+            answer(plant, three, 1, 1, outputs=4)
+        assert answer(plant, three, 1, 1, outputs=3) is three
