@@ -16,6 +16,7 @@ def register(app: typer.Typer) -> None:
     """Entry point ``fmu_bridge.commands``: add the training and evaluation commands."""
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
+    app.command("sweep")(sweep_cmd)
     app.command("compare")(compare_cmd)
     agent_app = typer.Typer(
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
@@ -278,6 +279,13 @@ def evaluate_cmd(
     batch: Annotated[
         bool, typer.Option("--batch", help="All episodes of a cell in one batch env (implies --no-record).")
     ] = False,
+    engine: Annotated[
+        str, typer.Option(help="local, or ray: chunks of episodes as Ray tasks (implies --no-record).")
+    ] = "local",
+    chunk_episodes: Annotated[int, typer.Option("--chunk-episodes", help="Episodes per Ray task.")] = 4,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
 ) -> None:
     """Evaluate agents and baselines over scenarios: metrics table, results.csv/json, report."""
     import time
@@ -294,8 +302,11 @@ def evaluate_cmd(
         episodes=episodes,
         workers=workers,
         seed=seed,
-        record_dir=Path("recordings") / out.name if record and not batch else None,
+        record_dir=Path("recordings") / out.name if record and not batch and engine != "ray" else None,
         batch=batch,
+        engine=engine,
+        chunk_episodes=chunk_episodes,
+        ray_address=ray_address,
     )
     from bridge.experiment.config import load_experiment
 
@@ -315,6 +326,55 @@ def evaluate_cmd(
     console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
     for recording in result.recordings:
         console.print(f"recording: {recording}")
+
+
+def sweep_cmd(
+    experiment: Annotated[Path, typer.Argument(help="An experiment YAML file with a training section.")],
+    seeds: Annotated[str, typer.Option(help="Training seeds, comma-separated.")] = "0",
+    grid: Annotated[
+        list[str] | None,
+        typer.Option("--grid", help="NAME=V1,V2 over training.hyperparams (repeat for a grid)."),
+    ] = None,
+    timesteps: Annotated[int | None, typer.Option(help="Environment steps per run.")] = None,
+    n_envs: Annotated[int | None, typer.Option("--n-envs", help="Parallel environments per run.")] = None,
+    eval_episodes: Annotated[int, typer.Option("--eval-episodes", help="Episodes per evaluation.")] = 5,
+    eval_seed: Annotated[int, typer.Option("--eval-seed", help="First evaluation seed.")] = 1000,
+    engine: Annotated[str, typer.Option(help="local (one run after another) or ray (Ray tasks).")] = "local",
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Directory for the runs and the report.")] = None,
+    version: Annotated[str | None, typer.Option("--version", help="Env version.")] = None,
+) -> None:
+    """Train over seeds and a hyperparameter grid, evaluate each run: sweep.csv/json/md."""
+    import time
+
+    from agents.sweep import parse_grid, points, sweep, write_report
+    from bridge.errors import ConfigError
+
+    try:
+        seed_list = [int(s) for s in seeds.split(",") if s.strip()]
+    except ValueError:
+        raise ConfigError(f"--seeds {seeds!r}: expected integers separated by commas (e.g. 0,1,2)") from None
+    out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+    todo = points(
+        experiment,
+        seeds=seed_list,
+        grid=parse_grid(grid or []),
+        out=out,
+        version=version,
+        timesteps=timesteps,
+        n_envs=n_envs,
+        eval_episodes=eval_episodes,
+        eval_seed=eval_seed,
+    )
+    rows = sweep(todo, engine=engine, ray_address=ray_address)
+    paths = write_report(rows, out, title=f"Sweep of {experiment.stem}")
+    table = Table(*rows[0].keys(), title=f"sweep ({experiment.name}, {len(rows)} runs)")
+    for row in rows:
+        table.add_row(*(f"{v:.4g}" if isinstance(v, float) else str(v) for v in row.values()))
+    console.print(table)
+    console.print(f"report: {paths['report']}\nresults: {paths['csv']}, {paths['json']}")
 
 
 def compare_cmd(

@@ -157,13 +157,24 @@ def evaluate(
     seed: int = 0,
     record_dir: Path | None = None,
     batch: bool = False,
+    engine: str = "local",
+    chunk_episodes: int = 4,
+    ray_address: str | None = None,
 ) -> EvaluationResult:
     """Evaluate every agent on every scenario for ``episodes`` seeded episodes.
 
     ``batch``: run all episodes of a cell at once in a batch env (``agents.evaluate_batch``):
-    the same seeds and results, a large grid in seconds; no recordings."""
+    the same seeds and results, a large grid in seconds; no recordings.
+    ``engine="ray"``: each cell in chunks of ``chunk_episodes`` episodes as Ray tasks on the
+    cluster at ``ray_address`` (``agents.ray_engine``): the same seeds and results; no recordings."""
+    if engine not in ("local", "ray"):
+        raise ConfigError(f"engine must be 'local' or 'ray', got {engine!r}")
     if batch and record_dir is not None:
         raise ConfigError("evaluate --batch does not record episodes; pass --no-record (or drop --batch)")
+    if engine == "ray" and record_dir is not None:
+        raise ConfigError(
+            "evaluate --engine ray does not record episodes (they run on other machines); pass --no-record"
+        )
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
     agents, names = _named(agents)
@@ -184,7 +195,15 @@ def evaluate(
         for sc in (chosen or [None])
     ]
     result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
-    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch)):
+    if engine == "ray":
+        from agents.ray_engine import map_cells
+
+        outcomes: list[Any] = map_cells(
+            cell_runner(batch), cells, episodes_per_chunk=chunk_episodes, address=ray_address
+        )
+    else:
+        outcomes = _map(cells, workers, batch)
+    for cell, (rows, traces, recording) in zip(cells, outcomes):
         result.rows += rows
         result.traces[(cell.agent_name, cell.scenario or "")] = traces
         if recording is not None:
@@ -192,14 +211,19 @@ def evaluate(
     return result
 
 
-def _map(
-    cells: list[Cell], workers: int, batch: bool = False
-) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
-    run: Any = run_cell
+def cell_runner(batch: bool) -> Any:
+    """The function that runs one cell: ``run_cell``, or its batch env twin."""
     if batch:
         from agents.evaluate_batch import run_cell_batch
 
-        run = run_cell_batch
+        return run_cell_batch
+    return run_cell
+
+
+def _map(
+    cells: list[Cell], workers: int, batch: bool = False
+) -> list[tuple[list[dict[str, Any]], list[Trace], Path | None]]:
+    run: Any = cell_runner(batch)
     if workers <= 1 or len(cells) == 1:
         return [run(c) for c in cells]
     context = multiprocessing.get_context("spawn")  # a fresh process per worker: no inherited FMU state
