@@ -208,6 +208,13 @@ def train_cmd(
         str | None,
         typer.Option(help="Residual RL over an evaluation baseline: BASELINE:SCALE (e.g. pid:0.1)."),
     ] = None,
+    engine: Annotated[
+        str, typer.Option(help="sb3 (stable-baselines3), or rllib: PPO on Ray, env runners of n_envs FMUs.")
+    ] = "sb3",
+    runners: Annotated[int, typer.Option(help="RLlib env runners (with --engine rllib).")] = 1,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
 
@@ -218,6 +225,11 @@ def train_cmd(
 
     if experiment is None and resume is None:
         raise ConfigError("give an experiment file to train on, or --resume RUN_DIR to continue a run")
+    if engine not in ("sb3", "rllib"):
+        raise ConfigError(f"--engine must be sb3 or rllib, got {engine!r}")
+    if engine == "rllib":
+        _train_rllib(experiment, algo, timesteps, n_envs, seed, run_dir, version, runners, ray_address)
+        return
 
     overrides: dict[str, Any] = {
         "algo": algo.upper() if algo else None,
@@ -243,6 +255,45 @@ def train_cmd(
         f"({result.timesteps / max(result.wall_time_s, 1e-9):,.0f} steps/s)"
     )
     console.print(f"run: {result.run_dir}\nmodel: {result.model_path}")
+
+
+def _train_rllib(
+    experiment: Path | None,
+    algo: str | None,
+    timesteps: int | None,
+    n_envs: int | None,
+    seed: int | None,
+    run_dir: Path | None,
+    version: str | None,
+    runners: int,
+    ray_address: str | None,
+) -> None:
+    import time
+
+    from agents.rllib_train import train_rllib
+    from bridge.errors import ConfigError
+
+    if experiment is None:
+        raise ConfigError("train --engine rllib needs an experiment file (--resume is for sb3 runs)")
+    overrides = {
+        "algo": algo.upper() if algo else None,
+        "timesteps": timesteps,
+        "n_envs": n_envs,
+        "seed": seed,
+    }
+    run_dir = run_dir or Path("runs") / f"rllib-{experiment.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    result = train_rllib(
+        experiment,
+        run_dir=run_dir,
+        overrides=overrides,
+        runners=runners,
+        version=version,
+        ray_address=ray_address,
+    )
+    console.print(
+        f"trained {result.timesteps:,} steps in {result.iterations} iterations, {result.wall_time_s:.1f} s"
+    )
+    console.print(f"run: {result.run_dir}\ncheckpoint: {result.checkpoint}")
 
 
 def _residual_option(text: str) -> dict[str, Any]:
