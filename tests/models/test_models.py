@@ -711,6 +711,7 @@ def test_model_names_and_variants() -> None:
         "dcmotor",
         "feedthrough",
         "gearload",
+        "global_state",
         "modelica_names",
         "motor_gearload",
         "pi_controller",
@@ -735,10 +736,12 @@ def test_model_names_and_variants() -> None:
     assert by_model["vehicle"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["modelica_names"] == {("2.0", "cs"), ("2.0", "me"), ("3.0", "cs")}
     assert by_model["feedthrough"] == {("2.0", "cs"), ("3.0", "cs")}
+    assert by_model["global_state"] == {("2.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
-    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, modelica_names, motor_gearload, "
+    names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, global_state, modelica_names, "
+    names += "motor_gearload, "
     names += "pi_controller, stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
