@@ -196,10 +196,16 @@ def evaluate(
     ]
     result = EvaluationResult(rows=[], agents=names, scenarios=[c or "" for c in chosen] or [""])
     if engine == "ray":
-        from agents.ray_engine import map_cells
+        from agents.evaluate_batch import CHUNK
+        from agents.ray_engine import licence_resources, map_cells
 
+        instances = min(chunk_episodes, CHUNK) if batch else 1  # FMU instances a chunk opens at once
         outcomes: list[Any] = map_cells(
-            cell_runner(batch), cells, episodes_per_chunk=chunk_episodes, address=ray_address
+            cell_runner(batch),
+            cells,
+            episodes_per_chunk=chunk_episodes,
+            address=ray_address,
+            resources=licence_resources(experiment, instances),
         )
     else:
         outcomes = _map(cells, workers, batch)

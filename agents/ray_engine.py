@@ -13,10 +13,11 @@ from __future__ import annotations
 
 import dataclasses
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, TypeVar
 
 from bridge.errors import ConfigError, DependencyMissing
+from bridge.experiment.config import Experiment
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -40,13 +41,46 @@ def connect(address: str | None = None) -> Any:
 
 
 def ray_map(
-    function: Callable[[T], R], items: Sequence[T], *, address: str | None = None, retries: int = RETRIES
+    function: Callable[[T], R],
+    items: Sequence[T],
+    *,
+    address: str | None = None,
+    retries: int = RETRIES,
+    resources: Mapping[str, float] | None = None,
 ) -> list[R]:
-    """``[function(item) for item in items]``, each call a Ray task (1 CPU, retried ``retries``
-    times when its worker or node dies); results in the order of ``items``."""
+    """``[function(item) for item in items]``, each call a Ray task (1 CPU and ``resources``, e.g. a
+    licence's seats; retried ``retries`` times when its worker or node dies); results in the order
+    of ``items``. Resources no host of the cluster offers are refused, not left pending forever."""
     ray = connect(address)
-    task = ray.remote(num_cpus=1, max_retries=retries)(function)
+    wanted = dict(resources or {})
+    check_resources(ray, wanted)
+    task = ray.remote(num_cpus=1, max_retries=retries, resources=wanted or None)(function)
     return list(ray.get([task.remote(item) for item in items]))
+
+
+def licence_resources(experiment: Experiment, instances: int) -> dict[str, float]:
+    """The custom resources a task that opens ``instances`` FMU instances asks for
+    (``model.licence``; none without one)."""
+    licence = experiment.model.licence
+    if licence is None:
+        return {}
+    return {licence.resource: licence.per_instance * max(1, instances)}
+
+
+def check_resources(ray: Any, wanted: Mapping[str, float]) -> None:
+    """Refuse resources that no single host offers enough of (a task asking for them would wait
+    for ever)."""
+    if not wanted:
+        return
+    hosts = [node.get("Resources", {}) for node in ray.nodes() if node.get("Alive")]
+    for name, amount in wanted.items():
+        best = max((float(h.get(name, 0.0)) for h in hosts), default=0.0)
+        if best < amount:
+            raise ConfigError(
+                f"the licence resource {name!r}: a task needs {amount:g} seats on one host, the most any "
+                f"host of the cluster offers is {best:g}; start the licensed hosts with "
+                f"ray start --resources '{{\"{name}\": SEATS}}' (SEATS >= {amount:g}), or lower n_envs"
+            )
 
 
 def chunked(cells: Sequence[Any], episodes_per_chunk: int) -> list[tuple[int, int, Any]]:
@@ -68,11 +102,12 @@ def map_cells(
     *,
     episodes_per_chunk: int,
     address: str | None = None,
+    resources: Mapping[str, float] | None = None,
 ) -> list[tuple[list[dict[str, Any]], list[Any], None]]:
-    """Evaluation cells on Ray, chunk by chunk; merged back to one (rows, traces) per cell with the
-    episode numbers a single run gives."""
+    """Evaluation cells on Ray, chunk by chunk (each task with ``resources``); merged back to one
+    (rows, traces) per cell with the episode numbers a single run gives."""
     chunks = chunked(cells, episodes_per_chunk)
-    results = ray_map(run, [chunk for _, _, chunk in chunks], address=address)
+    results = ray_map(run, [chunk for _, _, chunk in chunks], address=address, resources=resources)
     merged: list[tuple[list[dict[str, Any]], list[Any], None]] = [([], [], None) for _ in cells]
     for (index, start, _), (rows, traces, _recording) in zip(chunks, results):
         merged[index][0].extend({**row, "episode": start + int(row["episode"])} for row in rows)

@@ -133,6 +133,10 @@ def build_config(
     kwargs, model = training_kwargs(settings, runners)
     config = ppo_config(experiment, envs_per_runner=max(1, settings.n_envs), num_env_runners=runners)
     config = config.training(**kwargs).debugging(seed=settings.seed)
+    licence = experiment.model.licence
+    if licence is not None:  # each env runner holds n_envs instances' seats
+        seats = {licence.resource: licence.per_instance * max(1, settings.n_envs)}
+        config = config.env_runners(custom_resources_per_env_runner=seats)
     if model:
         config = config.rl_module(model_config=model)
     return config.fault_tolerance(
@@ -153,12 +157,15 @@ def train_rllib(
     on_iteration: Callable[[Any, dict[str, Any]], None] | None = None,
 ) -> RllibResult:
     """Train PPO on RLlib until ``timesteps`` env steps; ``on_iteration(algo, result)`` after each."""
-    from agents.ray_engine import connect
+    from agents.ray_engine import check_resources, connect
 
     experiment = load_experiment(experiment_path, version=version)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
     config = build_config(experiment_path, settings, runners=runners, version=version)
-    connect(ray_address)
+    ray = connect(ray_address)
+    licence = experiment.model.licence
+    if licence is not None:
+        check_resources(ray, {licence.resource: licence.per_instance * max(1, settings.n_envs)})
     run_dir.mkdir(parents=True, exist_ok=True)
     info: dict[str, Any] = {
         "engine": "rllib",

@@ -140,9 +140,16 @@ def sweep(
     if engine == "local":
         return [run_point(p) for p in sweep_points]
     if engine == "ray":
-        from agents.ray_engine import ray_map
+        from agents.ray_engine import licence_resources, ray_map
 
-        return ray_map(run_point, sweep_points, address=ray_address)
+        if not sweep_points:
+            return []
+        # a run opens n_envs training instances and one evaluation instance at once
+        first = sweep_points[0]
+        experiment = load_experiment(first.experiment, version=first.version)
+        n_envs = max(p.n_envs or experiment.training.n_envs for p in sweep_points)
+        resources = licence_resources(experiment, n_envs + 1)
+        return ray_map(run_point, sweep_points, address=ray_address, resources=resources)
     raise ConfigError(f"engine must be 'local' or 'ray', got {engine!r}")
 
 

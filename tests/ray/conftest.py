@@ -2,8 +2,9 @@
 with ``FMU_BRIDGE_REQUIRE_RAY=1`` (set by ``.ci/ray``) a missing Ray fails the run instead.
 
 ``ray_cluster``: two Ray nodes on 127.0.0.1 in this machine (``ray.cluster_utils.Cluster``), one CPU
-and a small object store each, in a temporary folder of their own (``RAY_TMPDIR``): they never meet
-another Ray on this machine, and shutting them down stops only them."""
+and a small object store each, the second with one seat of the licence resource ``SEATS``, in a
+temporary folder of their own (``RAY_TMPDIR``): they never meet another Ray on this machine, and
+shutting them down stops only them."""
 
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ if os.environ.get("FMU_BRIDGE_REQUIRE_RAY") == "1":
     import ray  # noqa: F401  (an ImportError here fails the run: these tests must run, not skip)
 
 STORE = 80 * 2**20  # bytes of object store per node: small, the machine is shared
+SEATS = "fmu_test_seats"  # a licence's custom resource: one seat, on the second node only
 
 
 @pytest.fixture(scope="session")
@@ -42,7 +44,7 @@ def ray_cluster() -> Iterator[Any]:
     }
     cluster = Cluster(initialize_head=True, connect=True, head_node_args=node)
     try:
-        cluster.add_node(**node)
+        cluster.add_node(**node, resources={SEATS: 1})  # the only host with the licence's seats
         cluster.wait_for_nodes()
         yield cluster
     finally:
