@@ -17,7 +17,7 @@ from agents.evaluate import evaluate
 from agents.ray_engine import ray_map
 from bridge.errors import ConfigError
 from bridge.experiment.examples import example_experiment
-from tests.ray.conftest import SEATS
+from tests.on_ray.conftest import SEATS
 
 
 def node_of_task() -> Any:
