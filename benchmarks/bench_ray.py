@@ -92,15 +92,15 @@ def rates(ks: list[int], steps: int, repeats: int) -> list[tuple[str, ...]]:
         )
         ours.stop()
         theirs.stop()
-        rows.append(
-            (
-                str(k),
-                f"{got['batch']:,.0f}",
-                f"{got['cartpole']:,.0f}",
-                f"{got['batch'] / got['cartpole']:.2f}",
-                f"{got['alone']:,.0f}",
-            )
+        row = (
+            str(k),
+            f"{got['batch']:,.0f}",
+            f"{got['cartpole']:,.0f}",
+            f"{got['batch'] / got['cartpole']:.2f}",
+            f"{got['alone']:,.0f}",
         )
+        print("K done:", " | ".join(row), flush=True)  # partial results on a slow machine
+        rows.append(row)
     return rows
 
 
