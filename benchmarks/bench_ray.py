@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import argparse
 import os
+
+os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # read when Ray is imported: keep 127.0.0.1
 import signal
 import statistics
 import tempfile
@@ -34,8 +36,6 @@ from common import table
 from bridge.env.batch import BatchVectorEnv
 from bridge.env.rllib import ppo_config
 from bridge.experiment.examples import example_experiment
-
-os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
 
 
 def runner_over(config: Any) -> Any:
@@ -155,13 +155,15 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=4096)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-cluster", action="store_true")
+    parser.add_argument("--no-rates", action="store_true", help="only the cluster timings")
     args = parser.parse_args()
     load = os.getloadavg()
     print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores\n")
-    rows = rates([int(k) for k in args.ks.split(",")], args.steps, args.repeats)
-    header = ("K", "runner/batch env", "runner/CartPole-v1", "batch / CartPole", "batch env alone")
-    print("env steps per CPU second of one RLlib env runner (medians)\n")
-    print(table(rows, header))
+    if not args.no_rates:
+        rows = rates([int(k) for k in args.ks.split(",")], args.steps, args.repeats)
+        header = ("K", "runner/batch env", "runner/CartPole-v1", "batch / CartPole", "batch env alone")
+        print("env steps per CPU second of one RLlib env runner (medians)\n")
+        print(table(rows, header))
     if not args.no_cluster:
         print()
         print(table(cluster_times(), ("two-node cluster on 127.0.0.1", "time")))
