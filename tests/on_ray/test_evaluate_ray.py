@@ -54,3 +54,19 @@ def test_ray_evaluation_refuses_recordings_and_bad_chunks(ray_cluster: Any, tmp_
         evaluate(["zero"], config, engine="ray", chunk_episodes=0, episodes=1)
     with pytest.raises(ConfigError, match="'local' or 'ray'"):
         evaluate(["zero"], config, engine="dask")
+
+
+def test_the_evaluate_command_on_ray_writes_the_report(ray_cluster: Any, tmp_path: Path) -> None:
+    from typer.testing import CliRunner
+
+    from bridge.cli.main import _load_plugins, app
+
+    _load_plugins()
+    out = tmp_path / "eval"
+    args = ["evaluate", "zero", "pid", "--config", str(example_experiment("dcmotor_tracking"))]
+    args += ["--scenarios", "step_up", "--episodes", "2", "--engine", "ray", "--chunk-episodes", "1"]
+    result = CliRunner().invoke(app, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    lines = (out / "results.csv").read_text().splitlines()
+    assert len(lines) == 1 + 2 * 2 and (out / "report.md").is_file()
+    assert not (tmp_path / "recordings").exists() and not Path("recordings", out.name).exists()
