@@ -15,6 +15,7 @@ def register(app: typer.Typer) -> None:
     """Entry point ``fmu_bridge.commands``: add the training and evaluation commands."""
     app.command("train")(train_cmd)
     app.command("evaluate")(evaluate_cmd)
+    app.command("sweep")(sweep_cmd)
     app.command("compare")(compare_cmd)
     app.command("tune")(tune_cmd)
     agent_app = typer.Typer(
@@ -276,6 +277,13 @@ def train_cmd(
             "(a copy in the run folder, so the run outlives the original).",
         ),
     ] = "absolute",
+    engine: Annotated[
+        str, typer.Option(help="sb3 (stable-baselines3), or rllib: PPO on Ray, env runners of n_envs FMUs.")
+    ] = "sb3",
+    runners: Annotated[int, typer.Option(help="RLlib env runners (with --engine rllib).")] = 1,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
 
@@ -286,6 +294,11 @@ def train_cmd(
 
     if experiment is None and resume is None:
         raise ConfigError("give an experiment file to train on, or --resume RUN_DIR to continue a run")
+    if engine not in ("sb3", "rllib"):
+        raise ConfigError(f"--engine must be sb3 or rllib, got {engine!r}")
+    if engine == "rllib":
+        _train_rllib(experiment, algo, timesteps, n_envs, seed, run_dir, version, runners, ray_address)
+        return
 
     overrides: dict[str, Any] = {
         "algo": algo.upper() if algo else None,
@@ -317,6 +330,45 @@ def train_cmd(
         f"({result.timesteps / max(result.wall_time_s, 1e-9):,.0f} steps/s)"
     )
     console.print(f"run: {result.run_dir}\nmodel: {result.model_path}")
+
+
+def _train_rllib(
+    experiment: Path | None,
+    algo: str | None,
+    timesteps: int | None,
+    n_envs: int | None,
+    seed: int | None,
+    run_dir: Path | None,
+    version: str | None,
+    runners: int,
+    ray_address: str | None,
+) -> None:
+    import time
+
+    from agents.rllib_train import train_rllib
+    from bridge.errors import ConfigError
+
+    if experiment is None:
+        raise ConfigError("train --engine rllib needs an experiment file (--resume is for sb3 runs)")
+    overrides = {
+        "algo": algo.upper() if algo else None,
+        "timesteps": timesteps,
+        "n_envs": n_envs,
+        "seed": seed,
+    }
+    run_dir = run_dir or Path("runs") / f"rllib-{experiment.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+    result = train_rllib(
+        experiment,
+        run_dir=run_dir,
+        overrides=overrides,
+        runners=runners,
+        version=version,
+        ray_address=ray_address,
+    )
+    console.print(
+        f"trained {result.timesteps:,} steps in {result.iterations} iterations, {result.wall_time_s:.1f} s"
+    )
+    console.print(f"run: {result.run_dir}\ncheckpoint: {result.checkpoint}")
 
 
 def _residual_option(text: str) -> dict[str, Any]:
@@ -353,6 +405,13 @@ def evaluate_cmd(
     batch: Annotated[
         bool, typer.Option("--batch", help="All episodes of a cell in one batch env (implies --no-record).")
     ] = False,
+    engine: Annotated[
+        str, typer.Option(help="local, or ray: chunks of episodes as Ray tasks (implies --no-record).")
+    ] = "local",
+    chunk_episodes: Annotated[int, typer.Option("--chunk-episodes", help="Episodes per Ray task.")] = 4,
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
 ) -> None:
     """Evaluate agents and baselines over scenarios: metrics table, results.csv/json, report."""
     import time
@@ -371,9 +430,12 @@ def evaluate_cmd(
             episodes=episodes,
             workers=workers,
             seed=seed,
-            record_dir=Path("recordings") / out.name if record and not batch else None,
+            record_dir=Path("recordings") / out.name if record and not batch and engine != "ray" else None,
             batch=batch,
             progress=progress,
+            engine=engine,
+            chunk_episodes=chunk_episodes,
+            ray_address=ray_address,
         )
     from bridge.experiment.config import load_experiment
 
@@ -396,6 +458,55 @@ def evaluate_cmd(
     console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
     for recording in result.recordings:
         console.print(f"recording: {recording}")
+
+
+def sweep_cmd(
+    experiment: Annotated[Path, typer.Argument(help="An experiment YAML file with a training section.")],
+    seeds: Annotated[str, typer.Option(help="Training seeds, comma-separated.")] = "0",
+    grid: Annotated[
+        list[str] | None,
+        typer.Option("--grid", help="NAME=V1,V2 over training.hyperparams (repeat for a grid)."),
+    ] = None,
+    timesteps: Annotated[int | None, typer.Option(help="Environment steps per run.")] = None,
+    n_envs: Annotated[int | None, typer.Option("--n-envs", help="Parallel environments per run.")] = None,
+    eval_episodes: Annotated[int, typer.Option("--eval-episodes", help="Episodes per evaluation.")] = 5,
+    eval_seed: Annotated[int, typer.Option("--eval-seed", help="First evaluation seed.")] = 1000,
+    engine: Annotated[str, typer.Option(help="local (one run after another) or ray (Ray tasks).")] = "local",
+    ray_address: Annotated[
+        str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
+    out: Annotated[Path | None, typer.Option("--out", help="Directory for the runs and the report.")] = None,
+    version: Annotated[str | None, typer.Option("--version", help="Env version.")] = None,
+) -> None:
+    """Train over seeds and a hyperparameter grid, evaluate each run: sweep.csv/json/md."""
+    import time
+
+    from agents.sweep import parse_grid, points, sweep, write_report
+    from bridge.errors import ConfigError
+
+    try:
+        seed_list = [int(s) for s in seeds.split(",") if s.strip()]
+    except ValueError:
+        raise ConfigError(f"--seeds {seeds!r}: expected integers separated by commas (e.g. 0,1,2)") from None
+    out = out or Path("runs") / f"sweep-{time.strftime('%Y%m%d-%H%M%S')}"
+    todo = points(
+        experiment,
+        seeds=seed_list,
+        grid=parse_grid(grid or []),
+        out=out,
+        version=version,
+        timesteps=timesteps,
+        n_envs=n_envs,
+        eval_episodes=eval_episodes,
+        eval_seed=eval_seed,
+    )
+    rows = sweep(todo, engine=engine, ray_address=ray_address)
+    paths = write_report(rows, out, title=f"Sweep of {experiment.stem}")
+    from bridge.cli.inspect import print_rows
+
+    cells = [[f"{v:.4g}" if isinstance(v, float) else str(v) for v in row.values()] for row in rows]
+    print_rows(console, list(rows[0].keys()), cells, f"sweep ({experiment.name}, {len(rows)} runs)")
+    console.print(f"report: {paths['report']}\nresults: {paths['csv']}, {paths['json']}")
 
 
 def compare_cmd(

@@ -164,15 +164,26 @@ def evaluate(
     record_dir: Path | None = None,
     batch: bool = False,
     progress: Callable[[int, int], None] | None = None,
+    engine: str = "local",
+    chunk_episodes: int = 4,
+    ray_address: str | None = None,
 ) -> EvaluationResult:
     """Evaluate every agent on every scenario for ``episodes`` seeded episodes.
 
     ``batch``: run all episodes of a cell at once in a batch env (``agents.evaluate_batch``):
     the same seeds and results, a large grid in seconds; no recordings. ``progress(done, total)``
     is called with the episodes done (after each episode in this process, after each agent and
-    scenario with worker processes or a batch)."""
+    scenario with worker processes or a batch, at the end with Ray).
+    ``engine="ray"``: each cell in chunks of ``chunk_episodes`` episodes as Ray tasks on the
+    cluster at ``ray_address`` (``agents.ray_engine``): the same seeds and results; no recordings."""
+    if engine not in ("local", "ray"):
+        raise ConfigError(f"engine must be 'local' or 'ray', got {engine!r}")
     if batch and record_dir is not None:
         raise ConfigError("evaluate --batch does not record episodes; pass --no-record (or drop --batch)")
+    if engine == "ray" and record_dir is not None:
+        raise ConfigError(
+            "evaluate --engine ray does not record episodes (they run on other machines); pass --no-record"
+        )
     experiment = load_experiment(experiment_path, version=version)
     config = experiment.evaluation
     agents, names = _named(agents)
@@ -194,12 +205,38 @@ def evaluate(
     ]
     # no scenarios defined: every episode is the sampler's "nominal" one
     result = EvaluationResult(rows=[], agents=names, scenarios=[c or NOMINAL for c in chosen] or [NOMINAL])
-    for cell, (rows, traces, recording) in zip(cells, _map(cells, workers, batch, progress)):
+    if engine == "ray":
+        from agents.evaluate_batch import CHUNK
+        from agents.ray_engine import licence_resources, map_cells
+
+        instances = min(chunk_episodes, CHUNK) if batch else 1  # FMU instances a chunk opens at once
+        outcomes: list[Any] = map_cells(
+            cell_runner(batch),
+            cells,
+            episodes_per_chunk=chunk_episodes,
+            address=ray_address,
+            resources=licence_resources(experiment, instances),
+        )
+        if progress is not None:
+            total = sum(len(c.seeds) for c in cells)
+            progress(total, total)
+    else:
+        outcomes = _map(cells, workers, batch, progress)
+    for cell, (rows, traces, recording) in zip(cells, outcomes):
         result.rows += rows
         result.traces[(cell.agent_name, cell.scenario or NOMINAL)] = traces
         if recording is not None:
             result.recordings.append(recording)
     return result
+
+
+def cell_runner(batch: bool) -> Any:
+    """The function that runs one cell: ``run_cell``, or its batch env twin."""
+    if batch:
+        from agents.evaluate_batch import run_cell_batch
+
+        return run_cell_batch
+    return run_cell
 
 
 def _map(
@@ -219,11 +256,7 @@ def _map(
 
     if progress is not None:
         progress(0, total)
-    run: Any = run_cell
-    if batch:
-        from agents.evaluate_batch import run_cell_batch
-
-        run = run_cell_batch
+    run: Any = cell_runner(batch)
     if workers <= 1 or len(cells) == 1:
         results = []
         for c in cells:

@@ -35,8 +35,9 @@ from gymnasium.vector.utils import batch_space
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.validate import resolve_fmu
+from bridge.fmu import read_model_info
 from bridge.plant.batch import BatchPlant
-from bridge.plant.factory import model_info_for
 from bridge.task.batch import BatchTask
 from bridge.task.core import NonFiniteOutputs
 
@@ -335,7 +336,7 @@ def _check_once_per_process(exp: Experiment, n_envs: int) -> None:
     """A batch steps its instances in this process: refuse several of a once-per-process FMU."""
     if n_envs < 2:
         return
-    info = model_info_for(exp)
+    info = read_model_info(resolve_fmu(exp))  # what BatchPlant opens (cached)
     if info.once_per_process:
         raise ConfigError(
             f"{info.model_name} declares canBeInstantiatedOnlyOncePerProcess: the {n_envs} instances of a "

@@ -15,6 +15,7 @@ without an error. So:
 
 from __future__ import annotations
 
+import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -84,9 +85,14 @@ def ppo_config(
 ) -> Any:
     """An RLlib ``PPOConfig`` whose env runners each host a NEXT_STEP batch env of ``envs_per_runner``
     FMU instances, with :class:`NextStepOnly` installed (training settings are left to the caller)."""
+    from ray.tune.registry import register_env
+
+    creator = BatchEnvCreator(experiment, **env_kwargs)
+    name = f"fmu_bridge_batch_{uuid.uuid4().hex[:12]}"  # the Algorithm takes a registered name
+    register_env(name, creator)
     return (
         PPOConfig()  # type: ignore[no-untyped-call]
-        .environment(env=BatchEnvCreator(experiment, **env_kwargs))
+        .environment(env=name)
         .env_runners(
             num_env_runners=num_env_runners,
             num_envs_per_env_runner=envs_per_runner,

@@ -67,6 +67,16 @@ class IsolationSection(Strict):
     restart: bool = Field(default=True, description="start a fresh process at the next reset")
 
 
+class LicenceSection(Strict):
+    """``model.licence``: a licensed FMU runs only where, and as often as, its seats allow. On Ray each
+    task or env runner asks for ``per_instance`` of the custom resource ``resource`` per FMU instance
+    it opens; hosts offer seats with ``ray start --resources '{"RESOURCE": SEATS}'``, so a host runs at
+    most SEATS instances at once and a host without the resource runs none."""
+
+    resource: str = Field(min_length=1, description="Ray custom resource naming the licence's seats")
+    per_instance: PositiveFloat = Field(default=1.0, description="seats one FMU instance takes")
+
+
 class ModelSection(Strict):
     fmu: str = Field(
         default="",
@@ -89,6 +99,7 @@ class ModelSection(Strict):
         default=1, description="fixed-step solvers: integration steps per FMU step (step_size)"
     )
     isolation: IsolationSection | None = None
+    licence: LicenceSection | None = None
 
     @model_validator(mode="after")
     def _samples(self) -> ModelSection:

@@ -5,6 +5,7 @@ step the FMU took. SAME_STEP is what the env declares by default."""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
@@ -119,3 +120,38 @@ def test_same_step_read_as_next_step_shows_the_mismatch() -> None:
         env.close()
     with pytest.raises(AssertionError):
         replay_in_fmu_env(exp, seed=3, episodes=per_env[0])
+
+
+TYPED = """\
+model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 2.0}
+actions: {inputs: [real_in], low: {real_in: -1}, high: {real_in: 1}}
+observations: {outputs: [real_out, real_integral]}
+reward: {terms: [{alive: 1.0}]}
+scenarios:
+  fine: {}
+  breaks: {parameters: {fail_at_step: 3}}
+schedule: {mode: fixed}
+"""
+
+
+def test_next_step_a_plant_error_truncates_that_env_only_and_it_resets_on_the_next_step(
+    tmp_path: Path,
+) -> None:
+    path = tmp_path / "typed.yaml"
+    path.write_text(TYPED)
+    env = BatchVectorEnv(load_experiment(path), 2, autoreset_mode=AutoresetMode.NEXT_STEP)
+    try:
+        env.reset(seed=0, options={"scenario": ["fine", "breaks"]})
+        a = np.zeros((2, 1), dtype=np.float32)
+        for _ in range(2):
+            _, _, terminated, truncated, _ = env.step(a)
+            assert not (terminated | truncated).any()
+        _, reward, terminated, truncated, info = env.step(a)  # env 1's third step fails
+        assert list(truncated) == [False, True] and not terminated.any()
+        assert "fail" in str(info["plant_error"][1]) and not info["_plant_error"][0]
+        assert info["reason"][1] == "plant_error"
+        _, reward, terminated, truncated, info = env.step(a)  # env 1 resets, env 0 steps on
+        assert reward[1] == 0.0 and not (terminated | truncated).any()
+        assert list(info["step"]) == [4, 0] and info["_scenario"][1]
+    finally:
+        env.close()

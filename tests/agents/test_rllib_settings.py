@@ -1,0 +1,68 @@
+"""The training section's mapping onto RLlib's PPO (agents/rllib_train.py) without Ray: the
+documented subset is carried over, anything else is refused with the list."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from agents.rllib_train import SUPPORTED, training_kwargs
+from agents.settings import TrainingSettings
+from bridge.errors import ConfigError
+from bridge.experiment.config import load_experiment
+from bridge.experiment.examples import example_experiment
+
+
+def settings(**training: Any) -> TrainingSettings:
+    experiment = load_experiment(example_experiment("cartpole_balance"))
+    return TrainingSettings.from_experiment(experiment, training)
+
+
+def test_the_documented_subset_maps_onto_ppo() -> None:
+    hyper = {
+        "n_steps": 32,
+        "batch_size": 64,
+        "n_epochs": 3,
+        "learning_rate": "lin_0.001",
+        "gamma": 0.98,
+        "gae_lambda": 0.8,
+        "clip_range": 0.2,
+        "ent_coef": 0.01,
+        "vf_coef": 0.5,
+        "max_grad_norm": 0.7,
+        "policy_kwargs": {"net_arch": [16, 8]},
+    }
+    assert sorted(hyper) == sorted(SUPPORTED)
+    kwargs, model = training_kwargs(settings(n_envs=4, timesteps=1000, hyperparams=hyper), runners=2)
+    assert kwargs == {
+        "train_batch_size_per_learner": 32 * 4 * 2,
+        "minibatch_size": 64,
+        "num_epochs": 3,
+        "lr": [[0, 0.001], [1000, 0.0]],
+        "clip_param": 0.2,
+        "gamma": 0.98,
+        "lambda_": 0.8,
+        "entropy_coeff": 0.01,
+        "vf_loss_coeff": 0.5,
+        "grad_clip": 0.7,
+    }
+    assert model == {"fcnet_hiddens": [16, 8]}
+
+
+def test_the_example_sections_own_schedules_are_refused_where_rllib_has_none() -> None:
+    with pytest.raises(ConfigError, match=r"clip_range: 'lin_0.2' is not a number"):
+        training_kwargs(settings(), runners=1)  # the example's clip_range: lin_0.2
+
+
+@pytest.mark.parametrize(
+    ("training", "message"),
+    [
+        ({"algo": "SAC"}, "runs PPO"),
+        ({"hyperparams": {"use_sde": True}}, r"\['use_sde'\] have no RLlib mapping"),
+        ({"hyperparams": {"policy_kwargs": {"activation_fn": "relu"}}}, "net_arch: \\[sizes\\] only"),
+    ],
+)
+def test_what_has_no_mapping_is_refused(training: dict[str, Any], message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        training_kwargs(settings(**training), runners=1)
