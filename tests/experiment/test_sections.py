@@ -145,7 +145,12 @@ def test_baselines_give_the_policies_what_the_file_says() -> None:
         ({"type": "constant", "value": 1.0, "kp": 2.0}, r"\['kp'\] do not apply to a constant baseline"),
         ({"output": "omega", "reference": "omega_ref"}, r"a pid baseline needs \['input'\]"),
         ({"type": "python", "callable": "nocolon"}, r"expected 'module:function'"),
-        ({"type": "pidd"}, r"Input should be 'pid', 'constant' or 'python'"),
+        ({"type": "pidd"}, r"Input should be 'pid', 'constant', 'python', 'lqr' or 'mpc'"),
+        ({"type": "lqr"}, r"a lqr baseline needs \['design'\]"),
+        (
+            {"type": "lqr", "design": {"inputs": ["u"], "measured": ["y"]}, "kp": 1.0},
+            r"\['kp'\] do not apply to a lqr",
+        ),
     ],
 )
 def test_a_baseline_takes_the_keys_of_its_type(
