@@ -71,9 +71,7 @@ class LinearModel:
 
 def state_names(model: Model) -> list[str]:
     """The FMU's continuous states in the order of its state vector."""
-    from fmpy import read_model_description
-
-    md = read_model_description(str(model.info.path))
+    md: Any = model.info.raw  # the parsed model description (bridge.fmu reads it)
     names = [u.variable.derivative.name for u in md.derivatives if u.variable.derivative is not None]
     if len(names) != model.info.number_of_states:
         raise ConfigError(
