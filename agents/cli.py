@@ -49,7 +49,7 @@ def tune_cmd(
     out: Annotated[Path | None, typer.Option(help="tuning.json (default: beside that file).")] = None,
     version: Annotated[str | None, typer.Option()] = None,
 ) -> None:
-    """Tune a baseline's gains or weights on the training scenarios (held IAE; see agents/tune.py)."""
+    """Tune a baseline's gains or weights on the training scenarios (held IAE or return; agents/tune.py)."""
     import json
 
     from agents.tune import tune, write_experiment

@@ -146,6 +146,11 @@ def test_baselines_give_the_policies_what_the_file_says() -> None:
         ({"output": "omega", "reference": "omega_ref"}, r"a pid baseline needs \['input'\]"),
         ({"type": "python", "callable": "nocolon"}, r"expected 'module:function'"),
         ({"type": "pidd"}, r"\.type: .*\(got 'pidd'\)"),
+        ({"type": "lqr"}, r"a lqr baseline needs \['design'\]"),
+        (
+            {"type": "lqr", "design": {"inputs": ["u"], "measured": ["y"]}, "kp": 1.0},
+            r"\['kp'\] do not apply to a lqr",
+        ),
     ],
 )
 def test_a_baseline_takes_the_keys_of_its_type(
