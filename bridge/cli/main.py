@@ -274,6 +274,15 @@ ZenohModeOpt = Annotated[
     ),
 ]
 PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
+NetworkOpt = Annotated[
+    bool,
+    typer.Option(
+        "--network",
+        help="Serve on the network: every interface and multicast scouting (Zenoh's defaults). "
+        "Without it, and without --listen/--connect/--zenoh-config, only 127.0.0.1 through the "
+        "local router (see docs/zenoh.md).",
+    ),
+]
 
 
 def _zenoh_options(
@@ -282,12 +291,13 @@ def _zenoh_options(
     connect: list[str] | None,
     mode: str | None = None,
     zenoh_mode: str | None = None,
+    network: bool = False,
 ) -> Any:
     from bridge.net.transport import ZenohOptions, session_mode
 
     listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
     chosen = mode or session_mode(zenoh_mode, listen_t, connect_t, config)
-    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t)
+    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t, network=network)
 
 
 @app.command()
@@ -310,6 +320,7 @@ def node(
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
     zenoh_mode: ZenohModeOpt = None,
+    network: NetworkOpt = False,
     prefix: Annotated[
         str | None, typer.Option("--prefix", help="Key expression prefix [node.prefix or fmu_bridge].")
     ] = None,
@@ -349,6 +360,7 @@ def node(
     defaults = loaded.node  # the experiment's node: section; options given here win
     name, mode = name or defaults.name, mode or defaults.mode
     rate, prefix = defaults.rate if rate is None else rate, prefix or defaults.prefix
+    network = network or defaults.network
     view = None
     if ros or ros_backend:
         from bridge.net.ros2.args import current
@@ -363,7 +375,7 @@ def node(
         name=name,
         mode=mode,  # type: ignore[arg-type]
         rate=rate,
-        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode),
+        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode, network=network),
         prefix=prefix,
         ros=view,
         isolate=isolate,
@@ -394,13 +406,16 @@ def node(
 def router(
     listen: ListenOpt = None,
     zenoh_config: ZenohConfigOpt = None,
+    network: NetworkOpt = False,
 ) -> None:
-    """Run a Zenoh router (no zenohd needed): nodes, trainers and tools connect to it."""
+    """Run a Zenoh router (no zenohd needed): nodes, trainers and tools connect to it.
+
+    Without options it listens on 127.0.0.1:7447 only; --network listens on every interface."""
     import threading
 
-    from bridge.net.transport import open_session
+    from bridge.net.transport import open_session, router_endpoints
 
-    endpoints = listen or ([] if zenoh_config else ["tcp/0.0.0.0:7447"])
+    endpoints = listen or ([] if zenoh_config else router_endpoints(network))
     mode = None if zenoh_config else "router"  # a config file says its own mode
     session = open_session(_zenoh_options(zenoh_config, endpoints, None, mode=mode))
     err_console.print(

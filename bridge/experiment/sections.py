@@ -187,6 +187,7 @@ class NodeSection(Strict):
     mode: Literal["lockstep", "realtime"] = "lockstep"
     rate: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 1.0
     prefix: Annotated[str, Field(min_length=1)] = "fmu_bridge"
+    network: bool = Field(default=False, description="serve on every interface with scouting (--network)")
 
 
 class RosSection(Strict):
