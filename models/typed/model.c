@@ -4,6 +4,9 @@
 
 #include <stdlib.h>
 #include <string.h>
+#ifndef _WIN32
+#include <unistd.h>
+#endif
 
 static bool copy_string(char** dst, const char* src) {
     char* copy = malloc(strlen(src) + 1);
@@ -71,6 +74,19 @@ static void misbehave(int kind) {
             memset(leak, 1, 1u << 20); /* touched, so it counts as resident memory */
             leaked = leak;
         }
+    } else if (kind == 4) {
+#ifndef _WIN32
+        (void)fork(); /* parent and child both loop: a deadline must stop the pair */
+#endif
+        misbehave(1);
+    } else if (kind == 5) {
+        const size_t size = (size_t)4 << 30;
+        char* huge = malloc(size);
+        if (huge == NULL) abort(); /* what most code does with a failed allocation, one way or another */
+        memset(huge, 1, size);
+        leaked = huge;
+    } else if (kind == 6) {
+        exit(0); /* a model that ends the process it runs in */
     }
 }
 
