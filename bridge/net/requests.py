@@ -114,6 +114,7 @@ class RequestRules:
         self.variables = variables
         self.input_names = tuple(input_names)
         self.settable = _declared_names(experiment, variables)
+        self.ranges = {} if experiment.hooks.episode else _experiment_ranges(experiment)
         self.low, self.high = _input_ranges(experiment, variables, self.input_names)
 
     def values(self, values: Mapping[str, Any]) -> dict[str, float | int | bool | str]:
@@ -146,6 +147,12 @@ class RequestRules:
             raise BadRequest(f"{where} takes an integer in [-2^31, 2^31), got {_show(value)}")
         if (var.min is not None and number < var.min) or (var.max is not None and number > var.max):
             raise BadRequest(f"{where} = {number:g} is outside its declared range [{var.min}, {var.max}]")
+        low, high = self.ranges.get(var.name, (-math.inf, math.inf))
+        if not low <= number <= high:
+            raise BadRequest(
+                f"{where} = {number:g} is outside the experiment's range [{low:g}, {high:g}] (the values "
+                "its model, scenarios and randomisation can give)"
+            )
         return number if is_float else int(number)
 
     def inputs(self, values: Sequence[float]) -> str | None:
@@ -158,6 +165,40 @@ class RequestRules:
                     f"[{low[i]:g}, {high[i]:g}]"
                 )
         return None
+
+
+def _experiment_ranges(experiment: Experiment) -> dict[str, tuple[float, float]]:
+    """Per numeric name: the hull of what the experiment can set; a name any value may reach
+    (a normal or lognormal draw, a non-numeric value) has no entry."""
+    seen: dict[str, list[float]] = {}
+    open_ended: set[str] = set()
+
+    def fixed(values: Mapping[str, Any]) -> None:
+        for name, value in values.items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                seen.setdefault(name, []).append(float(value))
+            else:
+                open_ended.add(name)
+
+    def drawn(distributions: Mapping[str, Any]) -> None:
+        for name, dist in distributions.items():
+            support = {"uniform": dist.uniform, "choice": dist.choice}.get(dist.kind)
+            if dist.kind == "truncnormal":
+                support = dist.truncnormal[2:]
+            if support is None:
+                open_ended.add(name)
+            else:
+                seen.setdefault(name, []).extend(float(v) for v in support)
+
+    model = experiment.model
+    fixed({**model.parameters, **model.start_values})
+    randomizations = [experiment.randomization]
+    for scenario in experiment.scenarios.values():
+        fixed({**scenario.parameters, **scenario.start_values})
+        randomizations.append(scenario.randomization)
+    for r in randomizations:
+        drawn({**r.parameters, **r.start_values})
+    return {name: (min(v), max(v)) for name, v in seen.items() if name not in open_ended}
 
 
 def _declared_names(experiment: Experiment, variables: Mapping[str, Variable]) -> frozenset[str]:

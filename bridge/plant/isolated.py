@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.errors import ConfigError, PlantDied, PlantError, StepError, StepTimeout
+from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepError, StepTimeout
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
@@ -144,7 +144,13 @@ class IsolatedFmuPlant(Plant):
             self.restarts += 1
         self.episode += 1
         self.sample, self.terminated = 0, False
-        return self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+        try:
+            outputs = self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+        except BridgeError as exc:
+            self._unusable = f"the last reset failed: {exc}"
+            raise
+        self._unusable = None
+        return outputs
 
     def send(self, inputs: Sequence[float] | None) -> None:
         if self._broken is not None:
@@ -179,6 +185,14 @@ class IsolatedFmuPlant(Plant):
 
     def set_values(self, values: Mapping[str, Any]) -> None:
         self._call(("set", dict(values)), step=self.sample)
+
+    @property
+    def unusable(self) -> str | None:
+        if self._broken is not None:
+            return str(self._broken)
+        return self._unusable
+
+    _unusable: str | None = None  # the child's own model failed to initialise
 
     def provenance(self) -> dict[str, str]:
         from bridge.fmu import sha256

@@ -40,6 +40,11 @@ FmuStatus model_initialize(FmuInstance* inst) {
     d->counter = 0;
     d->real_integral = 0.0;
     d->double_gain = 2.0 * d->gain;
+    if (d->real_param > d->init_fails_above) {
+        fmu_log_error(inst, "typed: real_param = %g is above init_fails_above = %g: initialisation refused (test hook)",
+                      d->real_param, d->init_fails_above);
+        return FMU_ERROR;
+    }
     if (!copy_inputs_to_outputs(d)) {
         fmu_log_error(inst, "typed: out of memory while copying string_in");
         return FMU_FATAL;
