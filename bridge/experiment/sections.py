@@ -44,6 +44,7 @@ class RemoteSection(Strict):
     zenoh_mode: Literal["client", "peer"] | None = None
     timeout_s: PositiveFloat = 5.0
     replace_dead: bool = False
+    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = 0.0
 
 
 class NormalizeSection(Strict):
