@@ -1,17 +1,41 @@
-"""docs/reliability.md from the counts the fuzz and fault tests write to docs/reliability/*.json.
+"""docs/reliability.md from the counts the fuzz and fault tests write, committed only on request.
 
-The tests write their counts as they run; at the end of a test session ``conftest.py`` calls
-``write()`` so the document always shows the last run's figures. ``python tests/reliability_table.py``
-does the same by hand.
+The tests write their counts as they run into a temporary folder (``FMU_BRIDGE_RELIABILITY_DIR``,
+which ``conftest.py`` sets to a fresh one per test session unless given); at the end of the session
+``write()`` renders ``reliability.md`` there, next to the counts, and the repository is left alone.
+``python tests/reliability_table.py --commit FOLDER`` copies a run's counts into docs/reliability/
+and regenerates docs/reliability.md: the step a maintainer takes on purpose.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 DOCS = Path(__file__).resolve().parent.parent / "docs"
+COUNTS_ENV = "FMU_BRIDGE_RELIABILITY_DIR"
+
+
+def counts_dir() -> Path:
+    """Where this run's counts go: FMU_BRIDGE_RELIABILITY_DIR, or a fresh temporary folder."""
+    folder = os.environ.get(COUNTS_ENV)
+    if not folder:
+        folder = os.environ[COUNTS_ENV] = tempfile.mkdtemp(prefix="fmu-bridge-reliability-")
+    path = Path(folder)
+    path.mkdir(parents=True, exist_ok=True)
+    return path
+
+
+def counts_path(name: str) -> Path:
+    """The file a fuzz or fault test writes its counts to (in :func:`counts_dir`)."""
+    return counts_dir() / name
+
+
 HEADER = """# Reliability: hostile input and faults, counted
 
 Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
@@ -67,19 +91,37 @@ def _nodes(data: dict[str, Any]) -> str:
 ROWS = {"experiment_fuzz.json": _experiments, "recording_fuzz.json": _recordings, "node_fuzz.json": _nodes}
 
 
-def render() -> str:
+def render(source: Path) -> str:
+    """The document from the counts in ``source`` (each missing file: the committed counts)."""
     rows = []
     for name, row in ROWS.items():
-        path = DOCS / "reliability" / name
+        path = source / name if (source / name).is_file() else DOCS / "reliability" / name
         if path.is_file():
             rows.append(row(json.loads(path.read_text())))
     faults = (DOCS / "reliability" / "faults.md").read_text()  # the fault-injection table, by hand
     return HEADER + "\n".join(rows) + "\n\n" + faults
 
 
-def write() -> None:
-    (DOCS / "reliability.md").write_text(render())
+def write() -> Path | None:
+    """reliability.md beside this run's counts (in the temporary folder); None without counts."""
+    source = Path(os.environ.get(COUNTS_ENV, ""))
+    if not os.environ.get(COUNTS_ENV) or not any((source / name).is_file() for name in ROWS):
+        return None
+    target = source / "reliability.md"
+    target.write_text(render(source))
+    return target
+
+
+def commit(source: Path) -> None:
+    """Copy the counts in ``source`` into docs/reliability/ and regenerate docs/reliability.md."""
+    for name in ROWS:
+        if (source / name).is_file():
+            shutil.copyfile(source / name, DOCS / "reliability" / name)
+    (DOCS / "reliability.md").write_text(render(DOCS / "reliability"))
 
 
 if __name__ == "__main__":
-    write()
+    if len(sys.argv) == 3 and sys.argv[1] == "--commit":
+        commit(Path(sys.argv[2]))
+    else:
+        sys.exit("usage: python tests/reliability_table.py --commit FOLDER  (a test run's counts folder)")

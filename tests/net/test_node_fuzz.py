@@ -19,7 +19,6 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -32,11 +31,12 @@ from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
 from tests.conftest import Loopback, _wait_for_node
+from tests.reliability_table import counts_path
 
 pytestmark = pytest.mark.integration
 SEED = 20260412
 CARTPOLE = example_experiment("cartpole_continuous")
-COUNTS = Path(__file__).resolve().parents[2] / "docs" / "reliability" / "node_fuzz.json"
+COUNTS = counts_path("node_fuzz.json")
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE = "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"  # noqa: E501
 TRIGGER = (

@@ -39,9 +39,10 @@ from bridge.recording.export import describe, export_csv
 from bridge.recording.reader import read_recording, recover_file
 from bridge.recording.writer import McapWriter
 from tests.conftest import Loopback, node_process
+from tests.reliability_table import counts_path
 
 ROOT = Path(__file__).resolve().parents[2]
-COUNTS = ROOT / "docs" / "reliability" / "recording_fuzz.json"
+COUNTS = counts_path("recording_fuzz.json")
 SEED = 20260412
 CORRUPTIONS = 1000
 RSS_GROWTH_MB = 300  # what the whole fuzz run may add to the process's peak memory
