@@ -38,9 +38,15 @@ def counts_path(name: str) -> Path:
 
 HEADER = """# Reliability: hostile input and faults, counted
 
-Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
-counts); regenerate with `pytest` or `python tests/reliability_table.py`. Every row asserts, in its
-test, that there were zero tracebacks, zero hangs and nothing silently wrong.
+Who is trusted on which set-up (loopback by default, the network only when asked, admitted
+clients with authentication) is in [zenoh.md](zenoh.md#who-is-trusted-on-which-set-up): peers,
+files (experiments, FMUs, recordings) and FMUs themselves are treated as hostile input.
+
+The counts below come from the fuzz and fault tests. Each test run writes its counts to a
+temporary folder (`FMU_BRIDGE_RELIABILITY_DIR`, printed at the end of `pytest`) with this table
+beside them; `python tests/reliability_table.py --commit FOLDER` copies a run's counts here when a
+maintainer asks for it. Every row asserts, in its test, that there were zero tracebacks, zero
+hangs and nothing silently wrong.
 
 | test | what was thrown at it | outcome | tracebacks | hangs | silently wrong |
 |---|---|---|---|---|---|

@@ -300,9 +300,12 @@ def check_run_name(name: str, folder: Path) -> None:
     problem = (
         f"{len(name):,} characters, at most {MAX_RUN_NAME_CHARS} are allowed"
         if len(name) > MAX_RUN_NAME_CHARS
-        else "a path separator" if "/" in name or "\\" in name or os.sep in name
-        else "no file name" if name in ("", ".", "..")
-        else f"the characters {''.join(odd)!a}" if odd
+        else "a path separator"
+        if "/" in name or "\\" in name or os.sep in name
+        else "no file name"
+        if name in ("", ".", "..")
+        else f"the characters {''.join(odd)!a}"
+        if odd
         else ""
     )
     if problem:
