@@ -95,10 +95,15 @@ class PlantVecEnv(Sb3VecEnv):
             except PlantError as exc:
                 failed[i] = exc
         results: list[Any] = [None] * self.num_envs
+        for i, error in failed.items():
+            if self._raises_at_once(error):
+                self._failed_result(i, error)
         for i in self._in_answer_order([i for i in range(self.num_envs) if i not in failed]):
             try:
                 results[i] = self.envs[i].receive()
             except PlantError as exc:
+                if self._raises_at_once(exc):  # reported now, not after a hung env's timeout
+                    self._failed_result(i, exc)
                 failed[i] = exc
         # the healthy envs' results are in before a failed env is recovered (which may wait for a
         # replacement, or raise: then ``partial_results`` keeps them, None for the failed envs)
@@ -111,6 +116,10 @@ class PlantVecEnv(Sb3VecEnv):
     def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
         """The envs to receive from, in the order their plants answer (in-process: in order)."""
         return pending
+
+    def _raises_at_once(self, error: PlantError) -> bool:
+        """Whether recovering from ``error`` only raises it (then no other result is awaited)."""
+        return self.on_error == "raise"
 
     def _failed_result(self, index: int, error: PlantError) -> Result:
         info = self._recover(index, error)
@@ -269,6 +278,10 @@ class RemoteVecEnv(PlantVecEnv):
 
     def _client(self, index: int) -> Any:
         return self.envs[index].plant.client  # type: ignore[attr-defined]
+
+    def _raises_at_once(self, error: PlantError) -> bool:
+        replaceable = isinstance(error, PlantDied | StepTimeout) and self.replace_dead
+        return super()._raises_at_once(error) and not replaceable
 
     def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
         if isinstance(error, PlantDied | StepTimeout) and self.replace_dead:
