@@ -8,7 +8,8 @@ signal (or the exit code of an FMU that ends its process), and a child whose res
 by more than ``memory_limit_mb`` after loading (a leak; checked every 32 samples) is stopped with
 :class:`PlantDied` saying so. The limit also holds before the fact: the child's address space is
 capped (``RLIMIT_AS``) at what it had after loading plus twice ``memory_limit_mb``, so one huge
-allocation fails instead of taking the machine's memory. The child leads a session of its own:
+allocation fails instead of taking the machine's memory. The child leads a process group of its
+own (same session, so the same scheduling group as its parent):
 on a deadline or ``close()`` its whole process group is killed (an FMU that forks leaves nothing
 behind), and a child whose parent dies kills its group too (no orphan burns a core). With
 ``restart=True`` the next ``reset()`` starts a fresh child, so a long training run survives an
@@ -298,7 +299,7 @@ def _serve(
 ) -> None:
     """The child's loop: one LocalFmuPlant, one message in, one reply out."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which stops us
-    os.setsid()  # a process group of its own: the parent kills it whole, with whatever the FMU forked
+    os.setpgid(0, 0)  # a process group of its own: the parent kills it whole, with whatever the FMU forked
     _follow_parent(os.getppid())
     from bridge.errors import BridgeError
     from bridge.plant.local import LocalFmuPlant
