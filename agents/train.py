@@ -98,6 +98,7 @@ def build_vec_env(
                 options=remote.options(),
                 timeout_s=remote.timeout_s,
                 replace_dead=remote.replace_dead,
+                replace_wait_s=remote.replace_wait_s,
             )
         )
         vec.seed(seed)

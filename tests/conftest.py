@@ -301,11 +301,34 @@ def check_with_model(experiment: Experiment) -> ModelInfo:
     return check_experiment(experiment, model_info_for(experiment))
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """The fuzz and fault tests' counts go to a temporary folder of this session (see
+    tests/reliability_table.py: committed into docs/ only on request)."""
+    from reliability_table import counts_dir
+
+    counts_dir()
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """docs/reliability.md from the counts the fuzz and fault tests wrote in this run."""
+    """reliability.md beside the counts the fuzz and fault tests wrote in this run."""
     from reliability_table import write
 
-    write()
+    written = write()
+    if written is not None:
+        session.config.stash[_RELIABILITY] = written
+
+
+_RELIABILITY = pytest.StashKey[Path]()
+
+
+def pytest_terminal_summary(
+    terminalreporter: pytest.TerminalReporter, exitstatus: int, config: pytest.Config
+) -> None:
+    written = config.stash.get(_RELIABILITY, None)
+    if written is not None:
+        terminalreporter.write_line(
+            f"reliability counts: {written} (python tests/reliability_table.py --commit {written.parent})"
+        )
 
 
 @pytest.fixture(scope="session")

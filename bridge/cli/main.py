@@ -23,6 +23,7 @@ from bridge import __version__
 from bridge.cli.options import (
     ConnectOpt,
     ListenOpt,
+    NetworkOpt,
     PrefixOpt,
     ZenohConfigOpt,
     ZenohModeOpt,
@@ -294,6 +295,7 @@ def node(
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
     zenoh_mode: ZenohModeOpt = None,
+    network: NetworkOpt = False,
     prefix: Annotated[
         str | None, typer.Option("--prefix", help="Key expression prefix [node.prefix or fmu_bridge].")
     ] = None,
@@ -333,6 +335,7 @@ def node(
     defaults = loaded.node  # the experiment's node: section; options given here win
     name, mode = name or defaults.name, mode or defaults.mode
     rate, prefix = defaults.rate if rate is None else rate, prefix or defaults.prefix
+    network = network or defaults.network
     view = None
     if ros or ros_backend:
         from bridge.net.ros2.args import current
@@ -347,7 +350,7 @@ def node(
         name=name,
         mode=mode,  # type: ignore[arg-type]
         rate=rate,
-        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode),
+        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode, network=network),
         prefix=prefix,
         ros=view,
         isolate=isolate,
@@ -378,13 +381,16 @@ def node(
 def router(
     listen: ListenOpt = None,
     zenoh_config: ZenohConfigOpt = None,
+    network: NetworkOpt = False,
 ) -> None:
-    """Run a Zenoh router (no zenohd needed): nodes, trainers and tools connect to it."""
+    """Run a Zenoh router (no zenohd needed): nodes, trainers and tools connect to it.
+
+    Without options it listens on 127.0.0.1:7447 only; --network listens on every interface."""
     import threading
 
-    from bridge.net.transport import open_session
+    from bridge.net.transport import open_session, router_endpoints
 
-    endpoints = listen or ([] if zenoh_config else ["tcp/0.0.0.0:7447"])
+    endpoints = listen or ([] if zenoh_config else router_endpoints(network))
     mode = None if zenoh_config else "router"  # a config file says its own mode
     session = open_session(_zenoh_options(zenoh_config, endpoints, None, mode=mode))
     err_console.print(

@@ -29,6 +29,15 @@ ZenohModeOpt = Annotated[
     ),
 ]
 PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
+NetworkOpt = Annotated[
+    bool,
+    typer.Option(
+        "--network",
+        help="Serve on the network: every interface and multicast scouting (Zenoh's defaults). "
+        "Without it, and without --listen/--connect/--zenoh-config, only 127.0.0.1 through the "
+        "local router (see docs/zenoh.md).",
+    ),
+]
 
 
 def zenoh_options(
@@ -37,9 +46,11 @@ def zenoh_options(
     connect: list[str] | None,
     mode: str | None = None,
     zenoh_mode: str | None = None,
+    *,
+    network: bool = False,
 ) -> Any:
     from bridge.net.transport import ZenohOptions, session_mode
 
     listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
     chosen = mode or session_mode(zenoh_mode, listen_t, connect_t, config)
-    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t)
+    return ZenohOptions(config_file=config, mode=chosen, listen=listen_t, connect=connect_t, network=network)

@@ -31,7 +31,7 @@ import numpy.typing as npt
 from bridge.env.fmu_env import FmuEnv
 from bridge.env.remote import RemoteFmuEnv
 from bridge.env.sb3_vec import Sb3VecEnv
-from bridge.errors import ConfigError, PlantDied, PlantError, StepTimeout
+from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import list_nodes
@@ -67,6 +67,7 @@ class PlantVecEnv(Sb3VecEnv):
         self._options: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         self.reset_infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
         self._actions: Any = None
+        self.partial_results: list[Any] = []
         self._last_obs: list[npt.NDArray[np.float32]] = []
 
     # -- VecEnv API ----------------------------------------------------------------------------------
@@ -95,17 +96,30 @@ class PlantVecEnv(Sb3VecEnv):
                 failed[i] = exc
         results: list[Any] = [None] * self.num_envs
         for i, error in failed.items():
-            results[i] = self._failed_result(i, error)
+            if self._raises_at_once(error):
+                self._failed_result(i, error)
         for i in self._in_answer_order([i for i in range(self.num_envs) if i not in failed]):
             try:
                 results[i] = self.envs[i].receive()
-            except PlantError as exc:  # handled at once: raised, or replaced while others still step
-                results[i] = self._failed_result(i, exc)
+            except PlantError as exc:
+                if self._raises_at_once(exc):  # reported now, not after a hung env's timeout
+                    self._failed_result(i, exc)
+                failed[i] = exc
+        # the healthy envs' results are in before a failed env is recovered (which may wait for a
+        # replacement, or raise: then ``partial_results`` keeps them, None for the failed envs)
+        self.partial_results = list(results)
+        for i, error in sorted(failed.items()):
+            results[i] = self._failed_result(i, error)
+        self.partial_results = []
         return self._collect(results)
 
     def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
         """The envs to receive from, in the order their plants answer (in-process: in order)."""
         return pending
+
+    def _raises_at_once(self, error: PlantError) -> bool:
+        """Whether recovering from ``error`` only raises it (then no other result is awaited)."""
+        return self.on_error == "raise"
 
     def _failed_result(self, index: int, error: PlantError) -> Result:
         info = self._recover(index, error)
@@ -178,8 +192,11 @@ class RemoteVecEnv(PlantVecEnv):
         experiment: the experiment the nodes serve.
         nodes: node names, or a glob pattern (``"worker-*"``) matched against live nodes.
         n_envs: how many envs (default: every listed or matching node); extra matches are spares.
-        replace_dead: replace a node that died or stopped answering by a spare and truncate its
-            episode, instead of raising (needs ``nodes`` as a pattern).
+        replace_dead: replace a node that died or stopped answering by a spare (``nodes`` as a
+            pattern) or by the same name coming back, and truncate its episode, instead of raising.
+        replace_wait_s: with ``replace_dead``, how long to wait for a replacement when none is up;
+            only then the error is raised (the healthy envs' results of that step are kept in
+            ``partial_results``).
         on_error: what a failed model step does (``"truncate"``, the default, or ``"raise"``);
             dead and hung nodes are replaced first where ``replace_dead`` allows.
     """
@@ -197,8 +214,10 @@ class RemoteVecEnv(PlantVecEnv):
         replace_dead: bool = False,
         on_error: OnError = "truncate",
         discovery_timeout_s: float = 10.0,
+        replace_wait_s: float = 0.0,
     ) -> None:
         self.experiment = as_experiment(experiment)
+        self.replace_wait_s = replace_wait_s
         self._any_answer = threading.Event()
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
@@ -257,6 +276,10 @@ class RemoteVecEnv(PlantVecEnv):
                 waiting.remove(i)
                 yield i
 
+    def _raises_at_once(self, error: PlantError) -> bool:
+        replaceable = isinstance(error, PlantDied | StepTimeout) and self.replace_dead
+        return super()._raises_at_once(error) and not replaceable
+
     def _recover(self, index: int, error: PlantError) -> dict[str, Any]:
         if isinstance(error, PlantDied | StepTimeout) and self.replace_dead:
             old = self.envs[index]
@@ -272,26 +295,46 @@ class RemoteVecEnv(PlantVecEnv):
         return [env.node for env in self.envs if isinstance(env, RemoteFmuEnv)]
 
     def _replace(self, index: int, error: PlantError) -> bool:
-        if self._pattern is None:
-            return False
-        in_use = set(self.node_names)
-        for name in list_nodes(self._session, prefix=self._prefix, pattern=self._pattern, timeout_s=1.0):
-            if name in in_use:
-                continue
-            try:
-                replacement = self._connect(name)
-            except PlantError:
-                continue
-            except ConfigError:
-                continue
-            old = self.envs[index]
-            _log.warning(
-                "replacing dead node %r by %r (env %d): %s", getattr(old, "node", "?"), name, index, error
-            )
-            old.close()
-            self.envs[index] = replacement
-            return True
+        """Put a live node in place of env ``index``'s: a spare matching the pattern or the same
+        name come back, waiting up to ``replace_wait_s``; raise ``error`` if none comes."""
+        old = self.envs[index]
+        dead = getattr(old, "node", "")
+        deadline = time.monotonic() + self.replace_wait_s
+        while True:
+            replacement = self._live_replacement(dead)
+            if replacement is not None:
+                new = replacement.node
+                _log.warning("replacing dead node %r by %r (env %d): %s", dead, new, index, error)
+                old.close()
+                self.envs[index] = replacement
+                return True
+            if time.monotonic() > deadline:
+                break
+            time.sleep(0.2)
+        if self.replace_wait_s > 0:
+            raise PlantDied(
+                f"{error}; no replacement for node {dead!r} came within replace_wait_s = "
+                f"{self.replace_wait_s:g} s (a spare matching {self._pattern!r} or {dead!r} restarted)",
+                plant=getattr(error, "plant", dead),
+                detail=getattr(error, "detail", str(error)),
+            ) from error
         raise error
+
+    def _live_replacement(self, dead: str) -> RemoteFmuEnv | None:
+        in_use = set(self.node_names) - {dead}
+        spares = (
+            list_nodes(self._session, prefix=self._prefix, pattern=self._pattern, timeout_s=1.0)
+            if self._pattern is not None
+            else []
+        )
+        if dead not in spares:
+            spares += list_nodes(self._session, prefix=self._prefix, pattern=dead, timeout_s=1.0)
+        for name in sorted(set(spares) - in_use, key=lambda n: (n == dead, n)):  # spares first
+            try:
+                return self._connect(name)
+            except (PlantError, ConfigError, BridgeError):
+                continue  # still starting, just died, or taken: try the next, or again later
+        return None
 
     def close(self) -> None:
         super().close()

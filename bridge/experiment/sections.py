@@ -45,6 +45,7 @@ class RemoteSection(Strict):
     zenoh_mode: Literal["client", "peer"] | None = None
     timeout_s: PositiveFloat = 5.0
     replace_dead: bool = False
+    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = 0.0
 
 
 class NormalizeSection(Strict):
@@ -192,6 +193,7 @@ class NodeSection(Strict):
     mode: Literal["lockstep", "realtime"] = "lockstep"
     rate: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 1.0
     prefix: Annotated[str, Field(min_length=1)] = "fmu_bridge"
+    network: bool = Field(default=False, description="serve on every interface with scouting (--network)")
 
 
 class RosSection(Strict):

@@ -109,6 +109,7 @@ class Model:
         self._clock = Clock(0)
         self.terminated = False
         self._initialized = False
+        self._init_failed = False
         self._closed = False
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
@@ -284,10 +285,21 @@ class Model:
         if self._closed:
             raise FmuError(f"{self.info.model_name}: the model is closed; open a new Model")
         checked = self._check_init_values(values or {})
-        if self._backend.component is None:
-            self._backend.instantiate()
-        self._initialize(checked)
+        if self._backend.component is not None and self.unusable:
+            # a failed initialisation leaves the instance half-initialised for good: start afresh
+            _log.info("%s: re-instantiating after a failed initialisation", self.info.model_name)
+            self._reinstantiate(checked)
+        else:
+            if self._backend.component is None:
+                self._backend.instantiate()
+            self._initialize(checked)
         self._remember(_freeze(checked))
+
+    @property
+    def unusable(self) -> bool:
+        """True after a failed initialisation: the instance cannot step until the next reset,
+        which instantiates it afresh."""
+        return self._init_failed
 
     def reset(self, values: Mapping[str, Any] | None = None) -> None:
         """Return to ``t0`` with parameters/start values ``values``, by the configured policy."""
@@ -326,6 +338,7 @@ class Model:
 
     def _initialize(self, values: dict[Variable, Any]) -> None:
         self._initialized = False
+        self._init_failed = True  # until it completes
         self._backend.log.clear()
         # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
         early = [
@@ -344,6 +357,7 @@ class Model:
         if self.interface == "me":
             self._start_me()
         self._initialized = True
+        self._init_failed = False
         self._failed_status = 0
         self._restart()
 

@@ -118,6 +118,7 @@ class RequestRules:
         self.variables = variables
         self.input_names = served.input_names
         self.settable = served.settable
+        self.ranges = served.ranges
         self.low, self.high = list(served.low), list(served.high)
 
     def values(self, values: Mapping[str, Any]) -> dict[str, float | int | bool | str]:
@@ -150,6 +151,12 @@ class RequestRules:
             raise BadRequest(f"{where} takes an integer in [-2^31, 2^31), got {_show(value)}")
         if (var.min is not None and number < var.min) or (var.max is not None and number > var.max):
             raise BadRequest(f"{where} = {number:g} is outside its declared range [{var.min}, {var.max}]")
+        low, high = self.ranges.get(var.name, (-math.inf, math.inf))
+        if not low <= number <= high:
+            raise BadRequest(
+                f"{where} = {number:g} is outside the experiment's range [{low:g}, {high:g}] (the values "
+                "its model, scenarios and randomisation can give)"
+            )
         return number if is_float else int(number)
 
     def inputs(self, values: Sequence[float]) -> str | None:

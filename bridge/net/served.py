@@ -42,6 +42,8 @@ class Served:
     high: tuple[float, ...]
     timing: Timing
     nominal: Mapping[str, Any] = field(default_factory=dict)
+    # per numeric name a reset may set: the hull of what the experiment itself can give
+    ranges: Mapping[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def served_by(experiment: Experiment, info: ModelInfo, timing: Timing) -> Served:
@@ -63,6 +65,7 @@ def served_by(experiment: Experiment, info: ModelInfo, timing: Timing) -> Served
         high=tuple(high),
         timing=timing,
         nominal={**model.parameters, **model.start_values},
+        ranges={} if experiment.hooks.episode else experiment_ranges(experiment),
     )
 
 
@@ -111,3 +114,37 @@ def declared_ranges(
         low.append(-_LARGEST if var.min is None else float(var.min))
         high.append(_LARGEST if var.max is None else float(var.max))
     return low, high
+
+
+def experiment_ranges(experiment: Experiment) -> dict[str, tuple[float, float]]:
+    """Per numeric name: the hull of what the experiment can set; a name any value may reach
+    (a normal or lognormal draw, a non-numeric value) has no entry."""
+    seen: dict[str, list[float]] = {}
+    open_ended: set[str] = set()
+
+    def fixed(values: Mapping[str, Any]) -> None:
+        for name, value in values.items():
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                seen.setdefault(name, []).append(float(value))
+            else:
+                open_ended.add(name)
+
+    def drawn(distributions: Mapping[str, Any]) -> None:
+        for name, dist in distributions.items():
+            support = {"uniform": dist.uniform, "choice": dist.choice}.get(dist.kind)
+            if dist.kind == "truncnormal":
+                support = dist.truncnormal[2:]
+            if support is None:
+                open_ended.add(name)
+            else:
+                seen.setdefault(name, []).extend(float(v) for v in support)
+
+    model = experiment.model
+    fixed({**model.parameters, **model.start_values})
+    randomizations = [experiment.randomization]
+    for scenario in experiment.scenarios.values():
+        fixed({**scenario.parameters, **scenario.start_values})
+        randomizations.append(scenario.randomization)
+    for r in randomizations:
+        drawn({**r.parameters, **r.start_values})
+    return {name: (min(v), max(v)) for name, v in seen.items() if name not in open_ended}

@@ -1,8 +1,12 @@
 """Zenoh sessions from command-line style options (peer/client/router, endpoints, config files).
 
-Nodes on one machine find each other by explicit endpoints or scouting; nodes on other machines
-connect to a router or to each other (``--connect tcp/host:7447``), optionally with TLS and
-user/password authentication as Zenoh configures them (see docs/zenoh.md).
+Safe by default: a session opened without endpoints, a configuration file or ``network`` listens
+on 127.0.0.1 only (an ephemeral port), does not scout or answer scouting, and connects to the local
+router (``fmu-bridge router``, which listens on 127.0.0.1:7447 by default; ``FMU_BRIDGE_LOCAL_ROUTER``
+names another endpoint). Serving on the network is asked for explicitly: ``network`` (the
+``--network`` option: Zenoh's own defaults, every interface and multicast scouting), endpoints
+(``--listen``/``--connect``) or a configuration file, such as the TLS and user/password set-ups of
+docs/zenoh.md.
 """
 
 from __future__ import annotations
@@ -10,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import os
 import threading
 import time
 from dataclasses import dataclass
@@ -34,6 +39,8 @@ class ZenohOptions:
         listen: endpoints to listen on, e.g. ``tcp/127.0.0.1:7447``.
         connect: endpoints to connect to.
         scouting: multicast scouting; off whenever endpoints are given explicitly.
+        network: serve on the network with Zenoh's defaults; without it (and without endpoints or
+            a configuration file) the session stays on 127.0.0.1 (see the module docstring).
     """
 
     config_file: Path | None = None
@@ -41,6 +48,12 @@ class ZenohOptions:
     listen: tuple[str, ...] = ()
     connect: tuple[str, ...] = ()
     scouting: bool | None = None
+    network: bool = False
+
+    @property
+    def loopback_only(self) -> bool:
+        """No endpoints, file or ``network`` given: the session stays on 127.0.0.1."""
+        return not (self.network or self.listen or self.connect or self.config_file)
 
     def to_config(self) -> Any:
         import zenoh
@@ -52,11 +65,19 @@ class ZenohOptions:
         try:
             if self.mode:
                 config.insert_json5("mode", json.dumps(self.mode))
+            if self.loopback_only and self.mode != "client":
+                config.insert_json5("listen/endpoints", json.dumps([LOOPBACK_LISTEN]))
+            if self.loopback_only:
+                config.insert_json5("connect/endpoints", json.dumps([local_router()]))
             if self.listen:
                 config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
             if self.connect:
                 config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
-            scouting = self.scouting if self.scouting is not None else not (self.listen or self.connect)
+            scouting = (
+                self.scouting
+                if self.scouting is not None
+                else self.network and not (self.listen or self.connect)
+            )
             if not scouting:
                 config.insert_json5("scouting/multicast/enabled", "false")
         except Exception as exc:
@@ -65,6 +86,8 @@ class ZenohOptions:
 
     def describe(self) -> str:
         parts = [f"mode={self.mode or 'peer'}"]
+        if self.loopback_only:
+            parts.append(f"loopback only, via the local router {local_router()}")
         if self.listen:
             parts.append(f"listen={list(self.listen)}")
         if self.connect:
@@ -75,6 +98,20 @@ class ZenohOptions:
 
 
 ZENOH_MODES = ("peer", "client")
+LOOPBACK_LISTEN = "tcp/127.0.0.1:0"
+LOCAL_ROUTER = "tcp/127.0.0.1:7447"
+LOCAL_ROUTER_ENV = "FMU_BRIDGE_LOCAL_ROUTER"
+
+
+def local_router() -> str:
+    """The endpoint of the local router that sessions without options connect to."""
+    return os.environ.get(LOCAL_ROUTER_ENV) or LOCAL_ROUTER
+
+
+def router_endpoints(network: bool) -> list[str]:
+    """Where ``fmu-bridge router`` listens without ``--listen``: the local router endpoint, or
+    every interface on port 7447 with ``network``."""
+    return ["tcp/0.0.0.0:7447"] if network else [local_router()]
 
 
 def session_mode(

@@ -96,6 +96,12 @@ class Plant(ABC):
             "run the experiment with the model in this process (FmuEnv)"
         )
 
+    @property
+    def unusable(self) -> str | None:
+        """Why the model cannot step until the next reset (a failed initialisation, a dead or
+        hung process), or None; a node's ``health`` may report it. The next reset starts afresh."""
+        return None
+
     def provenance(self) -> dict[str, str]:
         """Where the model comes from, for recordings: ``fmu``, ``fmu_sha256``, ``node``."""
         return {"fmu": str(self.info.path), "fmu_sha256": "", "node": ""}

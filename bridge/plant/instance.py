@@ -135,6 +135,12 @@ class FmuInstancePlant(Plant):
     def set_values(self, values: Mapping[str, Any]) -> None:
         self.model.set(values)
 
+    @property
+    def unusable(self) -> str | None:
+        if getattr(self.model, "unusable", False):
+            return "the FMU's initialisation failed; the next reset instantiates it afresh"
+        return None
+
     # -- saved states (rollback) -------------------------------------------------------------------
     @property
     def can_save(self) -> bool:

@@ -4,8 +4,14 @@ An FMU is native code from someone else. In this process a segfault kills the tr
 endless loop in ``doStep`` hangs it for good and a leak grows without bound. Here the FMU runs
 in a child process (a ``LocalFmuPlant`` there) and every reset and step waits at most
 ``timeout_s``: a hung FMU becomes :class:`StepTimeout`, a crash :class:`PlantDied` naming the
-signal, and a child whose resident memory grows by more than ``memory_limit_mb`` after loading
-(a leak; checked every 32 samples) is stopped with :class:`PlantDied` saying so. With
+signal (or the exit code of an FMU that ends its process), and a child whose resident memory grows
+by more than ``memory_limit_mb`` after loading (a leak; checked every 32 samples) is stopped with
+:class:`PlantDied` saying so. The limit also holds before the fact: the child's address space is
+capped (``RLIMIT_AS``) at what it had after loading plus twice ``memory_limit_mb``, so one huge
+allocation fails instead of taking the machine's memory. The child leads a process group of its
+own (same session, so the same scheduling group as its parent):
+on a deadline or ``close()`` its whole process group is killed (an FMU that forks leaves nothing
+behind), and a child whose parent dies kills its group too (no orphan burns a core). With
 ``restart=True`` the next ``reset()`` starts a fresh child, so a long training run survives an
 unstable FMU.
 
@@ -26,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.errors import ConfigError, PlantDied, PlantError, StepError, StepTimeout
+from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepError, StepTimeout
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
@@ -78,10 +84,25 @@ class IsolatedFmuPlant(Plant):
 
     def _start(self) -> None:
         context = mp.get_context("spawn")  # no inherited threads or locks from this process
-        parent, child = context.Pipe()
-        args = (child, self.experiment, self.input_names, self.output_names)
-        self._process = context.Process(target=_serve, args=args, name="fmu-plant", daemon=True)
-        self._process.start()
+        parent = child = None
+        try:
+            parent, child = context.Pipe()
+            args = (child, self.experiment, self.input_names, self.output_names, self.memory_limit_mb)
+            process = context.Process(target=_serve, args=args, name="fmu-plant", daemon=True)
+            process.start()
+        except (OSError, ValueError) as exc:  # no process: EAGAIN, EMFILE, ENOMEM, a bad executable
+            for end in (parent, child):
+                if end is not None:
+                    end.close()
+            raise self.failure(
+                PlantDied,
+                "the plant's process could not start",
+                f"{type(exc).__name__}: {exc}",
+                "check the process and file limits (ulimit -u, ulimit -n) and free memory",
+                step=None,
+                time_s=None,
+            ) from None
+        self._process = process
         child.close()
         self._conn, self._broken = parent, None
         try:
@@ -94,7 +115,7 @@ class IsolatedFmuPlant(Plant):
                 plant=self.name,
                 detail=exc.detail,
             ) from None
-        self._rss_start = _rss_bytes(self._process.pid)
+        self._rss_start = _rss_bytes(process.pid or 0)
 
     def _stop(self) -> None:
         process, conn = self._process, self._conn
@@ -105,9 +126,8 @@ class IsolatedFmuPlant(Plant):
             conn.close()
         if process is not None:
             process.join(timeout=1.0)
-            if process.is_alive():
-                process.kill()
-                process.join(timeout=5.0)
+            _kill_group(process)
+            process.join(timeout=5.0)
 
     def close(self) -> None:
         self._stop()
@@ -126,7 +146,13 @@ class IsolatedFmuPlant(Plant):
             self.restarts += 1
         self.episode += 1
         self.sample, self.terminated = 0, False
-        return self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+        try:
+            outputs = self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+        except BridgeError as exc:
+            self._unusable = f"the last reset failed: {exc}"
+            raise
+        self._unusable = None
+        return outputs
 
     def send(self, inputs: Sequence[float] | None) -> None:
         if self._broken is not None:
@@ -162,6 +188,14 @@ class IsolatedFmuPlant(Plant):
     def set_values(self, values: Mapping[str, Any]) -> None:
         self._call(("set", dict(values)), step=self.sample)
 
+    @property
+    def unusable(self) -> str | None:
+        if self._broken is not None:
+            return str(self._broken)
+        return self._unusable
+
+    _unusable: str | None = None  # the child's own model failed to initialise
+
     def provenance(self) -> dict[str, str]:
         from bridge.fmu import sha256
 
@@ -193,6 +227,16 @@ class IsolatedFmuPlant(Plant):
         if kind == "ok":
             outputs, self._time_s, self.terminated = rest
             return outputs  # type: ignore[no-any-return]
+        if kind == "memory":
+            self._kill()
+            self._broken = self.failure(
+                PlantDied,
+                "the plant exceeded its memory limit",
+                f"an allocation beyond memory_limit_mb = {self.memory_limit_mb:g} failed ({rest[0]})",
+                "its process was stopped" + ("; the next reset() starts a fresh one" if self.restart else ""),
+                step=step,
+            )
+            raise self._broken
         if kind == "step_error":
             detail, log, self._time_s = rest
             raise self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, log=log)
@@ -221,9 +265,15 @@ class IsolatedFmuPlant(Plant):
         self._kill()
         if code is not None and code < 0:
             cause = f"its process was killed by {signal.Signals(-code).name}"
+            hint = "the FMU crashed (a segfault or an abort in its native code)"
         else:
             cause = f"its process exited with code {code}"
-        hint = "the FMU crashed (a segfault or an abort in its native code)"
+            hint = "the FMU ended the process it runs in (exit() in its native code)"
+        if self.memory_limit_mb is not None:
+            hint += (
+                f"; or an allocation failed at the memory limit (memory_limit_mb = {self.memory_limit_mb:g} "
+                "caps the process's address space)"
+            )
         if self.restart:
             hint += "; the next reset() starts a fresh process"
         error = self.failure(PlantDied, "the plant died", cause, hint, step=step, time_s=None)
@@ -233,8 +283,8 @@ class IsolatedFmuPlant(Plant):
     def _kill(self) -> None:
         process, conn = self._process, self._conn
         self._process = self._conn = None
-        if process is not None and process.is_alive():
-            process.kill()
+        if process is not None:
+            _kill_group(process)
             process.join(timeout=5.0)
         if conn is not None:
             conn.close()
@@ -246,14 +296,19 @@ def _serve(
     experiment: Experiment,
     input_names: Sequence[str],
     output_names: Sequence[str],
+    memory_limit_mb: float | None = None,
 ) -> None:
     """The child's loop: one LocalFmuPlant, one message in, one reply out."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which stops us
+    os.setpgid(0, 0)  # a process group of its own: the parent kills it whole, with whatever the FMU forked
+    _follow_parent(os.getppid())
     from bridge.errors import BridgeError
     from bridge.plant.local import LocalFmuPlant
 
     plant = LocalFmuPlant(experiment)
     plant.bind(input_names, output_names)
+    if memory_limit_mb is not None:
+        _cap_address_space(memory_limit_mb)
     while True:
         try:
             message = conn.recv()
@@ -268,6 +323,9 @@ def _serve(
             conn.send(("step_error", exc.detail, exc.log, plant.time_s))
         except BridgeError as exc:
             conn.send(("error", exc))
+        except MemoryError as exc:
+            conn.send(("memory", f"MemoryError in {op}: {exc}"))
+            break
     plant.close()
 
 
@@ -282,6 +340,57 @@ def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
     else:  # "hello"
         outputs = np.zeros(0)
     return ("ok", outputs, plant.time_s, plant.terminated)
+
+
+def _kill_group(process: Any) -> None:
+    """SIGKILL the child's process group (the child leads it) and so whatever the FMU forked."""
+    if process.pid is None:
+        return
+    try:
+        os.killpg(process.pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):  # gone, or not yet its own group
+        if process.is_alive():
+            process.kill()
+
+
+def _follow_parent(parent: int) -> None:
+    """Kill this process group when the parent is gone (killed, or ended without close())."""
+    import threading
+    import time
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os.killpg(0, signal.SIGKILL)
+
+    threading.Thread(target=watch, name="follow-parent", daemon=True).start()
+
+
+def _cap_address_space(limit_mb: float) -> None:
+    """Cap the address space at its size now (the FMU loaded) plus twice ``limit_mb`` and 64 MB.
+
+    A huge allocation fails at once; a slow leak still meets the sampled resident-memory check
+    first, whose message says what happened (address space is not all resident, hence the slack).
+    """
+    import resource
+
+    now = _vm_bytes(os.getpid())
+    if now <= 0:
+        return
+    cap = now + int((2 * limit_mb + 64) * 2**20)
+    _, hard = resource.getrlimit(resource.RLIMIT_AS)
+    if hard != resource.RLIM_INFINITY:
+        cap = min(cap, hard)
+    resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+
+
+def _vm_bytes(pid: int) -> int:
+    """Virtual memory size of process ``pid`` (Linux /proc)."""
+    try:
+        with open(f"/proc/{pid}/statm") as statm:
+            return int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, IndexError, ValueError):
+        return 0
 
 
 def _rss_bytes(pid: int) -> int:

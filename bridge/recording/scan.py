@@ -18,6 +18,7 @@ import io
 import logging
 import os
 import struct
+import time
 import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -37,22 +38,28 @@ class RecordingError(BridgeError):
 
 @dataclass(frozen=True)
 class Limits:
-    """What one read may take.
+    """What one read may take, whatever the file's size.
+
+    A chunk compressed more than ``chunk_ratio`` to one is skipped unread (recordings compress
+    tens to one; a megabyte of file declaring gigabytes of tiny messages is a bomb); the whole
+    read stops with a RecordingError past ``inflate_bytes`` decompressed, ``messages`` messages or
+    ``time_s`` seconds.
 
     Args:
         record_bytes: the largest record read into memory (a chunk, an attachment).
         chunk_bytes: the largest declared uncompressed chunk size accepted.
-        inflate_floor: decompressed bytes always allowed in total.
-        inflate_ratio: beyond the floor, decompressed bytes allowed per byte of file.
+        chunk_ratio: the largest declared uncompressed size per compressed byte of a chunk.
+        inflate_bytes: decompressed bytes allowed in total.
+        messages: messages allowed in total.
+        time_s: seconds one read may take.
     """
 
     record_bytes: int = 256 * _MIB
     chunk_bytes: int = 32 * _MIB
-    inflate_floor: int = 64 * _MIB
-    inflate_ratio: int = 200
-
-    def inflate_budget(self, file_size: int) -> int:
-        return max(self.inflate_floor, self.inflate_ratio * file_size)
+    chunk_ratio: int = 1000
+    inflate_bytes: int = 2048 * _MIB
+    messages: int = 20_000_000
+    time_s: float = 120.0
 
 
 @dataclass(frozen=True)
@@ -195,6 +202,8 @@ class Scan:
         self.problem_count = 0
         self.skipped_chunks = 0
         self._inflated = 0
+        self._messages = 0
+        self._deadline = time.monotonic() + self.limits.time_s
 
     def problem(self, text: str) -> None:
         self.problem_count += 1
@@ -218,7 +227,13 @@ class Scan:
                     f"not an MCAP file: it {what}{cut}, an MCAP file starts with "
                     f"{rec.MAGIC.hex(' ')} [{self.path}]"
                 )
-            yield from self._body(stream, size)
+            try:
+                yield from self._body(stream, size)
+            except MemoryError:
+                raise RecordingError(
+                    f"reading ran out of memory after {self._messages:,} messages and {self._inflated:,} "
+                    f"decompressed bytes; read a smaller recording or free memory [{self.path}]"
+                ) from None
 
     def _body(self, stream: io.BufferedReader, size: int) -> Iterator[Record]:
         data_crc = zlib.crc32(rec.MAGIC)
@@ -253,8 +268,10 @@ class Scan:
             else:
                 summary_crc = zlib.crc32(content, zlib.crc32(prefix, summary_crc))
             if opcode == rec.CHUNK:
-                yield from self._chunk(content, pos, size)
+                yield from self._chunk(content, pos)
             elif opcode != rec.DATA_END and (summary_crc is None or opcode in (rec.SCHEMA, rec.CHANNEL)):
+                if opcode == rec.MESSAGE:
+                    self._count_message()
                 yield from self._one(opcode, content, pos)
             pos += len(prefix) + length
 
@@ -299,8 +316,8 @@ class Scan:
             return
         self.complete = True
 
-    def _chunk(self, content: bytes, pos: int, file_size: int) -> Iterator[Record]:
-        records = self._expand(content, pos, file_size)
+    def _chunk(self, content: bytes, pos: int) -> Iterator[Record]:
+        records = self._expand(content, pos)
         if records is None:
             self.skipped_chunks += 1
             return
@@ -318,10 +335,32 @@ class Scan:
                     f"{length} bytes); skipped the rest of the chunk"
                 )
                 return
+            if opcode == rec.MESSAGE:
+                self._count_message()
             yield from self._one(opcode, inner[at : at + length], pos)
             at += length
 
-    def _expand(self, content: bytes, pos: int, file_size: int) -> bytes | None:
+    def _count_message(self) -> None:
+        self._messages += 1
+        if self._messages > self.limits.messages:
+            self._over(f"holds more than {self.limits.messages:,} messages")
+        if not self._messages & 0xFFFF:
+            self._check_time()
+
+    def _check_time(self) -> None:
+        if time.monotonic() > self._deadline:
+            self._over(
+                f"took longer than {self.limits.time_s:g} s to read ({self._messages:,} messages so far)"
+            )
+
+    def _over(self, what: str) -> None:
+        raise RecordingError(
+            f"the recording {what}: beyond this read's budget ({self.limits.messages:,} messages, "
+            f"{self.limits.inflate_bytes:,} decompressed bytes, {self.limits.time_s:g} s); a bomb, or a "
+            f"recording to read with larger bridge.recording.scan.Limits [{self.path}]"
+        )
+
+    def _expand(self, content: bytes, pos: int) -> bytes | None:
         """The chunk's records, decompressed within the limits and CRC-checked; None if unusable."""
         try:
             f = _Fields(content)
@@ -331,14 +370,16 @@ class Scan:
         except _Corrupt as exc:
             self.problem(f"skipped the corrupt chunk at byte {pos}: {exc}")
             return None
-        budget = self.limits.inflate_budget(file_size) - self._inflated
-        if declared > min(self.limits.chunk_bytes, budget):
+        self._check_time()
+        if declared > self.limits.chunk_bytes or declared > self.limits.chunk_ratio * max(len(data), 1):
             self.problem(
-                f"skipped the chunk at byte {pos}: it declares {declared} uncompressed bytes, the limit is "
-                f"{min(self.limits.chunk_bytes, budget)} (chunk limit {self.limits.chunk_bytes}, "
-                f"decompression budget left {budget}): corrupt, or a decompression bomb"
+                f"skipped the chunk at byte {pos}: it declares {declared} uncompressed bytes in "
+                f"{len(data)} (limits: {self.limits.chunk_bytes} bytes, {self.limits.chunk_ratio} to one): "
+                "corrupt, or a decompression bomb"
             )
             return None
+        if self._inflated + declared > self.limits.inflate_bytes:
+            self._over(f"decompresses to more than {self.limits.inflate_bytes:,} bytes")
         self._inflated += declared
         try:
             records = _decompress(compression, data, declared)

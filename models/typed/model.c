@@ -4,6 +4,9 @@
 
 #include <stdlib.h>
 #include <string.h>
+#ifndef _WIN32
+#include <unistd.h>
+#endif
 
 static bool copy_string(char** dst, const char* src) {
     char* copy = malloc(strlen(src) + 1);
@@ -37,6 +40,11 @@ FmuStatus model_initialize(FmuInstance* inst) {
     d->counter = 0;
     d->real_integral = 0.0;
     d->double_gain = 2.0 * d->gain;
+    if (d->real_param > d->init_fails_above) {
+        fmu_log_error(inst, "typed: real_param = %g is above init_fails_above = %g: initialisation refused (test hook)",
+                      d->real_param, d->init_fails_above);
+        return FMU_ERROR;
+    }
     if (!copy_inputs_to_outputs(d)) {
         fmu_log_error(inst, "typed: out of memory while copying string_in");
         return FMU_FATAL;
@@ -71,6 +79,19 @@ static void misbehave(int kind) {
             memset(leak, 1, 1u << 20); /* touched, so it counts as resident memory */
             leaked = leak;
         }
+    } else if (kind == 4) {
+#ifndef _WIN32
+        (void)fork(); /* parent and child both loop: a deadline must stop the pair */
+#endif
+        misbehave(1);
+    } else if (kind == 5) {
+        const size_t size = (size_t)4 << 30;
+        char* huge = malloc(size);
+        if (huge == NULL) abort(); /* what most code does with a failed allocation, one way or another */
+        memset(huge, 1, size);
+        leaked = huge;
+    } else if (kind == 6) {
+        exit(0); /* a model that ends the process it runs in */
     }
 }
 

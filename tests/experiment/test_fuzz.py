@@ -21,7 +21,6 @@ from typing import Any
 
 import pytest
 import yaml
-from reliability_table import counts_dir
 from typer.testing import CliRunner
 
 from bridge.cli.main import app
@@ -31,6 +30,7 @@ from bridge.experiment.examples import example_experiment, example_names
 from bridge.experiment.validate import check_experiment
 from bridge.fmu.vocab import ModelInfo
 from tests.conftest import check_with_model
+from tests.reliability_table import counts_dir
 
 MUTANTS_PER_EXAMPLE = 1000
 CLI_SAMPLE = 5  # accepted and as many rejected mutants per example also go through `fmu-bridge check`

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-from reliability_table import counts_dir
 from rosbags.typesys import Stores, get_typestore
 
 from bridge.env import RemoteFmuEnv
@@ -32,6 +31,7 @@ from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
 from tests.conftest import Loopback, _wait_for_node
+from tests.reliability_table import counts_dir
 
 pytestmark = pytest.mark.integration
 SEED = 20260412

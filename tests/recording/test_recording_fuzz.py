@@ -25,7 +25,6 @@ from pathlib import Path
 
 import pytest
 import zstandard
-from reliability_table import counts_dir
 from typer.testing import CliRunner
 
 from bridge.cli.main import _load_plugins, app
@@ -40,6 +39,7 @@ from bridge.recording.export import describe, export_csv
 from bridge.recording.reader import read_recording, recover_file
 from bridge.recording.writer import McapWriter
 from tests.conftest import Loopback, node_process
+from tests.reliability_table import counts_dir
 
 ROOT = Path(__file__).resolve().parents[2]
 COUNTS = counts_dir() / "recording_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
