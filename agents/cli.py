@@ -111,6 +111,13 @@ def agent_run_cmd(
     runtime: Annotated[
         str, typer.Option(help="torch (stable-baselines3) or onnx (onnxruntime, no torch needed).")
     ] = "torch",
+    managed: Annotated[
+        bool,
+        typer.Option(
+            "--managed/--unmanaged",
+            help="rclpy: a lifecycle node that acts only once configured and activated (docs/ros2.md).",
+        ),
+    ] = False,
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
     import signal
@@ -134,10 +141,21 @@ def agent_run_cmd(
     mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
     options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
     console.print(f"agent deploys {deployed_checkpoint(model, runtime)}", highlight=False)
-    agent = AgentNode(model, config, settings, options)
+    agent: Any
+    if managed:
+        from agents.deploy_lifecycle import ManagedAgent
+        from bridge.errors import ConfigError
+
+        if transport != "rclpy":
+            raise ConfigError("--managed is a ROS 2 lifecycle node: use it with --transport rclpy")
+        agent = ManagedAgent(model, config, settings)
+        what = f"managed agent {agent.ros.fully_qualified_name} (unconfigured: configure, then activate it)"
+    else:
+        agent = AgentNode(model, config, settings, options)
+        what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    console.print(f"agent {model} acting on {node!r} over {transport} ({runtime}); Ctrl-C stops it")
+    console.print(f"{what}; Ctrl-C stops it", highlight=False)
     try:
         stats = agent.run(duration_s, stop)
     finally:

@@ -163,7 +163,7 @@ class Command:
     def wait_for(self, text: str, timeout_s: float = 60.0) -> None:
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
-            if text in self.output:
+            if text in " ".join(self.output.split()):  # rich wraps long lines
                 return
             if self.process.poll() is not None:
                 self._reader.join(5)
