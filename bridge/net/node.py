@@ -179,6 +179,7 @@ class FmuNode:
                 on_actions=self._ros_actions,
                 on_reset=self._ros_reset,
                 realtime=self.mode == "realtime",
+                follower=self._clock_follower(self._ros_settings),
             )
         if self.mode == "realtime":
             # A real-time node runs from the start with the experiment's nominal values.
@@ -535,12 +536,36 @@ class FmuNode:
             self.counters["ros_rejected_unhealthy"] += 1
             return
         try:
-            if self.mode == "realtime":
-                self._latest_inputs = merged
+            if self.mode == "realtime" or self._ros_follows_clock:
+                self._latest_inputs = merged  # held: time (the wall's, or /clock) steps the FMU
             elif not self._ended:
                 self._advance(merged)
         finally:
             self._lock.release()
+
+    @property
+    def _ros_follows_clock(self) -> bool:
+        return self._ros_settings is not None and self._ros_settings.follow_clock
+
+    def _clock_follower(self, settings: RosViewSettings) -> Any:
+        """With ``ros.follow_clock``: steps on another simulator's /clock (bridge.net.ros2.clock)."""
+        if not settings.follow_clock:
+            return None
+        from bridge.net.ros2.clock import ClockFollower
+
+        def start() -> int:
+            model = self.experiment.model
+            self.reset({**model.parameters, **model.start_values}, None, self.episode + 1)
+            return round(self.plant.time_s * 1e9)
+
+        def step() -> int | None:
+            with self._lock:
+                if self._ended:
+                    return None
+                self._advance(self._latest_inputs or self._held_inputs)
+                return round(self.plant.time_s * 1e9)
+
+        return ClockFollower(round(self.timing.sampling_time_s * 1e9), start, step)
 
     def _ros_reset(self) -> tuple[bool, str]:
         model = self.experiment.model
