@@ -21,6 +21,7 @@ def register(app: typer.Typer) -> None:
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
     )
     agent_app.command("run")(agent_run_cmd)
+    agent_app.command("check")(agent_check_cmd)
     # `fmu-bridge export` is the recordings' CSV/Parquet export: agents export under `agent`.
     export_app = typer.Typer(help="Export a trained run: ONNX graph or policy FMU.", no_args_is_help=True)
     export_app.command("onnx")(export_onnx_cmd)
@@ -180,6 +181,42 @@ def _leave_now() -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
+
+
+def agent_check_cmd(
+    run: Annotated[Path, typer.Argument(help="A run directory (or model .zip) from `fmu-bridge train`.")],
+    recording: Annotated[
+        Path, typer.Option("--recording", help="An evaluation recording (.mcap) to replay.")
+    ],
+    config: Annotated[
+        Path | None, typer.Option("--config", help="The experiment the deployment uses (default: the run's).")
+    ] = None,
+    runtime: Annotated[str, typer.Option(help="torch, onnx or fmu (the exported policy FMU).")] = "torch",
+    tolerance: Annotated[float, typer.Option(help="The largest action difference that passes.")] = 1e-6,
+) -> None:
+    """Replay a recording through the deployed runtime: action differences, latency, mapping mismatches.
+
+    Exits 1 when an action differs by more than --tolerance or the mapping (joint names, order,
+    scale, offset) differs from the trained one."""
+    from agents.check import check_deployment
+
+    report = check_deployment(run, recording, config=config, runtime=runtime, tolerance=tolerance)
+    table = Table(title=f"agent check: {run} ({runtime}) against {recording}")
+    table.add_column("check")
+    table.add_column("result")
+    table.add_row("samples replayed", f"{report.samples} ({report.compared} with a recorded action)")
+    largest = f"{report.max_action_difference:.3g} (tolerance {tolerance:g})"
+    table.add_row("largest action difference", largest)
+    table.add_row("samples over tolerance", str(report.differing))
+    for name, value in report.latency_us.items():
+        table.add_row(f"inference latency {name}", f"{value:.0f} us")
+    for problem in report.mapping:
+        table.add_row("[bold red]mapping[/bold red]", problem)
+    console.print(table)
+    if not report.ok:
+        console.print("[bold red]check failed[/bold red]: the deployment does not act as recorded")
+        raise typer.Exit(1)
+    console.print("check passed: the deployment acts as recorded")
 
 
 def agent_settings(
