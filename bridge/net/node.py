@@ -540,6 +540,8 @@ class FmuNode:
                 self._latest_inputs = merged  # held: time (the wall's, or /clock) steps the FMU
             elif not self._ended:
                 self._advance(merged)
+            else:  # lockstep after the episode ended: no step, but not silently
+                self.counters["ros_ignored_episode_ended"] += 1
         finally:
             self._lock.release()
 
