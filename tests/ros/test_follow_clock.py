@@ -3,10 +3,13 @@ plain-rclpy clock publisher at 1x (ticks finer than the step), 10x (coarser) and
 
 from __future__ import annotations
 
+import pytest
+
 from bridge.experiment.examples import example_experiment
 from tests.conftest import Loopback
 from tests.ros.conftest import Probe, command
 
+pytestmark = [pytest.mark.ros, pytest.mark.integration]
 CARTPOLE = example_experiment("cartpole_balance")
 STEP_NS = 20_000_000  # the experiment's sampling time
 CLOCK = "rosgraph_msgs/msg/Clock"

@@ -10,7 +10,12 @@ import pytest
 
 from tests.ros.conftest import Probe, command
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # the balancer trains for minutes
+pytestmark = [
+    pytest.mark.ros,
+    pytest.mark.integration,
+    pytest.mark.slow,
+    pytest.mark.timeout(1800),
+]  # the balancer trains for minutes
 JOINT_STATE = "sensor_msgs/msg/JointState"
 NAMES = ["x", "x_dot", "theta", "theta_dot"]
 

@@ -13,6 +13,7 @@ from bridge.experiment.examples import example_experiment
 from tests.conftest import Loopback
 from tests.ros.conftest import Probe, command
 
+pytestmark = [pytest.mark.ros, pytest.mark.integration]
 CARTPOLE = example_experiment("cartpole_balance")
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
 HASHES = {  # REP-2011 type hashes of Jazzy's interfaces
