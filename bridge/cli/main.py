@@ -398,6 +398,12 @@ def node(
             )
             sys.stderr.flush()
             os._exit(3)
+        if view is not None and view.backend == "rclpy":
+            # all closed; rclpy's and Fast DDS's unloading at interpreter exit can take longer than
+            # the second a stopped node has on a busy machine
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
 
 
 @app.command()

@@ -62,11 +62,14 @@ class Probe:
     """The plain-rclpy process: ``ask(op, **fields)`` sends a command and returns its answer."""
 
     def __init__(self, env: dict[str, str]) -> None:
+        import tempfile
+
+        self.log = tempfile.TemporaryFile(mode="w+")  # noqa: SIM115  # closed in close()
         self.process = subprocess.Popen(
             [sys.executable, str(PROBE)],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
+            stderr=self.log,  # a file: a pipe nobody reads would block the probe once full
             text=True,
             env=env,
         )
@@ -82,8 +85,9 @@ class Probe:
         reader.join(timeout_s)
         if not result or not result[0]:
             self.process.kill()
-            _, err = self.process.communicate(timeout=5)
-            pytest.fail(f"the rclpy probe did not answer within {timeout_s} s:\n{err}")
+            self.process.wait(timeout=5)
+            self.log.seek(0)
+            pytest.fail(f"the rclpy probe did not answer within {timeout_s} s:\n{self.log.read()[-3000:]}")
         return json.loads(result[0])
 
     def ask(self, op: str, timeout_s: float = 60.0, **fields: Any) -> Any:
@@ -117,9 +121,10 @@ class Probe:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait(timeout=5)
-        for stream in (self.process.stdin, self.process.stdout, self.process.stderr):
+        for stream in (self.process.stdin, self.process.stdout):
             if stream is not None:
                 stream.close()
+        self.log.close()
 
 
 @pytest.fixture
