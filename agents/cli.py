@@ -22,6 +22,7 @@ def register(app: typer.Typer) -> None:
         help="Trained agents: run a policy as a node, export it (ONNX, policy FMU).", no_args_is_help=True
     )
     agent_app.command("run")(agent_run_cmd)
+    agent_app.command("check")(agent_check_cmd)
     # `fmu-bridge export` is the recordings' CSV/Parquet export: agents export under `agent`.
     export_app = typer.Typer(help="Export a trained run: ONNX graph or policy FMU.", no_args_is_help=True)
     export_app.command("onnx")(export_onnx_cmd)
@@ -157,6 +158,13 @@ def agent_run_cmd(
             "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
         ),
     ] = "torch",
+    managed: Annotated[
+        bool,
+        typer.Option(
+            "--managed/--unmanaged",
+            help="rclpy: a lifecycle node that acts only once configured and activated (docs/ros2.md).",
+        ),
+    ] = False,
 ) -> None:
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
     import signal
@@ -180,10 +188,21 @@ def agent_run_cmd(
     mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
     options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
     console.print(f"agent deploys {deployed_checkpoint(model, runtime)}", highlight=False)
-    agent = AgentNode(model, config, settings, options)
+    agent: Any
+    if managed:
+        from agents.deploy_lifecycle import ManagedAgent
+        from bridge.errors import ConfigError
+
+        if transport != "rclpy":
+            raise ConfigError("--managed is a ROS 2 lifecycle node: use it with --transport rclpy")
+        agent = ManagedAgent(model, config, settings)
+        what = f"managed agent {agent.ros.fully_qualified_name} (unconfigured: configure, then activate it)"
+    else:
+        agent = AgentNode(model, config, settings, options)
+        what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    console.print(f"agent {model} acting on {node!r} over {transport} ({runtime}); Ctrl-C stops it")
+    console.print(f"{what}; Ctrl-C stops it", highlight=False)
     try:
         stats = agent.run(duration_s, stop)
     finally:
@@ -208,6 +227,42 @@ def _leave_now() -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(0)
+
+
+def agent_check_cmd(
+    run: Annotated[Path, typer.Argument(help="A run directory (or model .zip) from `fmu-bridge train`.")],
+    recording: Annotated[
+        Path, typer.Option("--recording", help="An evaluation recording (.mcap) to replay.")
+    ],
+    config: Annotated[
+        Path | None, typer.Option("--config", help="The experiment the deployment uses (default: the run's).")
+    ] = None,
+    runtime: Annotated[str, typer.Option(help="torch, onnx or fmu (the exported policy FMU).")] = "torch",
+    tolerance: Annotated[float, typer.Option(help="The largest action difference that passes.")] = 1e-6,
+) -> None:
+    """Replay a recording through the deployed runtime: action differences, latency, mapping mismatches.
+
+    Exits 1 when an action differs by more than --tolerance or the mapping (joint names, order,
+    scale, offset) differs from the trained one."""
+    from agents.check import check_deployment
+
+    report = check_deployment(run, recording, config=config, runtime=runtime, tolerance=tolerance)
+    table = Table(title=f"agent check: {run} ({runtime}) against {recording}")
+    table.add_column("check")
+    table.add_column("result")
+    table.add_row("samples replayed", f"{report.samples} ({report.compared} with a recorded action)")
+    largest = f"{report.max_action_difference:.3g} (tolerance {tolerance:g})"
+    table.add_row("largest action difference", largest)
+    table.add_row("samples over tolerance", str(report.differing))
+    for name, value in report.latency_us.items():
+        table.add_row(f"inference latency {name}", f"{value:.0f} us")
+    for problem in report.mapping:
+        table.add_row("[bold red]mapping[/bold red]", problem)
+    console.print(table)
+    if not report.ok:
+        console.print("[bold red]check failed[/bold red]: the deployment does not act as recorded")
+        raise typer.Exit(1)
+    console.print("check passed: the deployment acts as recorded")
 
 
 def agent_settings(

@@ -307,6 +307,13 @@ def node(
         str | None, typer.Option(help="zenoh (rmw_zenoh wire, no ROS install) or rclpy.")
     ] = None,
     ros_domain: Annotated[int | None, typer.Option(help="ROS_DOMAIN_ID for the ROS view.")] = None,
+    follow_clock: Annotated[
+        bool,
+        typer.Option(
+            "--follow-clock",
+            help="Step the FMU on another simulator's ROS /clock (use_sim_time; see docs/ros2.md).",
+        ),
+    ] = False,
     isolate: Annotated[
         bool,
         typer.Option(
@@ -337,12 +344,15 @@ def node(
     rate, prefix = defaults.rate if rate is None else rate, prefix or defaults.prefix
     network = network or defaults.network
     view = None
-    if ros or ros_backend:
+    if follow_clock:
+        mode = "lockstep"  # no wall-clock thread: /clock ticks step the FMU
+    if ros or ros_backend or follow_clock:
         from bridge.net.ros2.args import current
         from bridge.net.ros2.view import settings_from
 
         section = loaded.ros.model_dump(exclude_unset=True)
         section.update({"domain_id": ros_domain} if ros_domain is not None else {})
+        section.update({"follow_clock": True} if follow_clock else {})
         section = current().apply(section)
         view = settings_from(section, backend=ros_backend)
     server = FmuNode(
@@ -375,6 +385,12 @@ def node(
             )
             sys.stderr.flush()
             os._exit(3)
+        if view is not None and view.backend == "rclpy":
+            # all closed; rclpy's and Fast DDS's unloading at interpreter exit can take longer than
+            # the second a stopped node has on a busy machine
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(0)
 
 
 @app.command()

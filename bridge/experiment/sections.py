@@ -210,3 +210,4 @@ class RosSection(Strict):
     reliability: Literal["reliable", "best_effort"] = "reliable"
     depth: Annotated[int, Field(ge=1, le=10_000)] = 10
     backend: Literal["zenoh", "rclpy"] = "zenoh"
+    follow_clock: bool = False  # step on an external /clock (use_sim_time); see docs/ros2.md

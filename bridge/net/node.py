@@ -118,6 +118,7 @@ class FmuNode:
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
+        self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
         self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
@@ -339,18 +340,34 @@ class FmuNode:
         return self._latest_inputs or self._held_inputs
 
     def apply(self, inputs: list[float]) -> bool:
-        """Anonymous inputs (the ROS view): held in real time, one step in lockstep; False when
-        the node is unhealthy or busy."""
+        """Anonymous inputs (the ROS view): held in real time or when following a clock (time
+        steps the FMU), one step in lockstep; False when the node is unhealthy or busy."""
         if self.health.is_hung or not self._lock.acquire(timeout=self.step_timeout_s):
             return False
         try:
-            if self._driver is not None:
+            if self._driver is not None or self.follows_clock:
                 self._latest_inputs = inputs
             elif not self.lockstep.ended:
                 self._advance(inputs, (0, b""))
+            else:  # lockstep after the episode ended: no step, but not silently
+                self.counters["ros_ignored_episode_ended"] += 1
         finally:
             self._lock.release()
         return True
+
+    def clock_step(self) -> int | None:
+        """One sample on an external clock's tick (``--follow-clock``) with the latest inputs held:
+        the FMU time reached in ns, or None when the episode is over."""
+        with self._lock:
+            if self.lockstep.ended:
+                return None
+            self._advance(self.current_inputs(), (0, b""))
+            return round(self.plant.time_s * 1e9)
+
+    def clock_start(self) -> int:
+        """A new episode with the nominal values for an external clock: its start time in ns."""
+        self.reset(dict(self.served.nominal), None, self.lockstep.episode + 1)
+        return round(self.plant.time_s * 1e9)
 
     def _tick(self) -> bool:
         """One real-time sample with the latest action held; False when the episode is over."""

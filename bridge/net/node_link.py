@@ -74,6 +74,7 @@ class NodeLink:
             on_actions=lambda values: ros_actions(node, values),
             on_reset=lambda: ros_reset(node),
             realtime=node.mode == "realtime",
+            follower=clock_follower(node, settings),
         )
 
     def _on_action(self, sample: Any) -> None:
@@ -170,3 +171,13 @@ def ros_reset(node: FmuNode) -> tuple[bool, str]:
     except BridgeError as exc:
         return False, redact(f"reset failed: {exc}")
     return True, f"reset to t0 (episode {node.lockstep.episode})"
+
+
+def clock_follower(node: FmuNode, settings: RosViewSettings) -> Any:
+    """With ``ros.follow_clock``: the node steps on another simulator's /clock
+    (:mod:`bridge.net.ros2.clock`); None otherwise."""
+    if not settings.follow_clock:
+        return None
+    from bridge.net.ros2.clock import ClockFollower
+
+    return ClockFollower(round(node.timing.sampling_time_s * 1e9), node.clock_start, node.clock_step)

@@ -15,7 +15,12 @@ from bridge.experiment.examples import example_experiment
 from tests.conftest import Loopback
 from tests.ros.conftest import Command, Probe, command
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(1800)]  # the balancer trains for minutes
+pytestmark = [
+    pytest.mark.ros,
+    pytest.mark.integration,
+    pytest.mark.slow,
+    pytest.mark.timeout(1800),
+]  # the balancer trains for minutes
 CARTPOLE = example_experiment("cartpole_balance")
 JOINT_STATE = "sensor_msgs/msg/JointState"
 THETA_LIMIT = 0.20944

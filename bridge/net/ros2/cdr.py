@@ -251,6 +251,15 @@ def decode_joint_state(data: bytes | memoryview) -> JointState:
     return JointState(sec * 1_000_000_000 + nanosec, frame_id, names, position, velocity, effort)
 
 
+def decode_clock(data: bytes | memoryview) -> int:
+    """The time of a ``rosgraph_msgs/msg/Clock`` payload, in ns."""
+    raw = bytes(data)
+    if len(raw) < 12:
+        raise ValueError(f"a Clock message has 12 bytes, got {len(raw)}")
+    sec, nanosec = struct.unpack_from("<iI", raw, 4)
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
 def decode_float64(data: bytes | memoryview) -> float:
     return float(_Reader(data, FLOAT64).take("<d", 8)[0])
 

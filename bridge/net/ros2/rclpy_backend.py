@@ -94,6 +94,27 @@ class _Publisher:
         self._publisher.publish(payload)  # rclpy publishes bytes as an already serialized message
 
 
+def open_context(domain_id: int | None) -> Any:
+    """An initialised rclpy context of its own, in ``domain_id`` (``None``: ``ROS_DOMAIN_ID``)."""
+    rclpy = _import_rclpy()
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    context = Context()
+    try:
+        # args=[]: fmu-bridge applies --ros-args itself (bridge.net.ros2.args), identically on
+        # both backends; no signal handlers: the command owns Ctrl-C and SIGTERM.
+        rclpy.init(
+            args=[], context=context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO
+        )
+    except Exception as exc:  # RCLError: an unknown RMW_IMPLEMENTATION, a bad domain, ...
+        raise ConfigError(
+            f"rclpy could not start ({exc}); check RMW_IMPLEMENTATION (rmw_fastrtps_cpp is the "
+            "one installed with fmu-bridge[ros]) and ROS_DOMAIN_ID (0-101 with Fast DDS)"
+        ) from None
+    return context
+
+
 class RclpyNode:
     """A real rclpy node in its own context, spun on its own executor thread; ``close()`` ends it.
 
@@ -102,6 +123,8 @@ class RclpyNode:
         namespace: the node's namespace.
         domain_id: the ROS domain; ``None`` reads ``ROS_DOMAIN_ID`` (0 when unset).
         use_sim_time: the node's clock follows ``/clock`` (the ``use_sim_time`` parameter).
+        node_class: the rclpy node class (default ``rclpy.node.Node``; a ``LifecycleNode`` subclass).
+        parameters: ROS parameter overrides (``--ros-args -p`` values meant for the node).
     """
 
     def __init__(
@@ -111,35 +134,27 @@ class RclpyNode:
         *,
         domain_id: int | None = None,
         use_sim_time: bool = False,
+        node_class: Any = None,
+        parameters: dict[str, Any] | None = None,
     ) -> None:
         rclpy = _import_rclpy()
-        from rclpy.context import Context
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.signals import SignalHandlerOptions
-
-        self.context = Context()
-        try:
-            # args=[]: fmu-bridge applies --ros-args itself (bridge.net.ros2.args), identically on
-            # both backends; no signal handlers: the command owns Ctrl-C and SIGTERM.
-            rclpy.init(
-                args=[],
-                context=self.context,
-                domain_id=domain_id,
-                signal_handler_options=SignalHandlerOptions.NO,
-            )
-        except Exception as exc:  # RCLError: an unknown RMW_IMPLEMENTATION, a bad domain, ...
-            raise ConfigError(
-                f"rclpy could not start ({exc}); check RMW_IMPLEMENTATION (rmw_fastrtps_cpp is the "
-                "one installed with fmu-bridge[ros]) and ROS_DOMAIN_ID (0-101 with Fast DDS)"
-            ) from None
-        self.domain_id = self.context.get_domain_id()
         from rclpy.parameter import Parameter
 
-        overrides = [Parameter("use_sim_time", Parameter.Type.BOOL, True)] if use_sim_time else []
+        self.context = open_context(domain_id)
+        self.domain_id = self.context.get_domain_id()
+        overrides = [Parameter(k, value=v) for k, v in (parameters or {}).items()]
+        if use_sim_time:
+            overrides.append(Parameter("use_sim_time", Parameter.Type.BOOL, True))
         try:
-            self.node = rclpy.create_node(
-                name, namespace=namespace, context=self.context, parameter_overrides=overrides
-            )
+            if node_class is None:
+                self.node = rclpy.create_node(
+                    name, namespace=namespace, context=self.context, parameter_overrides=overrides
+                )
+            else:  # a LifecycleNode subclass, say
+                self.node = node_class(
+                    name, namespace=namespace, context=self.context, parameter_overrides=overrides
+                )
         except Exception as exc:  # invalid names: InvalidNodeNameException, InvalidNamespaceException
             self.context.try_shutdown()
             raise ConfigError(f"ROS node {name!r} in {namespace!r}: {exc}") from None

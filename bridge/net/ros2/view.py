@@ -27,6 +27,7 @@ from typing import Any
 from bridge.errors import ConfigError
 from bridge.experiment.sections import RosSection
 from bridge.net.ros2 import cdr
+from bridge.net.ros2.clock import ClockFollower
 
 RosViewSettings = RosSection  # the ``ros:`` section of an experiment
 
@@ -57,7 +58,9 @@ def open_backend_node(session: Any, settings: RosViewSettings, name: str) -> Any
     if settings.backend == "rclpy":
         from bridge.net.ros2.rclpy_backend import RclpyNode
 
-        return RclpyNode(name, settings.namespace, domain_id=settings.domain_id)
+        return RclpyNode(
+            name, settings.namespace, domain_id=settings.domain_id, use_sim_time=settings.follow_clock
+        )
     if session is None:
         raise ConfigError("the zenoh ROS backend needs a Zenoh session; use the rclpy backend without one")
     from bridge.net.ros2 import RosContext
@@ -93,6 +96,7 @@ class RosView:
         on_actions: Callable[[dict[str, float]], None],
         on_reset: Callable[[], tuple[bool, str]],
         realtime: bool,
+        follower: ClockFollower | None = None,
     ) -> None:
         self.settings = settings
         self._output_names, self._input_names = tuple(output_names), tuple(input_names)
@@ -116,11 +120,14 @@ class RosView:
                 settings.actions_topic, "sensor_msgs/msg/JointState", self._actions, qos
             )
         self.node.create_service(settings.reset_service, "std_srvs/srv/Trigger", self._reset)
+        self.follower = follower
         self._clock = (
             self.node.create_publisher("/clock", "rosgraph_msgs/msg/Clock", qos)
-            if (realtime and settings.clock)
+            if (realtime and settings.clock and follower is None)
             else None
         )
+        if follower is not None:  # another simulator's clock drives this node (bridge.net.ros2.clock)
+            self.node.create_subscription("/clock", "rosgraph_msgs/msg/Clock", self._on_clock, qos)
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
@@ -148,8 +155,24 @@ class RosView:
 
             self.node.create_subscription(f"~/in/{name_token(name)}", "std_msgs/msg/Float64", on_value, qos)
 
+    def _on_clock(self, payload: bytes, info: Any) -> None:
+        try:
+            clock_ns = cdr.decode_clock(payload)
+        except ValueError as exc:
+            self.dropped += 1
+            _log.warning("/clock: dropped a message that is not a Clock: %s", exc)
+            return
+        try:
+            if self.follower is not None:
+                self.follower.tick(clock_ns)
+        except Exception:  # never let a subscription handler die
+            _log.exception("/clock: could not follow the tick at %d ns", clock_ns)
+
     def publish(self, sim_time_ns: int, outputs: Sequence[float]) -> None:
         """One sample: the bundled outputs, per-variable values, the clock."""
+        follower = self.follower
+        if follower is not None and follower.origin_ns is not None:  # stamped in the clock's time
+            sim_time_ns += follower.origin_ns - follower.t0_ns
         self._outputs.publish(self._layout.pack(sim_time_ns, outputs))
         for publisher, value in zip(self._per_variable, outputs):
             publisher.publish(cdr.encode_float64(float(value)))
@@ -192,6 +215,8 @@ class RosView:
         except Exception as exc:  # never let a service handler die
             _log.exception("ROS reset failed")
             success, message = False, f"reset failed ({type(exc).__name__})"
+        if success and self.follower is not None:
+            self.follower.restart()  # lined up with the clock again at its next tick
 
         return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
 

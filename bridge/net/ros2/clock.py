@@ -1,0 +1,115 @@
+"""Following an external ``/clock``: ``fmu-bridge node --follow-clock``.
+
+Another simulator (Gazebo, Isaac Sim, a bag being played with ``--clock``) owns time; the FMU
+node is a ``use_sim_time`` participant that steps its FMU so that the FMU's time keeps up with the
+clock. The policy, one ``tick(clock_ns)`` at a time:
+
+- **First tick**: the FMU is reset to its start (the experiment's nominal values) and its start
+  time is lined up with the clock's time at that tick (the *origin*): the FMU's time ``t`` is
+  clock time ``origin + t - t0``, and the outputs are stamped in clock time.
+- **Ticks coarser than the node's step** (10x a 20 ms step, say): the node steps as many times as
+  fit, publishing each sample, so after the tick the FMU's time is the clock's within one step
+  (``clock - step < fmu <= clock``).
+- **Ticks finer than the step**: no step until the clock reaches the next step boundary: the FMU
+  never runs ahead of the clock.
+- **A jump backwards** (the simulator was reset, a bag looped): the FMU is reset to its start and
+  lined up with the clock again (a new episode); counted in ``jumps_back``.
+- **A jump forwards by more than** ``max_catch_up`` steps: the FMU does not try to simulate the
+  gap in one tick; it is lined up with the clock again where it is (counted in ``skipped``).
+- **An ended episode** (the FMU terminated or failed): no more steps until a reset (``~/reset``
+  or a jump back).
+
+The node's step is its sampling time (``model.sampling_time``), one or more FMU steps.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+
+_log = logging.getLogger(__name__)
+TOLERANCE_NS = 1_000  # rounding of FMU times to ns: a step due at exactly the clock's time is taken
+
+
+class ClockFollower:
+    """Steps a plant on clock ticks.
+
+    Args:
+        step_ns: the node's step (sampling time) in ns.
+        start: resets the plant to its start; returns its time in ns.
+        step: one step with the held inputs; returns the new time in ns, or ``None`` when the
+            episode has ended (terminated or failed).
+        max_catch_up: the most steps one tick may take.
+    """
+
+    def __init__(
+        self,
+        step_ns: int,
+        start: Callable[[], int],
+        step: Callable[[], int | None],
+        *,
+        max_catch_up: int = 10_000,
+    ) -> None:
+        if step_ns <= 0:
+            raise ValueError(f"step_ns must be > 0, got {step_ns}")
+        self.step_ns, self._start, self._step = step_ns, start, step
+        self.max_catch_up = max_catch_up
+        self.origin_ns: int | None = None  # clock time of the FMU's start
+        self.fmu_ns = 0  # the FMU's time
+        self.t0_ns = 0
+        self.last_clock_ns: int | None = None
+        self.ended = False
+        self.ticks = self.steps = self.jumps_back = self.skipped = 0
+        self._lock = threading.Lock()
+
+    @property
+    def fmu_clock_ns(self) -> int:
+        """The FMU's time on the clock's scale."""
+        return (self.origin_ns or 0) + self.fmu_ns - self.t0_ns
+
+    def restart(self) -> None:
+        """The plant was reset from elsewhere (``~/reset``): line it up again at the next tick."""
+        with self._lock:
+            self.origin_ns = None
+
+    def tick(self, clock_ns: int) -> None:
+        with self._lock:
+            self.ticks += 1
+            last, self.last_clock_ns = self.last_clock_ns, clock_ns
+            if self.origin_ns is None or (last is not None and clock_ns < last):
+                if self.origin_ns is not None:
+                    self.jumps_back += 1
+                    _log.warning(
+                        "/clock jumped back from %.3f s to %.3f s: the FMU starts again",
+                        (last or 0) / 1e9,
+                        clock_ns / 1e9,
+                    )
+                self._line_up(clock_ns)
+                return
+            if self.ended:
+                return
+            due = (clock_ns - self.fmu_clock_ns + TOLERANCE_NS) // self.step_ns
+            if due > self.max_catch_up:
+                self.skipped += 1
+                _log.warning(
+                    "/clock jumped ahead by %.3f s (%d steps, at most %d per tick): the FMU is lined up "
+                    "with the clock where it is",
+                    (clock_ns - self.fmu_clock_ns) / 1e9,
+                    due,
+                    self.max_catch_up,
+                )
+                self.origin_ns = clock_ns - (self.fmu_ns - self.t0_ns)
+                return
+            for _ in range(max(due, 0)):
+                now = self._step()
+                if now is None:
+                    self.ended = True
+                    return
+                self.fmu_ns = now
+                self.steps += 1
+
+    def _line_up(self, clock_ns: int) -> None:
+        self.origin_ns = clock_ns  # first: step 0, published by the reset, is stamped in clock time
+        self.t0_ns = self.fmu_ns = self._start()
+        self.ended = False
