@@ -247,18 +247,16 @@ def agent_check_cmd(
     from agents.check import check_deployment
 
     report = check_deployment(run, recording, config=config, runtime=runtime, tolerance=tolerance)
-    table = Table(title=f"agent check: {run} ({runtime}) against {recording}")
-    table.add_column("check")
-    table.add_column("result")
-    table.add_row("samples replayed", f"{report.samples} ({report.compared} with a recorded action)")
-    largest = f"{report.max_action_difference:.3g} (tolerance {tolerance:g})"
-    table.add_row("largest action difference", largest)
-    table.add_row("samples over tolerance", str(report.differing))
-    for name, value in report.latency_us.items():
-        table.add_row(f"inference latency {name}", f"{value:.0f} us")
-    for problem in report.mapping:
-        table.add_row("[bold red]mapping[/bold red]", problem)
-    console.print(table)
+    from bridge.cli.inspect import print_rows
+
+    rows = [
+        ["samples replayed", f"{report.samples} ({report.compared} with a recorded action)"],
+        ["largest action difference", f"{report.max_action_difference:.3g} (tolerance {tolerance:g})"],
+        ["samples over tolerance", str(report.differing)],
+        *([f"inference latency {name}", f"{value:.0f} us"] for name, value in report.latency_us.items()),
+        *(["mapping", problem] for problem in report.mapping),
+    ]
+    print_rows(console, ["check", "result"], rows, f"agent check: {run} ({runtime}) against {recording}")
     if not report.ok:
         console.print("[bold red]check failed[/bold red]: the deployment does not act as recorded")
         raise typer.Exit(1)
