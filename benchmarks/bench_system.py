@@ -1,8 +1,12 @@
 """Cost of a macro step of a system, in this process and across nodes, side by side in one run.
 
-In this process: the DC motor and the gearbox load (two FMUs, two connections, Jacobi) against
-a raw FMPy loop doing the same work (per macro step and component: setReal of the connected
-input, doStep, getReal of the outputs). Target: at most 1.3x the raw loop.
+In this process: the DC motor and the gearbox load (two FMUs, two connections, Jacobi): the
+native master (one native call per macro step), the Python master (over each component's
+native sample), a raw FMPy loop doing the same work (per macro step and component: setReal of
+the connected input, doStep, getReal of the outputs), and Ecos's own C++ loop (``ecospy``) on
+the same two FMUs and connections, called once per macro step and once for all of them. Target:
+at most 1.3x the raw loop; the native master no slower than Ecos's loop. Ecos needs
+``libtbb.so.12`` (Debian: ``apt-get install libtbb12``); without it that row says why.
 
 Across nodes on loopback: N = 1..4 DC motors in a chain (``c_i.omega -> c_{i+1}.load_torque``),
 each component in its own node process (``fmu-bridge system serve --component c_i``), Jacobi:
@@ -17,6 +21,7 @@ outputs frame). Target: a macro step of N components at most 2x one bare round t
 from __future__ import annotations
 
 import argparse
+import os
 import tempfile
 from pathlib import Path
 
@@ -28,9 +33,9 @@ from bridge.plant.system.plant import SystemPlant
 H = 1e-3
 
 
-def system_plant(directory: Path) -> SystemPlant:
+def system_plant(directory: Path, *, native: bool = True, sample: int = 1) -> SystemPlant:
     data = {
-        "model": {"step_size": H, "episode_duration": 1e4},
+        "model": {"step_size": H, "sampling_time": sample * H, "episode_duration": 1e4},
         "system": {
             "components": {
                 "motor": {"fmu": "example:dcmotor", "feedthrough": False, "parameters": {"voltage": 12.0}},
@@ -44,8 +49,33 @@ def system_plant(directory: Path) -> SystemPlant:
     }
     plant = SystemPlant(parse_experiment(data, source=directory / "bench.yaml"))
     plant.bind(["load.tau_ext"], ["load.omega"])
-    plant.reset({}, [0.0])
+    if native:
+        plant.reset({}, [0.0])
+    else:  # the master decides at its first reset
+        os.environ["FMU_BRIDGE_NO_NATIVE_MASTER"] = "1"
+        try:
+            plant.reset({}, [0.0])
+        finally:
+            del os.environ["FMU_BRIDGE_NO_NATIVE_MASTER"]
+    assert (plant.master.native is not None) == native
     return plant
+
+
+def ecos_simulation() -> tuple[object | None, str]:
+    """The same two FMUs and connections in Ecos (its own master loop), or None and why not."""
+    try:
+        from ecospy import EcosSimulation, EcosSimulationStructure
+    except (ImportError, OSError) as exc:
+        return None, f"ecospy unavailable: {exc}"
+    structure = EcosSimulationStructure()
+    structure.add_model("motor", str(example_fmu("dcmotor", "2.0", "cs")))
+    structure.add_model("load", str(example_fmu("gearload", "2.0", "cs")))
+    structure.make_real_connection("motor::omega", "load::omega_in")
+    structure.make_real_connection("load::torque", "motor::load_torque")
+    structure.add_parameter_set("initial", {"motor::voltage": 12.0})
+    simulation = EcosSimulation(structure=structure, step_size=H)
+    simulation.init(parameter_set="initial")
+    return simulation, ""
 
 
 def raw_pair() -> tuple[RawFmpyLoop, RawFmpyLoop]:
@@ -74,12 +104,23 @@ def main() -> None:
 def in_process(args: argparse.Namespace) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         plant = system_plant(Path(tmp))
+        python_plant = system_plant(Path(tmp), native=False)
+        plant10 = system_plant(Path(tmp), sample=10)
         motor, load = raw_pair()
+        ecos, why = ecos_simulation()
         state = {"omega": 0.0, "torque": 0.0, "t": 0.0}
 
         def system(steps: int) -> None:
             for _ in range(steps):
                 plant.step([0.0])
+
+        def system10(steps: int) -> None:
+            for _ in range(steps // 10):
+                plant10.step([0.0])
+
+        def python_master(steps: int) -> None:
+            for _ in range(steps):
+                python_plant.step([0.0])
 
         def raw(steps: int) -> None:
             m, g = motor.fmu, load.fmu
@@ -95,17 +136,57 @@ def in_process(args: argparse.Namespace) -> None:
                 torque, _ = g.getReal(g_out)
             state.update(omega=omega, torque=torque, t=t)
 
-        rates = interleaved({"system": system, "raw": raw}, args.steps, args.repeats)
-        plant.close()
-        motor.close()
-        load.close()
-    ratio = rates["raw"] / rates["system"]
-    rows = [
-        ("raw FMPy loop (2 FMUs)", fmt_us(rates["raw"]), "1.00"),
-        ("SystemPlant, Jacobi", fmt_us(rates["system"]), f"{ratio:.2f}"),
-    ]
-    print(table(rows, ("in-process macro step", "us/step", "x raw")))
-    print(f"target <= 1.3x: {'met' if ratio <= 1.3 else 'NOT met'}")
+        candidates = {"system": system, "system10": system10, "python": python_master, "raw": raw}
+        if ecos is not None:
+            step = ecos.step  # type: ignore[attr-defined]
+
+            def ecos_each(steps: int) -> None:
+                for _ in range(steps):
+                    step(1)
+
+            def ecos_all(steps: int) -> None:
+                step(steps)
+
+            candidates.update(ecos_each=ecos_each, ecos_all=ecos_all)
+        rates = interleaved(candidates, args.steps, args.repeats)
+        for closable in (plant, plant10, python_plant, motor, load):
+            closable.close()
+        if ecos is not None:
+            ecos.terminate()  # type: ignore[attr-defined]
+    report(rates, why)
+
+
+def report(rates: dict[str, float], ecos_missing: str) -> None:
+    """The table of :func:`in_process` and whether the targets are met."""
+    raw_rate = rates["raw"]
+    named = (
+        ("SystemPlant, Jacobi, native master", "system"),
+        ("native master, samples of 10 macro steps", "system10"),
+        ("SystemPlant, Jacobi, Python master", "python"),
+    )
+    rows = [("raw FMPy loop (2 FMUs)", fmt_us(raw_rate), "1.00", "")]
+    rows += [(label, fmt_us(rates[key]), f"{raw_rate / rates[key]:.2f}", "") for label, key in named]
+    if not ecos_missing:
+        for key, label, ours in (
+            ("ecos_each", "Ecos loop, step(1) per macro step", "system"),
+            ("ecos_all", "Ecos loop, step(n)", "system10"),
+        ):
+            faster = rates[key] / rates[ours]
+            rows.append((label, fmt_us(rates[key]), f"{raw_rate / rates[key]:.2f}", f"{faster:.2f}"))
+    print(
+        table(rows, ("in-process macro step", "us/step", "x raw", "x faster than ours (per call / batched)"))
+    )
+    ratio = raw_rate / rates["system"]
+    print(f"target <= 1.3x raw: {'met' if ratio <= 1.3 else 'NOT met'}")
+    if ecos_missing:
+        print(f"Ecos: {ecos_missing}")
+    else:
+        for ours, theirs, what in (
+            ("system", "ecos_each", "a macro step a call"),
+            ("system10", "ecos_all", "many a call"),
+        ):
+            met = "met" if rates[ours] >= rates[theirs] else "NOT met"
+            print(f"target: native master no slower than Ecos's loop, {what}: {met}")
 
 
 if __name__ == "__main__":

@@ -33,14 +33,47 @@ ZenohModeOpt = Annotated[
     typer.Option("--zenoh-mode", help="client or peer; default: client when only --connect is given."),
 ]
 PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
+NoFeedthroughOpt = Annotated[
+    list[str] | None,
+    typer.Option(
+        "--no-feedthrough",
+        help="An .ssp/.ssd/OSP component whose outputs do not depend on its inputs at the same "
+        "instant (system.components.NAME.feedthrough: false; repeatable).",
+    ),
+]
+IterationsOpt = Annotated[
+    int,
+    typer.Option(
+        "--iterations", min=1, help="An .ssp/.ssd/OSP run: fixed-point iterations (system.iteration)."
+    ),
+]
 
 
-def _experiment(path: Path, step_size_s: float | None = None, duration_s: float | None = None) -> Experiment:
-    """An experiment file, or an .ssp/.ssd run as it is (every output observed, no actions)."""
+def _experiment(
+    path: Path,
+    step_size_s: float | None = None,
+    duration_s: float | None = None,
+    no_feedthrough: list[str] | None = None,
+    iterations: int = 1,
+) -> Experiment:
+    """An experiment file, or an .ssp/.ssd/OSP file run as it is (every output observed, no
+    actions), with the components ``no_feedthrough`` names and ``iterations`` applied."""
     if is_system_file(str(path)):
-        from bridge.plant.system.ssp import ssp_experiment
+        from bridge.plant.system.runfile import ssp_experiment
 
-        return ssp_experiment(path, step_size_s=step_size_s, duration_s=duration_s)
+        system: dict[str, Any] = {}
+        if no_feedthrough:
+            system["components"] = {name: {"feedthrough": False} for name in no_feedthrough}
+        if iterations > 1:
+            system["iteration"] = {"max_iterations": iterations}
+        return ssp_experiment(path, step_size_s=step_size_s, duration_s=duration_s, system=system)
+    if no_feedthrough or iterations > 1:
+        from bridge.errors import ConfigError
+
+        raise ConfigError(
+            f"--no-feedthrough and --iterations apply to .ssp/.ssd/OSP files; an experiment file says "
+            f"system.components.NAME.feedthrough and system.iteration itself [{path}]"
+        )
     return as_experiment(path)
 
 
@@ -99,6 +132,8 @@ def inspect_system(  # noqa: PLR0917 (typer options)
     dot: Annotated[Path | None, typer.Option(help="Write the connection graph as Graphviz DOT.")] = None,
     png: Annotated[Path | None, typer.Option(help="Draw the connection graph into a PNG.")] = None,
     step_size: StepSizeOpt = None,
+    no_feedthrough: NoFeedthroughOpt = None,
+    iterations: IterationsOpt = 1,
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
@@ -108,7 +143,7 @@ def inspect_system(  # noqa: PLR0917 (typer options)
     """A table of components and connections, and a picture of the connection graph."""
     from bridge.plant.system.graph import to_dot
 
-    exp = _experiment(experiment, step_size)
+    exp = _experiment(experiment, step_size, None, no_feedthrough, iterations)
     with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
         data = summary(plant)
         if dot is not None:
@@ -139,6 +174,8 @@ def check_system_cmd(  # noqa: PLR0917 (typer options)
     experiment: ExperimentArg,
     steps: Annotated[int, typer.Option(help="Samples to run after the checks.")] = 5,
     step_size: StepSizeOpt = None,
+    no_feedthrough: NoFeedthroughOpt = None,
+    iterations: IterationsOpt = 1,
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
@@ -148,7 +185,7 @@ def check_system_cmd(  # noqa: PLR0917 (typer options)
     """Check every connection and name, then reset the system and run a few samples."""
     from bridge.env.fmu_env import FmuEnv
 
-    exp = _experiment(experiment, step_size)
+    exp = _experiment(experiment, step_size, None, no_feedthrough, iterations)
     plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix))
     try:
         env = FmuEnv(exp, plant=plant)
@@ -178,6 +215,8 @@ def simulate_system(  # noqa: PLR0917 (typer options)
         list[str] | None, typer.Option("--input", help="Hold a task input at a value: NAME=VALUE.")
     ] = None,
     step_size: StepSizeOpt = None,
+    no_feedthrough: NoFeedthroughOpt = None,
+    iterations: IterationsOpt = 1,
     zenoh_config: ZenohConfigOpt = None,
     listen: ListenOpt = None,
     connect: ConnectOpt = None,
@@ -188,7 +227,7 @@ def simulate_system(  # noqa: PLR0917 (typer options)
 
     An .ssp/.ssd runs as it is: every numeric output observed, its DefaultExperiment's step and
     duration unless --step-size and --duration say otherwise."""
-    exp = _experiment(experiment, step_size, duration)
+    exp = _experiment(experiment, step_size, duration, no_feedthrough, iterations)
     with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
         names = list(exp.observations.outputs)
         inputs = list(exp.actions.inputs)

@@ -12,6 +12,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from bridge.experiment.reward import RewardSection
+
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -60,6 +62,12 @@ class AgentSection(_Strict):
     high: dict[str, FiniteFloat] = {}
     observations: list[str] = Field(min_length=1)
     reward: dict[str, Any] = Field(description="as the experiment's reward: section (terms, expression)")
+
+    @field_validator("reward")
+    @classmethod
+    def _reward(cls, value: dict[str, Any]) -> dict[str, Any]:
+        RewardSection.model_validate(value)  # its errors, under system.agents.NAME.reward
+        return value
 
 
 class SystemSection(_Strict):

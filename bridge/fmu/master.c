@@ -139,3 +139,20 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
     }
     return 0;
 }
+
+/* Up to `count` macro steps (one sample of several): stops after a macro step in which a
+ * component asked to stop, or at a failure (master_step's return). `done` counts the macro steps
+ * completed, the one with the stop request included, the failed one not. */
+int master_run(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status, int count,
+               int* done) {
+    *done = 0;
+    for (int r = 0; r < count; r++) {
+        int failed = master_step(comps, n, links, n_links, gauss_seidel, status);
+        if (failed) return failed;
+        *done = r + 1;
+        for (int c = 0; c < n; c++) {
+            if (status[c] == MASTER_TERMINATED) return 0;
+        }
+    }
+    return 0;
+}

@@ -41,21 +41,15 @@ _Component, _Link = MasterComponent, MasterLink
 
 @lru_cache(maxsize=1)
 def library() -> Any:
-    """``master_step`` of ``master.c``, built on first use; None where it cannot be built."""
+    """``master_run`` of ``master.c``, built on first use; None where it cannot be built."""
     try:
         library = native_build.load("master")
     except BridgeError as exc:
         _log.warning("native system master unavailable, stepping in Python instead: %s", exc)
         return None
-    function = library.master_step
-    function.argtypes = [
-        ctypes.c_void_p,
-        ctypes.c_int,
-        ctypes.c_void_p,
-        ctypes.c_int,
-        ctypes.c_int,
-        ctypes.c_void_p,
-    ]
+    function = library.master_run
+    p, i = ctypes.c_void_p, ctypes.c_int
+    function.argtypes = [p, i, p, i, i, p, i, p]
     function.restype = ctypes.c_int
     return function
 
@@ -87,6 +81,19 @@ class NativeMaster:
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
         self._gauss_seidel = int(master.system.algorithm == "gauss_seidel")
+        self._accounts = [(p, p.model, c) for p, c in zip(self._plants, self._comps)]
+        address = ctypes.addressof
+        self._args = (
+            ctypes.c_void_p(address(self._comps)),
+            len(self._names),
+            ctypes.c_void_p(address(self._links)),
+            self._n_links,
+            self._gauss_seidel,
+            ctypes.c_void_p(address(self._status)),
+        )
+        self._done = ctypes.c_int(0)
+        self._done_ref = ctypes.byref(self._done)
+        self.done = 0  # macro steps the last call completed
 
     def refresh(self) -> None:
         """Re-read the instances' addresses and the master's arrays (after a reset)."""
@@ -97,6 +104,7 @@ class NativeMaster:
             c.major, c.set_real, c.get_real = h["major"], h["set_real"], h["get_real"]
             c.do_step, c.bool_status, c.component = h["do_step"], h["bool_status"], h["component"]
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
+            c.k = model.step_index  # kept here from now on; each step hands it to the model
             c.n_in, c.in_vr = 0, None
             if inputs is not None:
                 vrs, c.n_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0)
@@ -106,25 +114,34 @@ class NativeMaster:
             c.u, c.y = u.ctypes.data, y.ctypes.data
             c.out_vr, c.n_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0)
 
-    def step(self) -> None:
-        """One macro step; the component's own error where one fails (as the Python master)."""
-        plants, comps = self._plants, self._comps
-        for name, plant, c in zip(self._names, plants, comps):
+    def run(self, count: int) -> None:
+        """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its
+        ``terminated`` is set); :attr:`done` says how many completed, also when one fails, which
+        raises the component's own error (as the Python master)."""
+        plants, comps, status = self._plants, self._comps, self._status
+        for name, plant in zip(self._names, plants):
             if not plant.model._steppable:  # the Python path raises the model's own refusal
+                self.done = 0
                 plant.step(self.master.inputs[name].tolist())
-            c.k = plant.model.step_index
-        failed = self._call(
-            self._comps, len(comps), self._links, self._n_links, self._gauss_seidel, self._status
-        )
-        stepped = len(comps)
+        failed = self._call(*self._args, count, self._done_ref)
+        self.done = done = self._done.value
+        if not failed and not any(status):  # the hot path: every component stepped with OK
+            for plant, model, c in self._accounts:
+                model.step_index = c.k
+                plant.sample += done
+            return
+        stepped = len(comps)  # components that took part in the last macro step tried
         if failed:
             stepped = failed - 1
-            if self._status[stepped] == NONFINITE and not self._gauss_seidel:
+            if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
-        for position in range(stepped):
-            plants[position].native_done(comps[position].k, self._status[position] == TERMINATED)
+        for position, (plant, model, c) in enumerate(self._accounts):
+            model.step_index = c.k
+            plant.sample += done - (1 if not failed else 0)
+            if position < stepped:
+                plant.native_done(c.k, status[position] == TERMINATED)
         if failed:
-            self._fail(plants[failed - 1], self._status[failed - 1], comps[failed - 1].k)
+            self._fail(plants[failed - 1], status[failed - 1], comps[failed - 1].k)
 
     def _fail(self, plant: FmuComponent, status: int, k: int) -> None:
         name = self._names[self._plants.index(plant)]

@@ -18,6 +18,7 @@ from tests.plant.ssp_semantics import motor_load, write
 runner = CliRunner()
 _load_plugins()
 NAMES = ["motor.omega", "motor.current", "load.omega", "load.torque"]
+EXAMPLE_YAML = Path(__file__).parents[2] / "examples" / "dcmotor_system.yaml"
 
 
 def invoke(*args: str) -> str:
@@ -86,3 +87,20 @@ def test_simulate_reaches_a_component_served_elsewhere_with_connect(
         invoke("system", "simulate", str(served), "--csv", str(remote), *args, *net)
     assert remote.read_text() == local.read_text()
     assert len(local.read_text().splitlines()) == 22
+
+
+def test_a_coupled_ssp_runs_from_the_cli_with_its_loop_opened(tmp_path: Path) -> None:
+    """Both directions coupled: the FMUs declare no output dependencies, so it is an algebraic
+    loop until --no-feedthrough says the motor has none; then libcosim's trajectory."""
+    from tests.plant.test_system_ssp_semantics import LINEAR_TORQUE, STEPS, libcosim
+
+    ssp = write(tmp_path / "coupled.ssp", motor_load(torque=LINEAR_TORQUE))
+    refused = runner.invoke(app, ["system", "simulate", str(ssp)])
+    assert refused.exit_code != 0 and "algebraic loop" in str(refused.exception)
+    out = tmp_path / "run.csv"
+    invoke("system", "simulate", str(ssp), "--no-feedthrough", "motor", "--csv", str(out), "--every", "100")
+    rows = list(csv.DictReader(out.open()))
+    ours = np.array([[float(r[n]) for n in NAMES] for r in rows])
+    np.testing.assert_allclose(ours[1 : STEPS + 1], libcosim(ssp), rtol=0, atol=1e-9)
+    misuse = runner.invoke(app, ["system", "check", str(EXAMPLE_YAML), "--no-feedthrough", "motor"])
+    assert misuse.exit_code != 0 and "apply to .ssp/.ssd/OSP files" in str(misuse.exception)

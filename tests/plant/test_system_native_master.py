@@ -55,9 +55,9 @@ def test_the_python_master_serves_what_the_native_one_cannot(tmp_path: Path) -> 
     assert not run(example(tmp_path, feedthrough_outputs="updated"), steps=3)[1]
 
 
-def cartpole(tmp_path: Path) -> Any:
+def cartpole(tmp_path: Path, sampling_s: float = 0.02) -> Any:
     data = {
-        "model": {"step_size": 0.02, "episode_duration": 10.0},
+        "model": {"step_size": 0.02, "sampling_time": sampling_s, "episode_duration": 10.0},
         "system": {
             "components": {
                 "gain": {"fmu": "example:feedthrough"},
@@ -81,14 +81,16 @@ def push(exp: Any, force: float) -> tuple[list[np.ndarray], bool, float, bool]:
         return rows, plant.terminated, plant.time_s, plant.master.native is not None
 
 
+@pytest.mark.parametrize("sampling_s", [0.02, 0.1])
 def test_a_component_that_asks_to_stop_stops_the_system_alike(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sampling_s: float
 ) -> None:
-    """The cart leaves its track (terminate request): the same step, time and values both ways."""
-    rows, terminated, t, used = push(cartpole(tmp_path), 10.0)
+    """The cart leaves its track (terminate request), also within a sample of five macro steps:
+    the same macro step, time and values both ways."""
+    rows, terminated, t, used = push(cartpole(tmp_path, sampling_s), 10.0)
     assert used and terminated and 0.2 < t < 5.0
     monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
-    python_rows, python_terminated, python_t, used = push(cartpole(tmp_path), 10.0)
+    python_rows, python_terminated, python_t, used = push(cartpole(tmp_path, sampling_s), 10.0)
     assert not used and python_terminated and python_t == t
     np.testing.assert_array_equal(np.array(rows), np.array(python_rows))
 

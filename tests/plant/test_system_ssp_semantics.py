@@ -20,7 +20,17 @@ from bridge.experiment.config import parse_experiment
 from bridge.fmu import read_model_info
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import example_fmu
-from tests.plant.ssp_semantics import component, connection, connector, motor_load, osp_dir, ssd, unit, write
+from tests.plant.ssp_semantics import (
+    NS,
+    component,
+    connection,
+    connector,
+    motor_load,
+    osp_dir,
+    ssd,
+    unit,
+    write,
+)
 
 NAMES = ["motor.omega", "motor.current", "load.omega", "load.torque"]
 H, STEPS = 1e-3, 300
@@ -250,29 +260,115 @@ def test_an_enumeration_item_that_does_not_exist_is_refused(tmp_path: Path) -> N
         typed_run(ssp, tmp_path, [0.0, 0.0, 1.0])
 
 
-def test_parameter_mappings_are_refused_by_name(tmp_path: Path) -> None:
-    end = "</ssd:ParameterValues></ssd:ParameterBinding>"
-    text = motor_load().replace(
-        end, '</ssd:ParameterValues><ssd:ParameterMapping source="m.ssm"/></ssd:ParameterBinding>', 1
-    )
-    assert text != motor_load()
-    refused(tmp_path, text, "Component 'motor'", "ssd:ParameterMapping", "not supported")
+SSM = 'xmlns:ssm="http://ssp-standard.org/SSP1/SystemStructureParameterMapping"'
+MAPPING = (
+    '<ssm:MappingEntry source="inertia" target="J"/>'
+    '<ssm:MappingEntry source="half_voltage" target="voltage">'
+    '<ssc:LinearTransformation factor="2.0"/></ssm:MappingEntry>'
+)
 
 
-def test_signal_dictionaries_are_refused_by_name(tmp_path: Path) -> None:
-    dictionary = '<ssd:SignalDictionaries><ssd:SignalDictionary name="bus"/></ssd:SignalDictionaries>'
-    refused(
-        tmp_path,
-        motor_load().replace("</ssd:Connections>", f"</ssd:Connections>{dictionary}"),
-        "ssd:SignalDictionaries",
+def mapped(entries: str = MAPPING, *, file: bool = False) -> str:
+    """The motor's parameters bound under other names (inertia, half_voltage = 6 V) and mapped
+    back to J and voltage (x 2), inline or from ``mapping.ssm``."""
+    text = motor_load()
+    plain = '<ssv:Parameter name="J"><ssv:Real value="0.002"/></ssv:Parameter>'
+    plain += '<ssv:Parameter name="voltage"><ssv:Real value="12.0"/></ssv:Parameter>'
+    assert plain in text
+    renamed = '<ssv:Parameter name="inertia"><ssv:Real value="0.002"/></ssv:Parameter>'
+    renamed += '<ssv:Parameter name="half_voltage"><ssv:Real value="6.0"/></ssv:Parameter>'
+    inner = f'<ssm:ParameterMapping version="1.0" {SSM}>{entries}</ssm:ParameterMapping>'
+    mapping = (
+        '<ssd:ParameterMapping source="resources/mapping.ssm"/>'
+        if file
+        else f"<ssd:ParameterMapping>{inner}</ssd:ParameterMapping>"
     )
-    reference = '<ssd:SignalDictionaryReference name="busref" dictionary="bus"/>'
-    refused(
-        tmp_path,
-        motor_load().replace("<ssd:Elements>", f"<ssd:Elements>{reference}"),
-        "'busref'",
-        "SignalDictionaryReference",
+    text = text.replace(plain, renamed, 1)
+    return text.replace(
+        "</ssd:ParameterValues></ssd:ParameterBinding>",
+        f"</ssd:ParameterValues>{mapping}</ssd:ParameterBinding>",
+        1,
     )
+
+
+def mapping_file(entries: str = MAPPING) -> str:
+    return f'<?xml version="1.0" encoding="UTF-8"?>\n<ssm:ParameterMapping version="1.0" {SSM} xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">{entries}</ssm:ParameterMapping>\n'
+
+
+@pytest.mark.parametrize("file", [False, True])
+def test_a_parameter_mapping_renames_and_transforms_bound_values(tmp_path: Path, file: bool) -> None:
+    """Inline and as an .ssm file: the same trajectory as the values bound directly, bit for bit,
+    and libcosim's run of those within 1e-9."""
+    ssp = write(tmp_path / "mapped.ssp", mapped(file=file))
+    if file:
+        import zipfile
+
+        with zipfile.ZipFile(ssp, "a") as archive:
+            archive.writestr("resources/mapping.ssm", mapping_file())
+    from_mapping = ours(ssp, tmp_path)
+    plain = write(tmp_path / "plain.ssp", motor_load())
+    np.testing.assert_array_equal(from_mapping, ours(plain, tmp_path))
+    same(from_mapping, libcosim(plain))
+
+
+def test_parameter_mapping_entries_that_cannot_apply_are_refused(tmp_path: Path) -> None:
+    typo = MAPPING.replace('source="inertia"', 'source="inertial"')
+    refused(tmp_path, mapped(typo), "Component 'motor'", "['inertial'] name no parameter", "half_voltage")
+    enum = MAPPING + (
+        '<ssm:MappingEntry source="inertia" target="J"><ssc:EnumerationMappingTransformation>'
+        '<ssc:MapEntry source="a" target="b"/></ssc:EnumerationMappingTransformation></ssm:MappingEntry>'
+    )
+    refused(tmp_path, mapped(enum), "EnumerationMappingTransformation is not supported in parameter mappings")
+    with_unit = mapped().replace('<ssv:Real value="6.0"/>', '<ssv:Real value="6.0" unit="V"/>')
+    refused(tmp_path, with_unit, "half_voltage -> voltage", "'V'", "suppressUnitConversion")
+
+
+SSB = 'xmlns:ssb="http://ssp-standard.org/SSP1/SystemStructureSignalDictionary"'
+PLAIN_CONNECTIONS = connection("motor", "omega", "load", "omega_in") + connection(
+    "load", "torque", "motor", "load_torque"
+)
+
+
+def through_bus(*, entries: tuple[str, ...] = ("speed", "torque"), extra: str = "") -> str:
+    """The motor and load connected through a signal dictionary "shaft" (reference "bus")."""
+    text = motor_load()
+    assert PLAIN_CONNECTIONS in text
+    routed = "".join(
+        connection(*ends)
+        for ends in (
+            ("motor", "omega", "bus", "speed"),
+            ("bus", "speed", "load", "omega_in"),
+            ("load", "torque", "bus", "torque"),
+            ("bus", "torque", "motor", "load_torque"),
+        )
+    )
+    text = text.replace(PLAIN_CONNECTIONS, routed + extra)
+    defined = "".join(f'<ssb:DictionaryEntry name="{e}"><ssc:Real/></ssb:DictionaryEntry>' for e in entries)
+    shaft = f'<ssd:SignalDictionary name="shaft">{defined}</ssd:SignalDictionary>'
+    dictionaries = f"<ssd:SignalDictionaries>{shaft}</ssd:SignalDictionaries>"
+    reference = '<ssd:SignalDictionaryReference name="bus" dictionary="shaft"><ssd:Connectors>'
+    reference += connector("speed", "inout") + connector("torque", "inout")
+    reference += "</ssd:Connectors></ssd:SignalDictionaryReference>"
+    text = text.replace("</ssd:Connections>", f"</ssd:Connections>{dictionaries}")
+    text = text.replace("<ssd:Elements>", f"<ssd:Elements>{reference}")
+    return text.replace(f"{NS}>", f"{NS} {SSB}>", 1)
+
+
+def test_signals_through_a_dictionary_equal_direct_connections_and_libcosim(tmp_path: Path) -> None:
+    routed = ours(write(tmp_path / "bus.ssp", through_bus()), tmp_path)
+    plain = write(tmp_path / "plain.ssp", motor_load())
+    np.testing.assert_array_equal(routed, ours(plain, tmp_path))
+    same(routed, libcosim(plain))
+
+
+def test_signal_dictionary_misuse_is_refused(tmp_path: Path) -> None:
+    refused(
+        tmp_path, through_bus(entries=("speed",)), "'torque' is not an entry of signal dictionary 'shaft'"
+    )
+    twice = connection("motor", "current", "bus", "speed")
+    refused(tmp_path, through_bus(extra=twice), "entry 'speed': 2 connections produce it")
+    unknown = through_bus().replace('dictionary="shaft"', 'dictionary="shaf"')
+    refused(tmp_path, unknown, "reference 'bus': dictionary 'shaf' is not defined")
 
 
 def test_a_transformation_to_a_system_connector_is_refused(tmp_path: Path) -> None:
@@ -336,3 +432,74 @@ def test_osp_elements_not_read_are_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(ConfigError, match="'gain': Sum functions are not supported"):
         ours(summed, tmp_path)
+
+
+MOTOR_J = '<ssv:Parameter name="J"><ssv:Real value="0.002"/></ssv:Parameter>'
+GRAM_M2 = unit("g.m2", factor=1e-3, kg=1, m=2) + unit("kg.m2", kg=1, m=2)
+
+
+def test_a_bound_value_in_another_unit_is_converted_and_matches_libcosim(tmp_path: Path) -> None:
+    """The motor's inertia bound as 2 g.m2 (ssv:Real unit): the run of 0.002 kg.m2, as libcosim
+    computes it from the value in the FMU's own unit."""
+    text = motor_load(units=GRAM_M2)
+    assert MOTOR_J in text
+    grams = text.replace(MOTOR_J, MOTOR_J.replace('value="0.002"', 'value="2.0" unit="g.m2"'))
+    converted = ours(write(tmp_path / "grams.ssp", grams), tmp_path)
+    same(converted, libcosim(write(tmp_path / "si.ssp", motor_load())))
+    from bridge.plant.system.ssp import read_ssp
+
+    assert read_ssp(tmp_path / "grams.ssp").components["motor"].parameters["J"] == pytest.approx(
+        0.002, rel=1e-15
+    )
+
+
+def test_a_bound_value_of_another_quantity_is_refused(tmp_path: Path) -> None:
+    text = motor_load(units=GRAM_M2 + unit("m", m=1))
+    bad = text.replace(MOTOR_J, MOTOR_J.replace('value="0.002"', 'value="2.0" unit="m"'))
+    refused(
+        tmp_path, bad, "component 'motor': parameter binding 'J'", "'m'", "'kg.m2'", "different quantities"
+    )
+
+
+def nested_text() -> str:
+    """The load inside a nested system "drive" whose connectors w_in and t_out carry the speed in
+    and the torque out; the motor at the top."""
+    flat = motor_load()
+    load_start = flat.index('<ssd:Component name="load"')
+    load_end = flat.index("</ssd:Component>", load_start) + len("</ssd:Component>")
+    load = flat[load_start:load_end]
+    inner = connection("", "w_in", "load", "omega_in") + connection("load", "torque", "", "t_out")
+    inner = inner.replace('startElement="" ', "").replace('endElement="" ', "")
+    drive = (
+        '<ssd:System name="drive"><ssd:Connectors>'
+        + connector("w_in", "input")
+        + connector("t_out", "output")
+        + f"</ssd:Connectors><ssd:Elements>{load}</ssd:Elements><ssd:Connections>{inner}</ssd:Connections>"
+        "</ssd:System>"
+    )
+    outer = connection("motor", "omega", "drive", "w_in") + connection(
+        "drive", "t_out", "motor", "load_torque"
+    )
+    text = flat.replace(load, drive).replace(PLAIN_CONNECTIONS, outer)
+    assert 'startElement="load"' in text and "drive" in text
+    return text
+
+
+def test_a_nested_system_runs_as_its_flat_equivalent_and_libcosim(tmp_path: Path) -> None:
+    """Components of a nested system are named system/component; the same trajectory as the flat
+    system bit for bit, and libcosim's run of the flat one within 1e-9."""
+    ssp = write(tmp_path / "nested.ssp", nested_text())
+    names = ["motor.omega", "motor.current", "drive/load.omega", "drive/load.torque"]
+    data: dict[str, Any] = {
+        "model": {"fmu": str(ssp), "step_size": H, "episode_duration": 1.0},
+        "observations": {"outputs": names},
+        "reward": {"terms": [{"alive": 0.0}]},
+        "system": {"components": {"motor": {"feedthrough": False}}},
+    }
+    with SystemPlant(parse_experiment(data, source=tmp_path / "e.yaml")) as plant:
+        assert sorted(plant.system.components) == ["drive/load", "motor"]
+        plant.bind([], names)
+        nested = np.array([plant.reset({}, None)] + [plant.step(None) for _ in range(STEPS)])
+    plain = write(tmp_path / "plain.ssp", motor_load())
+    np.testing.assert_array_equal(nested, ours(plain, tmp_path))
+    same(nested, libcosim(plain))

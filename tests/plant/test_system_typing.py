@@ -138,3 +138,19 @@ def test_updated_feedthrough_outputs_are_of_one_instant(tmp_path: Path) -> None:
     np.testing.assert_allclose(held[1:, 1], 0.5 * (10.0 - held[:-1, 0]), rtol=0, atol=1e-12)
     assert np.max(np.abs(held[:, 1] - 0.5 * (10.0 - held[:, 0]))) > 1e-3
     assert np.max(np.abs(updated[:, 0])) > 1.0
+
+
+def test_an_initialisation_that_does_not_converge_says_so(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Loop gain 0.9 x 0.9: three sweeps are not enough for 1e-13; the plant says it did not converge."""
+    iteration = {"max_iterations": 3, "tolerance": 1e-13}
+    exp = experiment(
+        tmp_path, controllers(0.9, 0.9, 1.0, 0.0), LOOP, outputs=["a.u"], system={"iteration": iteration}
+    )
+    with SystemPlant(exp) as plant:
+        plant.bind([], ["a.u"])
+        with caplog.at_level("WARNING"):
+            plant.reset({}, None)
+        assert not plant.master.init_converged
+    assert "did not converge in 3 sweeps" in caplog.text and "system.yaml" in caplog.text

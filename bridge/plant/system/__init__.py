@@ -1,10 +1,14 @@
 """Systems of coupled FMUs: one plant made of several components joined by connections.
 
-``description`` says what the system is (from the experiment's ``system:`` section or an SSP 1.0
-``.ssp``/``.ssd``, read by ``ssp``), ``check`` holds it against the FMUs, ``graph`` orders it and
-finds algebraic loops, ``master`` steps it (Jacobi or Gauss-Seidel, multi-rate, optional
-fixed-point iteration), ``component`` is one FMU of it in this process and ``plant`` is the
-:class:`SystemPlant` the env drives. Variables of a system are named ``component.variable``.
+``description`` says what the system is (from the experiment's ``system:`` section, an SSP 1.0
+``.ssp``/``.ssd`` read by ``ssp`` with ``ssm`` (parameter mappings) and ``ssb`` (signal
+dictionaries, nested systems), or OSP's ``OspSystemStructure.xml`` read by ``osp``; ``runfile``
+runs such a file as it is), ``check`` holds it against the FMUs with ``transform`` (units and
+connection transformations), ``graph`` orders it and finds algebraic loops, ``master`` steps it
+(Jacobi or Gauss-Seidel, multi-rate, optional fixed-point iteration; ``native_master`` with
+``master.c``: the same in one native call where it applies), ``component`` is one FMU of it in
+this process and ``plant`` is the :class:`SystemPlant` the env drives. Variables of a system are
+named ``component.variable``.
 
 May import the experiment, ``bridge.fmu`` and the plant interface; the network only lazily,
 for components served by nodes.

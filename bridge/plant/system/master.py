@@ -78,6 +78,7 @@ class Master:
             self._into[link.target].append(link)
         self.last_iterations = 0
         self.unconverged_steps = 0
+        self.init_converged = True
         self.native: NativeMaster | None = None
         self._native_checked = False
 
@@ -110,6 +111,7 @@ class Master:
             used[name] = u = self._gather(name, ready).copy()
             self.outputs[name] = np.asarray(self.plants[name].reset(values.get(name, {}), u.tolist()))
             ready.add(name)
+        self.init_converged = True
         for _ in range(self.iterations - 1):  # an algebraic loop at t0: restart until consistent
             if self._close(used, {n: self._gather(n).copy() for n in used}):
                 return
@@ -118,13 +120,22 @@ class Master:
                 if not np.array_equal(u, used[name]):
                     used[name] = u.copy()
                     self.outputs[name] = np.asarray(self.plants[name].reset(values.get(name, {}), u.tolist()))
+        if self.iterations > 1 and not self._close(used, {n: self._gather(n).copy() for n in used}):
+            self.init_converged = False
+            _log.warning(
+                "system initialisation did not converge in %d sweeps (tolerance %g); raise "
+                "system.iteration.max_iterations%s",
+                self.iterations,
+                self.system.tolerance,
+                self.system.where,
+            )
 
     def step(self) -> None:
         """One macro step from ``t`` to ``t + H`` (with fixed-point iteration where configured);
         then, with ``feedthrough_outputs: updated``, the feedthrough components' outputs again
         from the inputs of ``t + H``."""
         if self.native is not None:
-            self.native.step()
+            self.native.run(1)
             return
         self._step()
         for name in self.settle_order:  # sources before consumers: values of t + H flow on

@@ -32,6 +32,7 @@ from bridge.plant.system.description import (
 )
 from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
 from bridge.plant.system.master import Link, Master
+from bridge.plant.system.native_master import NativeMaster
 from bridge.plant.system.transform import Convert
 
 
@@ -186,6 +187,9 @@ class SystemPlant(Plant):
     def step(self, inputs: Sequence[float] | None) -> FloatArray:
         self._write(self.master.inputs, inputs)
         master, plants = self.master, self._plant_list
+        if master.native is not None:  # the sample's macro steps in one native call
+            self._native_sample(master.native)
+            return self._read()
         for _ in range(self.timing.steps_per_sample):
             try:
                 master.step()
@@ -198,6 +202,18 @@ class SystemPlant(Plant):
                 break
         self.sample += 1
         return self._read()
+
+    def _native_sample(self, native: NativeMaster) -> None:
+        try:
+            native.run(self.timing.steps_per_sample)
+        except PlantError as exc:
+            self._macro += native.done
+            self.terminated = True
+            raise self._component_failed(exc) from exc
+        self._macro += native.done
+        if native.done < self.timing.steps_per_sample or any([p.terminated for p in self._plant_list]):
+            self.terminated = True
+        self.sample += 1
 
     def _component_failed(self, exc: PlantError, **fields: Any) -> PlantError:
         """The component's error as the system's, same kind, naming the component."""

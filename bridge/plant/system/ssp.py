@@ -2,17 +2,18 @@
 
 Why not a library: ``pyssp-standard`` (PyPI) is marked alpha and brings ``xmlschema`` and ``pint``
 for what is here a read of a handful of elements, and FMPy's own SSD reader would pull the FMU
-runtime into a module that only describes. What is read: the top-level system's components
-(``ssd:Component`` with an FMU ``source`` and its ``implementation``), their connectors' units,
-connections between components with their transformation (``ssc:LinearTransformation``,
+runtime into a module that only describes. What is read: the system's components (``ssd:Component``
+with an FMU ``source`` and its ``implementation``), nested systems (flattened: ``system/component``),
+their connectors' units, connections with their transformation (``ssc:LinearTransformation``,
 ``ssc:BooleanMappingTransformation``, ``ssc:IntegerMappingTransformation``,
 ``ssc:EnumerationMappingTransformation``) and ``suppressUnitConversion``, the unit definitions
-(``ssd:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as ``.ssv`` files, and
-the default experiment. What this reader cannot honour is refused, naming the element, the file
-and the reason, never skipped: nested systems, signal dictionaries and their references,
-parameter mappings (``.ssm``), components that are not FMUs, parameter bindings of another type, a
-transformation on a connection to the system's own connectors. Annotations and geometry are
-ignored, as the standard allows.
+(``ssd:Units``, ``ssv:Units``), parameter bindings given inline (``ssd:ParameterValues``) or as
+``.ssv`` files, with units, parameter mappings (inline or ``.ssm``: :mod:`.ssm`), signal
+dictionaries and the connections through their references and through nested systems' connectors
+(:mod:`.ssb`), and the default experiment. What this reader cannot honour is refused, naming the
+element, the file and the reason, never skipped: components that are not FMUs, parameter bindings
+of another type, a transformation on a connection to the top system's own connectors.
+Annotations and geometry are ignored, as the standard allows.
 """
 
 from __future__ import annotations
@@ -23,12 +24,14 @@ import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from collections.abc import Callable
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bridge.errors import ConfigError
-from bridge.experiment.config import Experiment
 from bridge.plant.system.osp import is_osp_file, read_osp
+from bridge.plant.system.ssb import Bus, read_dictionaries
+from bridge.plant.system.ssm import apply, read_mapping
 from bridge.plant.system.structure import (
     Component,
     Connection,
@@ -55,6 +58,14 @@ _TYPES: dict[str, Callable[[str], Any]] = {
     "Boolean": lambda v: v.lower() in ("true", "1"),
     "String": str,
 }
+
+
+@dataclass
+class _Read:
+    """What the reading collects beyond the description: units of bound values, unit definitions."""
+
+    definitions: dict[str, Unit]
+    value_units: dict[str, dict[str, str]] = field(default_factory=dict)  # component -> name -> unit
 
 
 def read_ssp(path: Path) -> SystemDescription:
@@ -93,20 +104,11 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
     system = top.find(f"{SSD}System")
     if system is None:
         raise ConfigError(f"{ssd.name}: no ssd:System element; is this an SSP 1.0 file? [{origin}]")
-    _refuse_unread(system, origin)
-    components = {}
-    for element in _children(system, "Elements"):
-        component = _component(element, root, origin)
-        components[component.name] = component
-    for name, value in _bindings(system, root, origin).items():
-        comp, _, var = name.partition(".")
-        if comp not in components or not var:
-            raise ConfigError(
-                f"parameter binding {name!r} of the system names no component.variable; "
-                f"components: {list(components)} [{origin}]"
-            )
-        components[comp].parameters[var] = value
-    connections = tuple(_connections(system, components, origin))
+    found = _Read(_units(top, origin))
+    bus = Bus({})
+    components: dict[str, Component] = {}
+    connections = tuple(_read_system(system, "", root, origin, found, bus, components) + bus.routed(origin))
+    _convert_bound_values(components, found, origin)
     step, duration = None, None
     experiment = top.find(f"{SSD}DefaultExperiment")
     if experiment is not None:
@@ -122,9 +124,56 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
         connections=connections,
         step_size_s=step,
         source=origin,
-        units=_units(top, origin),
+        units=found.definitions,
         duration_s=duration,
     )
+
+
+def _read_system(  # noqa: PLR0917 (one recursive reader)
+    system: ET.Element,
+    prefix: str,
+    root: Path,
+    origin: Path,
+    found: _Read,
+    bus: Bus,
+    components: dict[str, Component],
+) -> list[Connection]:
+    """The components of ``system`` into ``components`` and its direct connections; a nested
+    system's components are named ``system/component`` and its connectors route like a signal
+    dictionary's entries (:class:`.ssb.Bus`)."""
+    bus.dictionaries.update(read_dictionaries(system, root, origin))
+    connections: list[Connection] = []
+    for element in _children(system, "Elements"):
+        name = prefix + element.attrib.get("name", "?")
+        if element.tag == f"{SSD}SignalDictionaryReference":
+            bus.add_reference(element, origin, prefix)
+        elif element.tag == f"{SSD}System":
+            connectors = [c.attrib.get("name", "") for c in _children(element, "Connectors")]
+            bus.add_system(name, connectors)
+            connections += _read_system(element, f"{name}/", root, origin, found, bus, components)
+        else:
+            component = _component(element, root, origin, found, prefix)
+            components[component.name] = component
+    _system_bindings(system, prefix, root, origin, found, components)
+    return connections + _connections(system, components, bus, origin, prefix)
+
+
+def _system_bindings(  # noqa: PLR0917
+    system: ET.Element, prefix: str, root: Path, origin: Path, found: _Read, components: dict[str, Component]
+) -> None:
+    """A system's own parameter bindings: ``component.variable`` of its components."""
+    units: dict[str, str] = {}
+    for name, value in _bindings(system, root, origin, found, units).items():
+        comp, _, var = name.partition(".")
+        comp = prefix + comp
+        if comp not in components or not var:
+            raise ConfigError(
+                f"parameter binding {name!r} of system {system.attrib.get('name', '?')!r} names no "
+                f"component.variable; components: {list(components)} [{origin}]"
+            )
+        components[comp].parameters[var] = value
+        if name in units:
+            found.value_units.setdefault(comp, {})[var] = units[name]
 
 
 def _float(text: str, key: str, origin: Path) -> float:
@@ -134,58 +183,32 @@ def _float(text: str, key: str, origin: Path) -> float:
         raise ConfigError(f"ssd:DefaultExperiment: {key}={text!r} is not a number [{origin}]") from None
 
 
-def ssp_experiment(
-    path: Path, *, step_size_s: float | None = None, duration_s: float | None = None
-) -> Experiment:
-    """An experiment that runs the system of ``path`` (an .ssp/.ssd) as it is: no actions, every
-    numeric output of every component observed, the macro step and duration of its
-    DefaultExperiment unless given."""
-    from bridge.experiment.config import parse_experiment
+def _convert_bound_values(components: dict[str, Component], found: _Read, origin: Path) -> None:
+    """Bound values given in another unit than their variable's, converted (SSP's unit rules)."""
     from bridge.fmu import read_model_info
+    from bridge.plant.system.transform import convert_value
 
-    system = read_ssp(path)
-    step = step_size_s or system.step_size_s
-    if step is None:
-        raise ConfigError(
-            f"{path.name} gives no step size (ssd:DefaultExperiment annotation stepSize or OSP's "
-            f"baseStepSize); pass --step-size SECONDS [{path}]"
-        )
-    outputs = [
-        f"{name}.{element}"
-        for name, component in system.components.items()
-        for var in read_model_info(component.fmu).by_causality("output")
-        if var.is_numeric
-        for element in var.element_names()
-    ]
-    duration = duration_s or system.duration_s or step
-    data = {
-        "name": path.stem,
-        "model": {"fmu": str(path), "step_size": step, "episode_duration": _whole(duration, step)},
-        "observations": {"outputs": outputs, "scale": "none"},
-        "reward": {"terms": [{"alive": 0.0}]},
-    }
-    return parse_experiment(data, source=path)
+    for name, units in found.value_units.items():
+        component = components[name]
+        info = read_model_info(component.fmu)
+        for var_name, unit in units.items():
+            var = info.variables.get(var_name)
+            if var is None:
+                continue  # check_system names the unknown parameter
+            what = f"component {name!r}: parameter binding {var_name!r}"
+            try:
+                value = convert_value(
+                    float(component.parameters[var_name]), unit, var, info, found.definitions, what=what
+                )
+            except ConfigError as exc:
+                raise ConfigError(f"{exc} [{origin}]") from None
+            component.parameters[var_name] = value
 
 
-def _whole(duration_s: float, step_s: float) -> float:
-    """``duration_s`` rounded to whole macro steps (at least one)."""
-    return max(1, round(duration_s / step_s)) * step_s
-
-
-def _refuse_unread(system: ET.Element, origin: Path) -> None:
-    """Elements of a system this reader does not implement: refused by name, never skipped."""
-    name = system.attrib.get("name", "?")
-    if system.find(f"{SSD}SignalDictionaries") is not None:
-        raise ConfigError(
-            f"system {name!r}: ssd:SignalDictionaries are not supported (signal dictionaries pass "
-            f"signals through dictionary entries, which this master does not route); connect the "
-            f"components' connectors directly [{origin}]"
-        )
-
-
-def _units(top: ET.Element, origin: Path) -> dict[str, Unit]:
+def _units(top: ET.Element, origin: Path, ns: str = SSD) -> dict[str, Unit]:
     units = {}
-    for unit in _children(top, "Units"):
+    box = top.find(f"{ns}Units")
+    for unit in list(box) if box is not None else []:
         base = unit.find(f"{SSC}BaseUnit")
         name = unit.attrib.get("name", "")
         if base is None or not name:
@@ -209,15 +232,8 @@ def _local(tag: str) -> str:
     return tag.rpartition("}")[2]
 
 
-def _component(element: ET.Element, root: Path, origin: Path) -> Component:
-    name = element.attrib.get("name", "?")
-    if element.tag == f"{SSD}System":
-        raise ConfigError(f"nested system {name!r}: only flat systems of FMUs are supported [{origin}]")
-    if element.tag == f"{SSD}SignalDictionaryReference":
-        raise ConfigError(
-            f"element {name!r}: ssd:SignalDictionaryReference is not supported (signal dictionaries "
-            f"are not routed by this master); connect the components' connectors directly [{origin}]"
-        )
+def _component(element: ET.Element, root: Path, origin: Path, found: _Read, prefix: str = "") -> Component:
+    name = prefix + element.attrib.get("name", "?")
     if element.tag != f"{SSD}Component":
         raise ConfigError(f"element {name!r} ({element.tag}) is not an ssd:Component [{origin}]")
     kind = element.attrib.get("type", "application/x-fmu-sharedlibrary")
@@ -231,7 +247,10 @@ def _component(element: ET.Element, root: Path, origin: Path) -> Component:
             f"component {name!r}: its FMU {source!r} is missing {inside}; add the file or fix the "
             f"component's source attribute [{origin}]"
         )
-    parameters = _bindings(element, root, origin)
+    value_units: dict[str, str] = {}
+    parameters = _bindings(element, root, origin, found, value_units)
+    if value_units:
+        found.value_units[name] = value_units
     implementation = element.attrib.get("implementation", "any")
     if implementation not in _IMPLEMENTATION:
         raise ConfigError(
@@ -256,16 +275,15 @@ def _connector_units(element: ET.Element) -> dict[str, str]:
     return units
 
 
-def _bindings(element: ET.Element, root: Path, origin: Path) -> dict[str, Any]:
+def _bindings(
+    element: ET.Element, root: Path, origin: Path, found: _Read, units: dict[str, str]
+) -> dict[str, Any]:
+    """The bound values by name; ``units`` receives the unit of each value that declares one, and
+    ``found`` the unit definitions of the parameter sets."""
     values: dict[str, Any] = {}
     owner = f"{_local(element.tag)} {element.attrib.get('name', '?')!r}"
     for binding in _children(element, "ParameterBindings"):
-        if binding.find(f"{SSD}ParameterMapping") is not None:
-            raise ConfigError(
-                f"{owner}: ssd:ParameterMapping (an .ssm parameter mapping) is not supported: the "
-                f"mapped names and transformations would not reach the FMU; bind the values under "
-                f"the FMU's own names (ssd:ParameterValues or an .ssv file) [{origin}]"
-            )
+        mapping = read_mapping(binding, root, origin, owner, _transform)
         kind = binding.attrib.get("type", "application/x-ssp-parameter-set")
         if kind != "application/x-ssp-parameter-set":
             raise ConfigError(
@@ -282,9 +300,27 @@ def _bindings(element: ET.Element, root: Path, origin: Path) -> dict[str, Any]:
             continue
         if parameter_set is None:
             continue
+        names = set()
         for parameter in parameter_set.iter(f"{SSV}Parameter"):
-            name = parameter.attrib["name"].removeprefix(prefix)
-            values[name] = _value(parameter, name, origin)
+            full = parameter.attrib["name"]
+            names.add(full)
+            value = _value(parameter, full, origin)
+            real = parameter.find(f"{SSV}Real")
+            unit = real.attrib.get("unit") if real is not None else None
+            if mapping is not None and full in mapping:
+                name, value, unit = apply(mapping[full], full, value, unit, where=(owner, origin))
+            else:
+                name = full.removeprefix(prefix)
+            values[name] = value
+            if unit:
+                units[name] = unit
+        unknown = sorted(set(mapping or {}) - names)
+        if unknown:
+            raise ConfigError(
+                f"{owner}: parameter mapping entries {unknown} name no parameter of the parameter set "
+                f"{parameter_set.attrib.get('name', '')!r}; parameters: {sorted(names)} [{origin}]"
+            )
+        found.definitions.update(_units(parameter_set, origin, SSV))
     return values
 
 
@@ -303,10 +339,15 @@ def _value(parameter: ET.Element, name: str, origin: Path) -> Any:
     raise ConfigError(f"parameter {name!r}: no Real, Integer, Boolean or String value [{origin}]")
 
 
-def _connections(system: ET.Element, components: dict[str, Component], origin: Path) -> list[Connection]:
+def _connections(
+    system: ET.Element, components: dict[str, Component], bus: Bus, origin: Path, prefix: str = ""
+) -> list[Connection]:
+    """The connections of ``system``; those through signal dictionaries and nested systems' own
+    connectors go to ``bus``, which routes them. A connection to the top system's own connectors
+    is left out (the task reaches the component's variable by name)."""
     found = []
     for element in _children(system, "Connections"):
-        a, b = element.attrib.get("startElement"), element.attrib.get("endElement")
+        a, b = _element_name(element, "start", prefix), _element_name(element, "end", prefix)
         y, u = element.attrib.get("startConnector"), element.attrib.get("endConnector")
         text = f"{a or ''}.{y} -> {b or ''}.{u}"
         transform = _transform(element, text, origin)
@@ -318,22 +359,26 @@ def _connections(system: ET.Element, components: dict[str, Component], origin: P
                     f"it to a connection between components [{origin}]"
                 )
             continue  # a system-level connector: the variables are reached as component.variable
+        suppress = element.attrib.get("suppressUnitConversion", "false").lower() in ("true", "1")
+        connection = Connection(Endpoint(a, y or ""), Endpoint(b, u or ""), transform, suppress)
+        if bus.add(connection, origin):
+            continue  # through a signal dictionary: routed below
         for side in (a, b):
             if side not in components:
                 raise ConfigError(
                     f"connection {text}: {side!r} is not a component; "
                     f"components: {list(components)} [{origin}]"
                 )
-        suppress = element.attrib.get("suppressUnitConversion", "false").lower() in ("true", "1")
-        found.append(
-            Connection(
-                Endpoint(a, element.attrib["startConnector"]),
-                Endpoint(b, element.attrib["endConnector"]),
-                transform,
-                suppress,
-            )
-        )
+        found.append(connection)
     return found
+
+
+def _element_name(connection: ET.Element, end: str, prefix: str) -> str | None:
+    """The flat name of a connection end's element; a nested system's own connector: the system."""
+    name = connection.attrib.get(f"{end}Element")
+    if name:
+        return prefix + name
+    return prefix[:-1] or None  # "" at the top: the system's own connector
 
 
 def _transform(element: ET.Element, text: str, origin: Path) -> Transform | None:

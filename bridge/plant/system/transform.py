@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from bridge.errors import ConfigError
 from bridge.fmu.vocab import ModelInfo, Variable
-from bridge.plant.system.description import Connection, SystemDescription, Transform, Unit
+from bridge.plant.system.structure import Connection, SystemDescription, Transform, Unit
 
 Convert = Callable[[float], float]
 _FLOATS = ("Float32", "Float64")
@@ -73,14 +73,42 @@ def _unit_name(c: Connection, end: str, var: Variable, system: SystemDescription
 def _definition(
     name: str, component: str, infos: Mapping[str, ModelInfo], system: SystemDescription
 ) -> Unit | None:
-    if name in system.units:
-        return system.units[name]
-    raw = getattr(infos[component], "raw", None)
+    return unit_definition(name, infos[component], system.units)
+
+
+def unit_definition(name: str, info: ModelInfo, units: Mapping[str, Unit]) -> Unit | None:
+    """The definition of unit ``name``: the SSD's (``units``), else the FMU's UnitDefinitions."""
+    if name in units:
+        return units[name]
+    raw = getattr(info, "raw", None)
     for unit in getattr(raw, "unitDefinitions", None) or ():
         if unit.name == name and unit.baseUnit is not None:
             base = unit.baseUnit
             return Unit(name, tuple(int(getattr(base, b, 0) or 0) for b in _BASE), base.factor, base.offset)
     return None
+
+
+def convert_value(
+    value: float, unit: str, var: Variable, info: ModelInfo, units: Mapping[str, Unit], *, what: str
+) -> float:
+    """``value`` given in ``unit`` as a value of ``var`` in its own unit (a parameter binding);
+    refused where the units measure different quantities or one has no definition."""
+    if not var.unit or var.unit == unit:
+        return value
+    given, own = unit_definition(unit, info, units), unit_definition(var.unit, info, units)
+    if given is None or own is None:
+        missing = [n for n, u in ((unit, given), (var.unit, own)) if u is None]
+        raise ConfigError(
+            f"{what}: the value is in {unit!r} and {var.name} of {info.model_name} in {var.unit!r}, and "
+            f"{missing} has no definition (ssd:Units, ssv:Units or the FMU's UnitDefinitions); define "
+            f"it or give the value in {var.unit!r}"
+        )
+    if given.base != own.base:
+        raise ConfigError(
+            f"{what}: the value is in {unit!r} ({_dimension(given)}) and {var.name} of {info.model_name} "
+            f"in {var.unit!r} ({_dimension(own)}): different quantities; give the value in {var.unit!r}"
+        )
+    return (given.factor * value + given.offset - own.offset) / own.factor
 
 
 def _unit_conversion(
