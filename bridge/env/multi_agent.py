@@ -23,7 +23,8 @@ import numpy as np
 from pydantic import ValidationError
 
 from bridge.errors import ConfigError, DependencyMissing
-from bridge.experiment.config import Experiment, RewardSection, as_experiment
+from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.reward import RewardSection
 from bridge.experiment.strict import format_validation_error
 from bridge.experiment.system import AgentSection
 from bridge.plant.base import FloatArray, Plant

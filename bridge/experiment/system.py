@@ -12,6 +12,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+from bridge.experiment.reward import RewardSection
+
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -64,8 +66,6 @@ class AgentSection(_Strict):
     @field_validator("reward")
     @classmethod
     def _reward(cls, value: dict[str, Any]) -> dict[str, Any]:
-        from bridge.experiment.config import RewardSection  # the experiment's own section
-
         RewardSection.model_validate(value)  # its errors, under system.agents.NAME.reward
         return value
 

@@ -41,8 +41,7 @@ _Component, _Link = MasterComponent, MasterLink
 
 @lru_cache(maxsize=1)
 def library() -> Any:
-    """``master_run`` of ``master.c`` (up to n macro steps), built on first use; None where it
-    cannot be built."""
+    """``master_run`` of ``master.c``, built on first use; None where it cannot be built."""
     try:
         library = native_build.load("master")
     except BridgeError as exc:
@@ -105,7 +104,7 @@ class NativeMaster:
             c.major, c.set_real, c.get_real = h["major"], h["set_real"], h["get_real"]
             c.do_step, c.bool_status, c.component = h["do_step"], h["bool_status"], h["component"]
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
-            c.k = model.step_index  # kept here from now on; each call hands it back to the model
+            c.k = model.step_index  # kept here from now on; each step hands it to the model
             c.n_in, c.in_vr = 0, None
             if inputs is not None:
                 vrs, c.n_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0)
@@ -128,7 +127,7 @@ class NativeMaster:
         self.done = done = self._done.value
         if not failed and not any(status):  # the hot path: every component stepped with OK
             for plant, model, c in self._accounts:
-                model._native_sampled(c.k, False)
+                model.step_index = c.k
                 plant.sample += done
             return
         stepped = len(comps)  # components that took part in the last macro step tried
@@ -137,7 +136,7 @@ class NativeMaster:
             if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
         for position, (plant, model, c) in enumerate(self._accounts):
-            model._native_sampled(c.k, False)
+            model.step_index = c.k
             plant.sample += done - (1 if not failed else 0)
             if position < stepped:
                 plant.native_done(c.k, status[position] == TERMINATED)

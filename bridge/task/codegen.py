@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from bridge.experiment.config import RewardTerm
+from bridge.experiment.reward import RewardTerm
 
 Term = Callable[[list[float], list[float], list[float]], float]
 Observe = Callable[[list[float], list[float], list[float]], list[float]]

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import BridgeError
-from bridge.experiment.config import RewardSection
+from bridge.experiment.reward import RewardSection
 from bridge.task.codegen import Term, reward_terms
 
 FloatArray = npt.NDArray[np.float64]

@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from bridge.experiment.config import RewardTerm
+from bridge.experiment.reward import RewardTerm
 from bridge.task.codegen import (
     batch_observation,
     batch_reward_terms,

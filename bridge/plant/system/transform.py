@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 from bridge.errors import ConfigError
 from bridge.fmu.vocab import ModelInfo, Variable
-from bridge.plant.system.description import Connection, SystemDescription, Transform, Unit
+from bridge.plant.system.structure import Connection, SystemDescription, Transform, Unit
 
 Convert = Callable[[float], float]
 _FLOATS = ("Float32", "Float64")
