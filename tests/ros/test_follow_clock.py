@@ -48,6 +48,15 @@ def test_fmu_time_follows_the_clock_at_1x_10x_and_back(loopback: Loopback, probe
             assert clock - STEP_NS < fmu <= clock, (k, clock, fmu)
             assert fmu == origin + expected_steps * STEP_NS
             previous_steps = expected_steps
-        assert len(probe.ask("take", id="out")) == seen  # nothing more came: no step ran ahead
+        assert len(probe.ask("take", id="out", clear=False)) == seen  # nothing more: no step ran ahead
+        # 300 s ahead (15,000 steps, over the 10,000 one tick may take): lined up, not simulated
+        last = ticks[-1]
+        probe.ask("publish", topic="/clock", type=CLOCK, messages=[{"stamp_ns": last + 300 * 10**9}])
+        probe.ask(
+            "publish", topic="/clock", type=CLOCK, messages=[{"stamp_ns": last + 300 * 10**9 + STEP_NS}]
+        )
+        after = probe.ask("wait_count", id="out", count=seen + 1, timeout=30)
+        assert isinstance(after, list) and after[-1]["stamp_ns"] == last + 300 * 10**9 + STEP_NS, after[-1]
+        assert len(probe.ask("take", id="out", clear=False)) == seen + 1  # one step, not 15,001
         stamps = [m["stamp_ns"] for m in outputs]
         assert stamps.count(250_000_000) == 1 and stamps[0] == 0  # one restart, at the jump back
