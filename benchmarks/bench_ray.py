@@ -22,6 +22,7 @@ import argparse
 import os
 
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # read when Ray is imported: keep 127.0.0.1
+import shutil
 import signal
 import statistics
 import tempfile
@@ -143,6 +144,7 @@ def cluster_times() -> list[tuple[str, str]]:
     finally:
         ray.shutdown()
         cluster.shutdown()
+        shutil.rmtree(folder, ignore_errors=True)
     return [
         ("time to first sample (build + 64 steps)", f"{first:.1f} s"),
         ("killed runner serving again", f"{again:.1f} s"),
