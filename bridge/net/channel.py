@@ -1,6 +1,6 @@
 """How a node client waits for its answer: a strategy object, chosen by who waits.
 
-A :class:`~bridge.net.remote.NodeClient` sends an action and then waits for the frame that
+A :class:`~bridge.net.client.NodeClient` sends an action and then waits for the frame that
 answers it; *how* it waits is one of two strategies with one interface (:class:`Waiting`):
 
 - :class:`EventWaiting` (vector envs, the default): Zenoh hands each frame to a callback on its
@@ -30,7 +30,7 @@ from bridge.net.transport import undeclare
 from bridge.net.watchdog import Watchdog
 
 if TYPE_CHECKING:
-    from bridge.net.remote import NodeClient
+    from bridge.net.client import NodeClient
 
 CAPACITY = 64  # frames kept for the waiting thread; older ones are dropped
 

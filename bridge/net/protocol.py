@@ -26,6 +26,11 @@ ACTION's flags may ask the node
 to save its FMU state before stepping (SAVE_STATE) or to go back to that saved state and step
 again from there (RESTORE_STATE): a system's fixed-point iteration repeats a macro step this way
 without a round trip of its own (``bridge.net.node_state``).
+
+A frame flagged SIGNED ends in a 16-byte MAC (keyed BLAKE2b) of everything before it, under the
+session key of the node's lease (``bridge.net.lease``): the holder signs its actions, the node
+signs what it sends in the session, and each side believes only what verifies (:func:`verify`).
+:func:`decode` reads a signed frame without its MAC (recorders and the deployed agent need no key).
 """
 
 from __future__ import annotations

@@ -1,0 +1,231 @@
+"""``NodeClient``: one client's session with one node: stamped, signed actions out, the answer back.
+
+The client has a random id and a liveliness token ``<prefix>/<node>/clients/<id>`` that backs its
+lease and ends it when this session goes away; the reset reply gives it the session key its
+actions are signed with and its answers are checked against (``bridge.net.lease``). How it waits
+for an answer is a strategy (``bridge.net.channel``).
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from bridge.errors import BridgeError, PlantDied, StepTimeout, TransportError
+from bridge.net import protocol as proto
+from bridge.net.channel import EventWaiting, Waiting
+from bridge.net.discovery import query_info, query_target, replier
+from bridge.net.lease import NO_TOKEN, reset_proof
+from bridge.net.transport import undeclare
+from bridge.plant.base import Plant
+
+_log = logging.getLogger(__name__)
+
+
+class NodeClient:
+    """Talks to one node: stamped actions out, the matching frame back.
+
+    The client has a random id, sent with every reset and action, and a liveliness token
+    ``<prefix>/<node>/clients/<id>`` that ends the node's lease when this session goes away.
+    ``waiting`` says how it waits for an answer (``bridge.net.channel``; by default an Event).
+    """
+
+    def __init__(
+        self,
+        session: Any,
+        node: str,
+        *,
+        prefix: str = proto.DEFAULT_PREFIX,
+        timeout_s: float = 5.0,
+        take_over: bool = False,
+        waiting: Waiting | None = None,
+    ) -> None:
+        self.keys = proto.Keys(prefix, node)
+        self.name = node
+        self.session = session
+        self.timeout_s = timeout_s
+        self.take_over = take_over
+        self.client_id = secrets.randbits(63) | 1
+        self.notify: threading.Event | None = None  # set too whenever an answer arrives (vector envs)
+        self.waiting: Waiting = waiting if waiting is not None else EventWaiting()
+        self.want: tuple[int, int] = (-1, -1)
+        self.deadline = 0.0
+        self.frame: proto.Frame | None = None
+        self.alive = True
+        self.key: bytes | None = None  # the session key of the lease, from the reset reply
+        # the token first: it reaches the node before any reset (a lease needs it), and its
+        # declaration has gone through long before the info query's round trip is over
+        token = session.liveliness().declare_token(self.keys.client(self.client_id))
+        try:
+            self.description = query_info(session, self.keys, timeout_s)
+        except BaseException:
+            undeclare(token)
+            raise
+        self.node_zid = str(self.description.get("zid") or "")  # answers come from this session only
+        self.outputs = len(self.description["output_names"])
+        self._declared = [
+            token,
+            self.waiting.start(self),
+            session.liveliness().declare_subscriber(self.keys.alive, self._on_liveliness, history=True),
+        ]
+        self._pub = session.declare_publisher(self.keys.actions)
+        self._declared.append(self._pub)
+
+    def take(self, frame: proto.Frame, payload: bytes) -> bool:
+        """Keep ``frame`` if it answers the last action: its step, from the leased node's session
+        (its MAC is right under the session key), and not another client's reject; whether it did."""
+        if (frame.episode, frame.step) != self.want:
+            return False
+        if frame.kind == proto.REJECT and frame.sim_time_ns not in (0, self.client_id):
+            return False
+        key = self.key
+        if key is not None and not proto.verify(payload, key):
+            return False  # not from the node this client leased: another peer's frame
+        self.frame = frame
+        return True
+
+    def _on_liveliness(self, sample: Any) -> None:
+        import zenoh
+
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self.alive = False
+            self.waiting.wake()  # wake a waiting step at once
+        else:
+            self.alive = True
+
+    def send_action(
+        self, plant: Plant, episode: int, step: int, inputs: Sequence[float], flags: int = 0
+    ) -> None:
+        """Publish the action for ``step``; ``flags``: SAVE_STATE or RESTORE_STATE (rollback)."""
+        if not self.alive:
+            raise self._dead(plant)
+        self.frame = None
+        self.waiting.arm()
+        self.want = (episode, step)
+        self.deadline = time.monotonic() + self.timeout_s
+        action = proto.encode_values(
+            proto.ACTION, episode, step, self.client_id, inputs, flags=flags, key=self.key
+        )
+        self._pub.put(action)
+        self.waiting.sent()
+
+    def ready(self) -> bool:
+        """Whether ``wait`` would return (or raise) at once: an answer, a death or the deadline."""
+        return self.waiting.ready()
+
+    def wait(self, plant: Plant) -> proto.Frame:
+        """The frame that answers the last action; raises if the node died or timed out."""
+        if not self.waiting.wait():
+            raise plant.failure(
+                StepTimeout,
+                f"no answer within {self.timeout_s:g} s",
+                f"no outputs for step {self.want[1]} within {self.timeout_s:g} s",
+                "the node may be overloaded, hung or unreachable; "
+                f"timeout_s sets the limit [{self.keys.base}]",
+            )
+        frame = self.frame
+        if frame is None:
+            raise self._dead(plant)
+        return frame
+
+    def _dead(self, plant: Plant, step: int | None = -1) -> PlantDied:
+        fields: dict[str, Any] = {} if step == -1 else {"step": step}
+        return plant.failure(
+            PlantDied,
+            "the plant died",
+            "the node's liveliness token disappeared",
+            f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.base}]",
+            **fields,
+        )
+
+    def reset(self, plant: Plant, values: dict[str, Any], inputs: list[float]) -> proto.Frame:
+        if not self.alive:
+            raise self._dead(plant, step=None)
+        episode = plant.episode
+        request: dict[str, Any] = {
+            "episode": episode,
+            "values": values,
+            "inputs": inputs,
+            "client": self.client_id,
+            "zid": str(self.session.zid()),
+            "take_over": self.take_over,
+        }
+        if self.key is not None:  # the holder shows it holds the session key
+            request["proof"] = reset_proof(self.key, self.client_id, episode)
+        self.want = (episode, 0)
+        payload = proto.encode_json(request)
+        start = time.monotonic()
+        while True:
+            sent = time.monotonic()
+            refusal = ""
+            replies = self.session.get(
+                self.keys.reset, payload=payload, target=query_target(), timeout=self.timeout_s
+            )
+            for reply in replies:
+                if self.node_zid and replier(reply) not in (None, self.node_zid):
+                    continue  # another session answering for the node: not believed
+                if reply.ok is not None:
+                    return self._session(plant, reply.ok, episode)
+                refusal = reply.err.payload.to_bytes().decode(errors="replace")
+                break
+            if NO_TOKEN in refusal and time.monotonic() - start < 0.5 * self.timeout_s:
+                time.sleep(0.05)  # the node has not seen this client's token yet: ask again
+                continue
+            if refusal:
+                raise self._reset_refused(plant, refusal)
+            break
+        if not self.alive or time.monotonic() - sent < 0.5 * self.timeout_s:
+            # No queryable answered long before the deadline: nothing serves the reset key any more.
+            raise plant.failure(
+                PlantDied,
+                "the plant died",
+                "nothing answers on the node's reset key (the node stopped or died)",
+                f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.reset}]",
+                step=None,
+            )
+        raise plant.failure(
+            StepTimeout,
+            f"no answer within {self.timeout_s:g} s",
+            "the reset request got no reply",
+            f"the node may be overloaded, hung or unreachable [{self.keys.reset}]",
+            step=None,
+        )
+
+    def _session(self, plant: Plant, sample: Any, episode: int) -> proto.Frame:
+        """The step-0 frame of a reset reply, and the session key beside it, both checked."""
+        payload = sample.payload.to_bytes()
+        key = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        try:
+            if len(key) != proto.KEY_SIZE:
+                raise TransportError(f"a session key of {len(key)} bytes, expected {proto.KEY_SIZE}")
+            if not proto.verify(payload, key):
+                raise TransportError("its step-0 frame is not signed with the session key")
+            frame = proto.decode(payload, expected_values=self.outputs)
+            if (frame.kind, frame.episode, frame.step) != (proto.OUTPUTS, episode, 0):
+                raise TransportError(
+                    f"a {proto.KIND_NAMES[frame.kind]} frame for step {frame.step} of episode "
+                    f"{frame.episode}, expected the outputs of step 0 of episode {episode}"
+                )
+        except TransportError as exc:
+            raise TransportError(f"{plant.name}: the reset reply is malformed: {exc}") from None
+        self.key = key
+        return frame
+
+    def _reset_refused(self, plant: Plant, message: str) -> BridgeError:
+        code, _, detail = message.partition(": ")
+        if code == "unhealthy":
+            return plant.failure(PlantDied, "the plant is unhealthy", detail, "restart the node", step=None)
+        return TransportError(f"{plant.name}: the reset was refused ({code}): {detail}")
+
+    def close(self) -> None:
+        self.waiting.close()
+        for entity in reversed(self._declared):
+            try:
+                undeclare(entity)
+            except Exception:
+                _log.debug("undeclare failed", exc_info=True)
+        self._declared = []
