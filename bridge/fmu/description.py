@@ -131,6 +131,7 @@ def _read_description(fmu_path: Path) -> tuple[ModelDescription, tuple[str, ...]
                     f"{fmu_path.name} is a zip archive but not an FMU: it has no modelDescription.xml at "
                     f"its root; re-export the model as an FMU [{fmu_path}]"
                 )
+            unzip.check_description_size(fmu_path, archive.getinfo("modelDescription.xml").file_size)
     try:
         return read_model_description(str(fmu_path), validate=True), ()
     except ValidationError as exc:

@@ -23,6 +23,7 @@ from bridge.errors import FmuLoadError
 MAX_ENTRIES = 100_000
 MAX_BYTES = 2 << 30  # 2 GiB extracted; the largest FMUs in the wild carry a few hundred MB of tables
 MAX_BYTES_ENV = "FMU_BRIDGE_MAX_FMU_BYTES"
+MAX_DESCRIPTION_BYTES = 256 << 20  # the largest exported models' descriptions are tens of MB
 _BLOCK = 1 << 20
 
 
@@ -45,6 +46,16 @@ def check_regular(path: Path) -> None:
         raise FmuLoadError(
             f"{path.name} is {kind}, not an FMU file: expected an .fmu archive or an extracted FMU "
             f"folder [{path}]"
+        )
+
+
+def check_description_size(fmu_path: Path, size: int) -> None:
+    """Raise FmuLoadError if modelDescription.xml declares more than MAX_DESCRIPTION_BYTES: it is
+    read whole into memory and parsed, so a bomb there would cost what it declares."""
+    if size > MAX_DESCRIPTION_BYTES:
+        raise FmuLoadError(
+            f"{fmu_path.name}: modelDescription.xml declares {size:,} bytes; at most "
+            f"{MAX_DESCRIPTION_BYTES:,} are read (a zip bomb, or a corrupt archive) [{fmu_path}]"
         )
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
+from bridge.plant.exit_guard import guard_native_exit
 from bridge.plant.experiment_model import experiment_model
 from bridge.plant.instance import FmuInstancePlant
 
@@ -30,6 +31,7 @@ class LocalFmuPlant(FmuInstancePlant):
         self.timing = t = timing(exp, self.info)
         self.name = f"FMU {self.fmu_path.name} (in-process)"
         self.model = experiment_model(exp, self.fmu_path, t)
+        guard_native_exit()  # an exit() inside the FMU ends the process with code 70, saying so
 
     def current_inputs(self) -> list[float]:
         """The input values the FMU holds now (in ``input_names`` order)."""

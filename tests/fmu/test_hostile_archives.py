@@ -169,3 +169,18 @@ def test_a_symbolic_link_entry_and_a_link_loop_are_refused(tmp_path: Path) -> No
     loop.symlink_to(loop)  # the FMU path itself is a link loop
     with pytest.raises(FmuLoadError, match=r"cannot read FMU|not found"):
         Model(loop)
+
+
+def test_a_model_description_bomb_is_refused_before_it_is_read(tmp_path: Path) -> None:
+    fmu = tmp_path / "m.fmu"
+    compressor = zlib.compressobj(9, zlib.DEFLATED, -15)
+    block = compressor.compress(bytes(CHUNK)) + compressor.flush(zlib.Z_FULL_FLUSH)
+    size = 5 * CHUNK  # 320 MiB of zeros as the model description, in a few hundred KB
+    raw = block * 5 + b"\x03\x00"
+    local, central = _zip_entry("modelDescription.xml", raw, size, 0, 0)
+    end = struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 1, 1, len(central), len(local), 0)
+    fmu.write_bytes(local + central + end)
+    started = time.perf_counter()
+    with pytest.raises(FmuLoadError, match=r"modelDescription.xml declares 335,544,320 bytes; at most"):
+        Model(fmu)
+    assert time.perf_counter() - started < 10

@@ -38,7 +38,7 @@ def start_node(name: str, net: Loopback) -> subprocess.Popen[str]:
 
 
 def reference(seed: int, steps: int) -> list[np.ndarray]:
-    """Env 0's observations in this process: what the node must give, step for step."""
+    """An env's observations in this process: what its node must give, step for step."""
     with FmuEnv(CARTPOLE) as env:
         obs, _ = env.reset(seed=seed)
         out = [obs]
@@ -115,3 +115,52 @@ def test_without_a_replacement_the_error_comes_after_the_wait_with_the_healthy_r
             assert kept[1] is None and kept[0] is not None and len(kept[0][0]) == 4, kept
         finally:
             vec.close()
+
+
+def reference_run(seed: int, steps: int) -> np.ndarray:
+    return np.array(reference(seed, steps))
+
+
+@pytest.mark.slow
+def test_soak_four_nodes_one_killed_and_restarted_no_spare(loopback: Loopback) -> None:
+    names = [f"soak-{i}" for i in range(4)]
+    action = np.full((4, 1), 0.3, dtype=np.float32)
+    with (
+        node_process(CARTPOLE, names[0], loopback),
+        node_process(CARTPOLE, names[1], loopback),
+        node_process(CARTPOLE, names[2], loopback) as victim,
+        node_process(CARTPOLE, names[3], loopback),
+    ):
+        vec = RemoteVecEnv(
+            CARTPOLE,
+            names,
+            session=loopback.session,
+            prefix=loopback.prefix,
+            replace_dead=True,
+            replace_wait_s=120.0,
+            timeout_s=5.0,
+        )
+        restarted = None
+        try:
+            vec.seed(11)
+            seen = [vec.reset()]
+            replaced = []
+            for k in range(300):
+                if k == 100:
+                    victim.send_signal(signal.SIGKILL)
+                    victim.wait(timeout=10)
+                    restarted = start_node(names[2], loopback)
+                obs, _, _, infos = vec.step(action)  # never raises: the victim comes back
+                seen.append(obs)
+                replaced += [
+                    (k, i, info["node_replaced"]) for i, info in enumerate(infos) if "node_replaced" in info
+                ]
+            assert [(i, r["dead"], r["new"]) for _, i, r in replaced] == [(2, names[2], names[2])], replaced
+            assert replaced[0][0] == 100 and vec.node_names == names
+            trajectories = np.array(seen)
+            for i in (0, 1, 3):  # the healthy envs: every transition exact
+                np.testing.assert_array_equal(trajectories[:, i], reference_run(11 + i, 300))
+        finally:
+            vec.close()
+            if restarted is not None:
+                stop_process(restarted, timeout_s=10)

@@ -168,3 +168,39 @@ def test_a_stopped_node_leaves_no_fmu_process(tmp_path: Path, loopback: Loopback
         while time.monotonic() < deadline and not all(gone(p.pid) for p in plants):
             time.sleep(0.05)
         assert all(gone(p.pid) for p in plants), [p.pid for p in plants if not gone(p.pid)]
+
+
+IN_PROCESS = textwrap.dedent(
+    """
+    import sys
+    import numpy as np
+    from bridge.env import FmuEnv
+    from bridge.experiment.config import load_experiment
+
+    env = FmuEnv(load_experiment(sys.argv[1]))
+    env.reset(seed=1, options={"scenario": sys.argv[2]})
+    for _ in range(5):
+        env.step(np.zeros(1, dtype=np.float32))
+    print("finished")
+    """
+)
+
+
+@pytest.mark.parametrize("scenario", ["exits", "fine"])
+def test_an_fmu_calling_exit_in_process_does_not_end_it_silently_with_code_0(
+    typed: Path, scenario: str
+) -> None:
+    run = subprocess.run(
+        [sys.executable, "-c", IN_PROCESS, str(typed), scenario],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    if scenario == "fine":  # Python's own shutdown: the guard stays silent
+        assert run.returncode == 0 and "finished" in run.stdout and "exit()" not in run.stderr, run.stderr
+        return
+    assert run.returncode == 70, (run.returncode, run.stdout, run.stderr)
+    assert "finished" not in run.stdout
+    assert "native code (an FMU loaded in this process) called exit()" in run.stderr
+    assert "(exit status 0)" in run.stderr
