@@ -235,13 +235,13 @@ def trace_figure(result: EvaluationResult, scenario: str, spec: PlotSpec) -> Any
             _series(main, traces[0], agent, spec, first=i == 0)
             for name, ax in zoomed.items():
                 trace = traces[0]
-                if name in trace.inputs:
-                    n = ZOOM_SAMPLES
+                if name in trace.inputs and len(trace.inputs[name]):
                     u = trace.inputs[name]
+                    n = min(ZOOM_SAMPLES, len(u))  # an episode may end sooner
                     held = np.append(u[:n], u[n - 1])  # the last sample held to its end
                     ax.step(trace.time_s[: n + 1], held, where="post", color=spec.colours[agent], label=agent)
                     ax.set_ylabel(spec.label(name), fontsize=8)
-                    ax.set_title(f"{name}: the first {n} samples", fontsize=8)
+                    ax.set_title(f"{name}: the first {ZOOM_SAMPLES} samples", fontsize=8)
     for ax in axes:
         ax.grid(alpha=0.3)
     seed = next(

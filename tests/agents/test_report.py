@@ -62,3 +62,14 @@ def test_metric_axes_have_units_and_the_figure_one_legend(result: EvaluationResu
     labels = [ax.get_ylabel() for ax in fig.axes]
     assert labels and all("[" in label and label.endswith("]") for label in labels), labels
     assert "return [sum of rewards]" in labels and "length [samples]" in labels
+
+
+def test_the_zoom_panel_takes_episodes_shorter_than_itself() -> None:
+    """The demo's case: the first agent runs past the zoom's 50 samples, another falls sooner."""
+    pole = example_experiment("cartpole_continuous")
+    result = evaluate(["random", "zero"], pole, episodes=1, seed=0)
+    lengths = {r["agent"]: r["length"] for r in result.rows}
+    assert lengths["random"] > 50 > lengths["zero"], lengths  # the case this test is about
+    fig = trace_figure(result, "nominal", PlotSpec.of(load_experiment(pole), result))
+    zoom = next(ax for ax in fig.axes if ax.get_title() == "force: the first 50 samples")
+    assert sorted(len(line.get_xdata()) for line in zoom.get_lines()) == [lengths["zero"] + 1, 51]
