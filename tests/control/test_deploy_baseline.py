@@ -3,6 +3,9 @@ inputs are the baseline's, step by step, and it keeps the cart-pole up for a who
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -83,3 +86,29 @@ def test_lqr_over_zenoh_keeps_a_cartpole_node_up_for_a_whole_episode(loopback: L
     theta = np.array([f.values[2] for f in episode])
     assert np.abs(theta).max() < 0.06  # from 0.05 rad the pole is brought up and kept there
     assert np.abs(theta[-100:]).max() < 0.01
+
+
+def test_a_deployed_baseline_needs_no_torch() -> None:
+    """In a process where importing torch or stable-baselines3 fails, the lqr designs and acts."""
+    blocker = Path(__file__).resolve().parents[1] / "agents" / "torch_free"
+    code = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from agents.deploy import deployment_experiment\n"
+        "from agents.runtime import load_policy\n"
+        "from bridge.env.fmu_env import FmuEnv\n"
+        f"experiment, _ = deployment_experiment(Path('lqr'), Path({str(CARTPOLE)!r}))\n"
+        "policy = load_policy(Path('lqr'), 'baseline', experiment)\n"
+        "env = FmuEnv(experiment)\n"
+        "obs, _ = env.reset(seed=0)\n"
+        "policy.reset(env.task, 0)\n"
+        "for _ in range(50):\n"
+        "    obs, _, terminated, _, _ = env.step(policy.act(obs, env.task.signal_dict()))\n"
+        "    assert not terminated\n"
+        "print('torch' in sys.modules, 'stable_baselines3' in sys.modules)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(blocker), os.environ.get("PYTHONPATH", "")])}
+    command = [sys.executable, "-c", code]
+    done = subprocess.run(command, check=False, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip() == "False False"

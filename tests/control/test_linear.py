@@ -60,7 +60,7 @@ def test_dc_motor_linearisation_and_sampling_match_the_closed_form() -> None:
     assert lin.states == ("current", "omega")
     np.testing.assert_allclose(lin.a, a, rtol=1e-6)
     np.testing.assert_allclose(lin.b, bu, rtol=1e-6, atol=1e-9)
-    np.testing.assert_allclose(lin.c, [[0, 1], [k, 0]], rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(lin.c, np.array([[0, 1], [k, 0]], dtype=float), rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(lin.f0, [(6.0 - k * 50.0) / ind, -b * 50.0 / j], rtol=1e-9)
     sampled = lin.discretize(0.01)
     np.testing.assert_allclose(sampled.a, expm(a * 0.01), rtol=1e-8, atol=1e-12)
@@ -88,7 +88,9 @@ def test_vehicle_linearisation_is_the_linear_single_track_model() -> None:
         ]
     )
     np.testing.assert_allclose(lin.a, expected, rtol=1e-6, atol=1e-8)
-    np.testing.assert_allclose(lin.b, [[0, 0], [0, -v], [0, 0], [0, 0], [1 / tau, 0]], rtol=1e-6, atol=1e-8)
+    np.testing.assert_allclose(
+        lin.b, np.array([[0, 0], [0, -v], [0, 0], [0, 0], [1 / tau, 0]], dtype=float), rtol=1e-6, atol=1e-8
+    )
 
 
 def test_unknown_state_and_co_simulation_only_fmu_are_clear_errors() -> None:
