@@ -286,8 +286,9 @@ def _close_ref(ref: weakref.ReferenceType[RecordMcap]) -> None:
 
 def slug(text: str) -> str:
     """``text`` as a file name that needs no quoting: letters, digits, ``.``, ``_`` and ``-`` kept,
-    every other run of characters (spaces, ``:``, ``/``) one ``-`` (``"ball tty" -> "ball-tty"``)."""
-    return re.sub(r"[^A-Za-z0-9._]+", "-", text).strip("-.") or "run"
+    every other run of characters (spaces, ``:``, ``/``) one ``-`` (``"ball tty" -> "ball-tty"``);
+    a sign is kept, so ``constant:-10`` and ``constant:10`` stay apart."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "-", text).strip("-.") or "run"
 
 
 def default_run_name(env: gym.Env[Any, Any]) -> str:

@@ -40,6 +40,8 @@ def test_slug_makes_plain_file_names() -> None:
     assert slug("ball tty") == "ball-tty"
     assert slug("policy:constant:2.5__nominal") == "policy-constant-2.5__nominal"
     assert slug("a / b") == "a-b" and slug("  ") == "run"
+    # the demo's two constant baselines: a sign is not a separator
+    assert slug("constant:-10__nominal") == "constant--10__nominal" != slug("constant:10__nominal")
 
 
 def test_generated_run_and_recording_names_have_no_spaces(
