@@ -1,5 +1,5 @@
 /* An exit() from native code (an FMU) while Python runs is not a normal end: say so, and end with
- * a non-zero code. Python's own shutdown disarms the guard first (bridge/plant/exit_guard.py). */
+ * a non-zero code. Python's own shutdown disarms the guard first (bridge/fmu/exit_guard.py). */
 #define _DEFAULT_SOURCE
 #include <stdio.h>
 #include <stdlib.h>

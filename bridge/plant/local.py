@@ -11,7 +11,7 @@ from __future__ import annotations
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
-from bridge.plant.exit_guard import guard_native_exit
+from bridge.fmu.exit_guard import guard_native_exit
 from bridge.plant.experiment_model import experiment_model
 from bridge.plant.instance import FmuInstancePlant
 

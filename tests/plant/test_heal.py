@@ -18,7 +18,9 @@ from bridge.experiment.config import Experiment, parse_experiment
 from bridge.experiment.validate import resolve_fmu
 from bridge.experiment.yaml_text import parse_yaml
 from bridge.fmu import read_model_info
+from bridge.experiment.validate import timing
 from bridge.net.requests import BadRequest, RequestRules
+from bridge.net.served import served_by
 from bridge.plant.isolated import IsolatedFmuPlant
 from bridge.plant.local import LocalFmuPlant
 
@@ -63,7 +65,8 @@ def test_reset_values_are_bounded_by_the_experiments_own_ranges() -> None:
         )
     )
     info = read_model_info(resolve_fmu(experiment))
-    rules = RequestRules(experiment, info.variables, ["real_in"])
+    rules = RequestRules(served_by(experiment, info, timing(experiment, info)), info.variables)
+    assert rules.input_names == ("real_in",)
     assert rules.values({"real_param": 2.0, "gain": 2.5}) == {"real_param": 2.0, "gain": 2.5}
     assert rules.values({"real_param": 5000.0}) == {"real_param": 5000.0}  # a scenario sets it
     with pytest.raises(
