@@ -130,7 +130,12 @@ def test_every_module_the_readme_names_exists() -> None:
         else:
             missing.append(name)
             continue
-        module = __import__(".".join(parts[:cut]), fromlist=["_"])
+        try:
+            module = __import__(".".join(parts[:cut]), fromlist=["_"])
+        except ModuleNotFoundError as exc:  # it exists; an optional stack (Ray, rclpy) is not installed
+            if (exc.name or "").split(".")[0] in ("bridge", "agents"):
+                raise
+            continue
         obj = module
         for attr in parts[cut:]:
             obj = getattr(obj, attr, None)

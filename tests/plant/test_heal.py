@@ -15,10 +15,9 @@ import pytest
 from bridge.env import FmuEnv
 from bridge.errors import BridgeError
 from bridge.experiment.config import Experiment, parse_experiment
-from bridge.experiment.validate import resolve_fmu
+from bridge.experiment.validate import resolve_fmu, timing
 from bridge.experiment.yaml_text import parse_yaml
 from bridge.fmu import read_model_info
-from bridge.experiment.validate import timing
 from bridge.net.requests import BadRequest, RequestRules
 from bridge.net.served import served_by
 from bridge.plant.isolated import IsolatedFmuPlant
