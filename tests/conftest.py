@@ -327,7 +327,7 @@ def pytest_terminal_summary(
     written = config.stash.get(_RELIABILITY, None)
     if written is not None:
         terminalreporter.write_line(
-            f"reliability counts: {written} (python tests/reliability_table.py --commit {written.parent})"
+            f"reliability counts: {written} (FMU_BRIDGE_WRITE_RELIABILITY=1 writes them to docs/ instead)"
         )
 
 
