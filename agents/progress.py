@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import math
-import sys
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -41,11 +40,15 @@ def rounded_timesteps(model: Any, timesteps: int) -> tuple[int, str]:
     return math.ceil(timesteps / unit) * unit, f"whole {what}"
 
 
-def announce(model: Any, timesteps: int) -> int:
-    """Say on stderr when SB3 will run more steps than asked; the steps it will run."""
+def announce(model: Any, timesteps: int, console: Console | None = None) -> int:
+    """Say on ``console`` (stderr, where the bar draws) when SB3 will run more steps than asked;
+    the steps it will run."""
     really, why = rounded_timesteps(model, timesteps)
     if really != timesteps:
-        print(f"training {really:,} steps: {timesteps:,} rounded up to {why}", file=sys.stderr)
+        out = console or Console(stderr=True)
+        out.print(
+            f"training {really:,} steps: {timesteps:,} rounded up to {why}", highlight=False, soft_wrap=True
+        )
     return really
 
 

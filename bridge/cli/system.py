@@ -7,17 +7,24 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
-from rich.console import Console
 from rich.table import Table
 
+from bridge.cli.options import (
+    ConnectOpt,
+    ListenOpt,
+    PrefixOpt,
+    ZenohConfigOpt,
+    ZenohModeOpt,
+    console,
+    err_console,
+    zenoh_options,
+)
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.experiment.system import is_system_file
 
 system_app = typer.Typer(
     help="Systems of coupled FMUs: inspect, check, simulate, serve.", no_args_is_help=True
 )
-console = Console()
-err_console = Console(stderr=True)
 ExperimentArg = Annotated[
     Path, typer.Argument(help="An experiment file with a system: section, or an .ssp/.ssd itself.")
 ]
@@ -25,14 +32,6 @@ StepSizeOpt = Annotated[
     float | None,
     typer.Option("--step-size", help="Macro step [s] of an .ssp/.ssd (default: its DefaultExperiment)."),
 ]
-ZenohConfigOpt = Annotated[Path | None, typer.Option("--zenoh-config", help="A Zenoh JSON5 config.")]
-ListenOpt = Annotated[list[str] | None, typer.Option("--listen", help="Zenoh endpoint to listen on.")]
-ConnectOpt = Annotated[list[str] | None, typer.Option("--connect", help="Zenoh endpoint to connect to.")]
-ZenohModeOpt = Annotated[
-    str | None,
-    typer.Option("--zenoh-mode", help="client or peer; default: client when only --connect is given."),
-]
-PrefixOpt = Annotated[str, typer.Option("--prefix", help="Key expression prefix of the nodes.")]
 NoFeedthroughOpt = Annotated[
     list[str] | None,
     typer.Option(
@@ -86,12 +85,10 @@ def _remote(
 ) -> Any:
     """Node components reached with the command's Zenoh options (a session only if one is used)."""
     from bridge.net.system_node import NodeComponents
-    from bridge.net.transport import ZenohOptions, session_mode
 
     if zenoh_config is None and not listen and not connect and zenoh_mode is None:
         return NodeComponents(prefix=prefix)
-    mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
-    options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
+    options = zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode)
     return NodeComponents(options=options, prefix=prefix)
 
 
