@@ -23,9 +23,8 @@ import pytest
 
 from bridge.env import FmuEnv
 from bridge.errors import PlantDied, StepTimeout
-from bridge.experiment.config import load_experiment
-from bridge.plant.isolated import IsolatedFmuPlant
 from tests.conftest import Loopback, node_process
+from tests.plant.test_isolated import isolated_env
 
 TYPED = """\
 model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 5.0}
@@ -47,11 +46,6 @@ def typed(tmp_path_factory: pytest.TempPathFactory) -> Path:
     path = tmp_path_factory.mktemp("contains") / "typed.yaml"
     path.write_text(TYPED)
     return path
-
-
-def isolated_env(path: Path, **kwargs: float) -> FmuEnv:
-    experiment = load_experiment(path)
-    return FmuEnv(experiment, plant=IsolatedFmuPlant(experiment, **kwargs))  # type: ignore[arg-type]
 
 
 def steps(env: FmuEnv, scenario: str, n: int) -> None:
