@@ -7,7 +7,7 @@ import subprocess
 import sys
 import tarfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -40,6 +40,23 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> No
         if time.monotonic() > deadline:
             pytest.fail(f"{what}: not within {timeout_s} s")
         time.sleep(0.01)
+
+
+def run_pytest(
+    args: Sequence[str], basetemp: Path, env: Mapping[str, str], timeout_s: float
+) -> subprocess.CompletedProcess[str]:
+    """A pytest session over ``args`` in a fresh interpreter from the repository's root (its own
+    ``--basetemp``, no cache), for what only a new process shows: environment variables read at
+    import, end-of-session hooks."""
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--basetemp", str(basetemp), *args],
+        cwd=Path(__file__).resolve().parents[1],
+        env=dict(env),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=False,
+    )
 
 
 def example_fmu(name: str, fmi_version: str, interface: str) -> Path:

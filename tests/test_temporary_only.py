@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 from pathlib import Path
 
-from reliability_table import RUN_DIR, WRITE_DOCS, counts_dir
+from tests.conftest import run_pytest
+from tests.reliability_table import RUN_DIR, WRITE_DOCS, counts_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -26,24 +25,6 @@ def test_a_test_session_rewrites_nothing_under_docs(tmp_path: Path) -> None:
     """A whole pytest session, with its end-of-session hooks, in a subprocess."""
     before = _snapshot(ROOT / "docs")
     env = {k: v for k, v in os.environ.items() if k not in (WRITE_DOCS, RUN_DIR)}
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-q",
-            "-p",
-            "no:cacheprovider",
-            "--basetemp",
-            str(tmp_path / "t"),
-            "tests/task/test_codegen.py",
-        ],
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=300,
-        check=False,
-    )
+    run = run_pytest(["tests/task/test_codegen.py"], tmp_path / "t", env, timeout_s=300)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
     assert _snapshot(ROOT / "docs") == before

@@ -15,6 +15,8 @@ from pathlib import Path
 import pytest
 from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
+from tests.conftest import run_pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 BIT_FOR_BIT = [
     "tests/task/test_codegen.py",
@@ -54,25 +56,7 @@ def test_bit_identity_holds_with_simd_groups_disabled(group: str, tmp_path: Path
         [sys.executable, "-c", probe, *names], env=env, capture_output=True, text=True, timeout=60, check=True
     )
     assert json.loads(seen.stdout) == dict.fromkeys(names, False), seen.stdout + seen.stderr
-    run = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pytest",
-            "-q",
-            "-p",
-            "no:cacheprovider",
-            "--basetemp",
-            str(tmp_path / "t"),
-            *BIT_FOR_BIT,
-        ],
-        check=False,
-        cwd=ROOT,
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
+    run = run_pytest(BIT_FOR_BIT, tmp_path / "t", env, timeout_s=900)
     assert run.returncode == 0, (
         f"with NPY_DISABLE_CPU_FEATURES={env['NPY_DISABLE_CPU_FEATURES']!r}:\n{run.stdout[-4000:]}"
     )
