@@ -19,6 +19,7 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.experiment.examples import example_experiment
 from tests.env.episodes import episodes_next_step, replay_in_fmu_env
+from tests.env.test_batch_env import TYPED  # the typed model with a step that fails
 
 N = 4
 STEPS = 400
@@ -120,18 +121,6 @@ def test_same_step_read_as_next_step_shows_the_mismatch() -> None:
         env.close()
     with pytest.raises(AssertionError):
         replay_in_fmu_env(exp, seed=3, episodes=per_env[0])
-
-
-TYPED = """\
-model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 2.0}
-actions: {inputs: [real_in], low: {real_in: -1}, high: {real_in: 1}}
-observations: {outputs: [real_out, real_integral]}
-reward: {terms: [{alive: 1.0}]}
-scenarios:
-  fine: {}
-  breaks: {parameters: {fail_at_step: 3}}
-schedule: {mode: fixed}
-"""
 
 
 def test_next_step_a_plant_error_truncates_that_env_only_and_it_resets_on_the_next_step(
