@@ -15,6 +15,12 @@ thread where the process may ask for it (the table says whether it was granted),
 for the Zenoh threads of the node and of the subscriber (a priority only root or CAP_SYS_NICE
 gets; on a busy machine the frame waits in normal-priority threads otherwise).
 
+Two floors are measured beside the node with the same subscriber and the same ``hybrid`` pacing,
+so that what the node adds can be told from what the machine and the transport cost:
+``floor zenoh`` is a bare process that only publishes a frame of the node's size on a Zenoh key
+from the same driver (no FMU, no node), and ``floor pipe`` a bare process that writes the frame to
+an OS pipe that a thread here reads (no Zenoh: the cost of waking another process's thread).
+
 Target on a quiet machine: |deviation| p99 <= 50 us, max <= 500 us without root.
 """
 
@@ -58,6 +64,34 @@ print("serving", node._driver.scheduling, node.counters["overruns"], flush=True)
 sys.stdin.readline()
 print("overruns", node.counters["overruns"], flush=True)
 node.close()
+"""
+FLOOR = """
+import os, sys, threading
+from collections import Counter
+from bridge.net.realtime import Pacing, RealtimeDriver
+
+kind, period_s, target, size = sys.argv[1], float(sys.argv[2]), sys.argv[3], int(sys.argv[4])
+payload = bytes(size)
+if kind == "zenoh":
+    from bridge.net.transport import ZenohOptions, open_session
+    session = open_session(ZenohOptions(connect=(target,)))
+    publisher = session.declare_publisher(sys.argv[5])
+    send = lambda: publisher.put(payload)
+else:
+    fd = int(target)
+    send = lambda: os.write(fd, payload)
+
+def tick():
+    send()
+    return True
+
+counters = Counter()
+driver = RealtimeDriver(tick, period_s, name="floor", counters=counters, pacing=Pacing())
+driver.start()
+print("serving", driver.scheduling, flush=True)
+sys.stdin.readline()
+driver.stop()
+print("overruns", counters["overruns"], flush=True)
 """
 MODES = {"sleep": ("0", "-"), "hybrid": ("300", "-"), "fifo": ("300", "50")}
 
@@ -112,16 +146,18 @@ def _measure(
         node.stdin.close()
         node.wait(timeout=20)
         sub.undeclare()
-    window = stamps[start:end]
-    period_ns = 0.02 / rate * 1e9
-    intervals = [b - a for a, b in itertools.pairwise(window)]
+    return _row(mode, scheduling, stamps[start:end], 0.02 / rate * 1e9, overruns)
+
+
+def _row(label: str, scheduling: str, stamps: list[int], period_ns: float, overruns: str) -> tuple[str, ...]:
+    intervals = [b - a for a, b in itertools.pairwise(stamps)]
     deviations = sorted(abs(i - period_ns) for i in intervals)
 
     def at(q: float) -> float:
         return deviations[min(len(deviations) - 1, int(q * len(deviations)))] / 1e3
 
     return (
-        mode,
+        label,
         scheduling,
         str(len(intervals)),
         f"{statistics.median(intervals) / 1e3:.1f}",
@@ -130,6 +166,57 @@ def _measure(
         f"{deviations[-1] / 1e3:.0f}",
         overruns,
     )
+
+
+def floor(kind: str, endpoint: str, session: object, *, rate: float, seconds: float) -> tuple[str, ...]:
+    """A bare process publishing a node-sized frame from the same driver and pacing (``zenoh``:
+    on a Zenoh key this process subscribes to; ``pipe``: into an OS pipe a thread here reads)."""
+    period_s = 0.02 / rate
+    size = 32 + 8 * 4  # header, count and the cart-pole's four outputs
+    stamps: list[int] = []
+    extra: list[str] = []
+    sub = None
+    reader = None
+    pass_fds: tuple[int, ...] = ()
+    if kind == "zenoh":
+        key = f"rt_floor_{uuid.uuid4().hex[:8]}"
+        sub = session.declare_subscriber(key, lambda _sample: stamps.append(time.monotonic_ns()))  # type: ignore[attr-defined]
+        target, extra = endpoint, [key]
+    else:
+        read_fd, write_fd = os.pipe()
+        target, pass_fds = str(write_fd), (write_fd,)
+
+        def read() -> None:
+            while os.read(read_fd, size):
+                stamps.append(time.monotonic_ns())
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+    cmd = [sys.executable, "-c", FLOOR, kind, repr(period_s), target, str(size), *extra]
+    proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, pass_fds=pass_fds)
+    for fd in pass_fds:  # the child's now: the reader sees the end of the pipe when the child exits
+        os.close(fd)
+    assert proc.stdout is not None and proc.stdin is not None
+    try:
+        line = proc.stdout.readline().split()
+        if not line or line[0] != "serving":
+            raise RuntimeError(f"the floor process did not start ({line})")
+        time.sleep(1.0)  # warm-up, as for the node
+        start = len(stamps)
+        threading.Event().wait(seconds)
+        end = len(stamps)
+        proc.stdin.write("\n")
+        proc.stdin.flush()
+        overruns = proc.stdout.readline().split()[-1]
+    finally:
+        proc.stdin.close()
+        proc.wait(timeout=20)
+        if sub is not None:
+            sub.undeclare()
+        if reader is not None:
+            reader.join(timeout=5)
+            os.close(read_fd)
+    return _row(f"floor {kind}", " ".join(line[1:]), stamps[start:end], period_s * 1e9, overruns)
 
 
 def driver_alone(mode: str, seconds: float, period_s: float) -> tuple[str, ...]:
@@ -151,22 +238,7 @@ def driver_alone(mode: str, seconds: float, period_s: float) -> tuple[str, ...]:
     driver.start()
     time.sleep(seconds)
     driver.stop()
-    intervals = [b - a for a, b in itertools.pairwise(stamps[100:])]
-    deviations = sorted(abs(i - period_s * 1e9) for i in intervals)
-
-    def at(q: float) -> float:
-        return deviations[min(len(deviations) - 1, int(q * len(deviations)))] / 1e3
-
-    return (
-        mode,
-        driver.scheduling,
-        str(len(intervals)),
-        f"{statistics.median(intervals) / 1e3:.1f}",
-        f"{at(0.99):.0f}",
-        f"{at(0.999):.0f}",
-        f"{deviations[-1] / 1e3:.0f}",
-        str(counters["overruns"]),
-    )
+    return _row(mode, driver.scheduling, stamps[100:], period_s * 1e9, str(counters["overruns"]))
 
 
 def main() -> None:
@@ -175,6 +247,7 @@ def main() -> None:
     parser.add_argument("--rate", type=float, default=20.0)
     parser.add_argument("--modes", default="sleep,hybrid,fifo")
     parser.add_argument("--port", type=int, default=17741)
+    parser.add_argument("--no-floors", action="store_true", help="skip the bare Zenoh and pipe floors")
     args = parser.parse_args()
     endpoint = f"tcp/127.0.0.1:{args.port}"
     experiment = example_experiment("cartpole_continuous")
@@ -184,6 +257,9 @@ def main() -> None:
         for mode in args.modes.split(","):
             rows.append(measure(experiment, endpoint, session, mode, rate=args.rate, seconds=args.seconds))
             wait_connected(session, timeout_s=0.1)
+        if not args.no_floors:
+            for kind in ("zenoh", "pipe"):
+                rows.append(floor(kind, endpoint, session, rate=args.rate, seconds=args.seconds))
     finally:
         session.close()  # type: ignore[attr-defined]
     period_us = 0.02 / args.rate * 1e6
