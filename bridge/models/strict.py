@@ -37,7 +37,8 @@ _VARIABLES: Final = f"""
       description="Array size: the number of elements of u and x (set it in configuration mode)"/>
     <Float64 name="k" valueReference="2" causality="parameter" variability="fixed" start="{K_START}"
       description="Decay rate" unit="1/s"/>
-    <Float64 name="u" valueReference="3" causality="input" start="1 2 3" description="Input array, u_i = i until set">
+    <Float64 name="u" valueReference="3" causality="input" start="1 2 3"
+      description="Input array, u_i = i until set">
       <Dimension valueReference="1"/>
     </Float64>
     <Float64 name="x" valueReference="4" causality="local" variability="continuous" initial="exact"

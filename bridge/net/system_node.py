@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, parse_experiment
-from bridge.experiment.validate import Timing
+from bridge.experiment.validate import Timing, with_elements
 from bridge.fmu.vocab import ModelInfo, info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.remote import SERVE_HINT, RemotePlant
@@ -57,7 +57,8 @@ def _signals(
     task = task_signal_names(experiment, _known_names(experiment, system, name, info))
     ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
     ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
-    outs = [v.name for v in info.by_causality("output") if v.is_numeric]
+    # FMI 3.0 arrays are served element by element (y[1,1], y[1,2], ...): the names a system binds
+    outs = [e for v in info.by_causality("output") if v.is_numeric for e in v.element_names()]
     outs += [c.source.variable for c in system.connections if c.source.component == name]
     outs += [e.variable for e in _ends(task.outputs, system, "observations") if e.component == name]
     return list(dict.fromkeys(ins)), list(dict.fromkeys(outs))
@@ -121,7 +122,7 @@ def component_served(experiment: Experiment, system: SystemDescription, name: st
             f"system.components.{name}.node: a component served by a node needs at least one input "
             f"(connected or driven by the task); {name!r} has none: run it in this process{system.where}"
         )
-    low, high = declared_ranges(info.variables, ins)
+    low, high = declared_ranges(with_elements(info.variables), ins)
     prefix = f"{name}."  # what the system's experiment sets on this component, by its own names
     on_component = {prefix + k: v for k, v in info.variables.items()}
     settable = {n[len(prefix) :] for n in declared_names(experiment, on_component)}
