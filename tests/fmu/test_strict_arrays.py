@@ -262,3 +262,115 @@ def test_system_with_an_array_component_in_a_node_equals_closed_form(
             rows = [plant.reset({}, [1.0, 2.0, 3.0])]
             rows += [plant.step([1.0, 2.0, 3.0]) for _ in range(STEPS)]
     np.testing.assert_allclose(np.asarray(rows)[1:], system_closed_form()[1:], rtol=1e-12, atol=1e-12)
+
+
+# -- structural parameters -----------------------------------------------------------------------
+
+
+def sized_experiment(fmu: Path, tmp_path: Path, n: int, **model: Any) -> dict[str, Any]:
+    inputs = [f"u[{i}]" for i in range(1, n + 1)]
+    outputs = [f"y[{r},{i}]" for r in (1, 2) for i in range(1, n + 1)] + ["total"]
+    data = {
+        "model": {
+            "fmu": str(fmu),
+            "step_size": H,
+            "sampling_time": H,
+            "episode_duration": 3.0,
+            "structural_parameters": {"n": n},
+            **model,
+        },
+        "actions": {
+            "inputs": inputs,
+            "low": dict.fromkeys(inputs, 0.0),
+            "high": {name: 2.0 * i for i, name in enumerate(inputs, start=1)},
+        },
+        "observations": {"outputs": outputs},
+        "reward": {"terms": [{"alive": 1.0}]},
+    }
+    (tmp_path / "sized.yaml").write_text(yaml.safe_dump(data))
+    return data
+
+
+def sized_episode(env: Any, n: int) -> np.ndarray:
+    obs, _ = env.reset(seed=0)
+    rows = [obs]
+    for _ in range(STEPS):
+        rows.append(env.step(np.zeros(n, dtype=np.float32))[0])
+    return np.asarray(rows, dtype=np.float64)
+
+
+def test_a_structural_parameter_sizes_the_arrays_in_configuration_mode(fmu: Path) -> None:
+    with Model(fmu, structural_parameters={"n": 5}, reset_policy="reset") as model:
+        assert model.info.variables["y"].dimensions == (2, 5) and model.info.number_of_states == 5
+        model.initialize()
+        u = model.signals([f"u[{i}]" for i in range(1, 6)], writable=True)
+        y = model.signals([*model.info.variables["y"].element_names(), "total"])
+        native = NativeSample.create(model, u, y, 1)
+        assert native is not None
+        for _ in range(2):  # an fmi reset returns n to its start: the model configures it again
+            model.reset()
+            native.refresh()
+            np.testing.assert_allclose(
+                native([1.0, 2.0, 3.0, 4.0, 5.0]), closed_form(TIMES[1:2], 5)[0], rtol=1e-12
+            )
+    with Model(fmu) as default:
+        assert default.info.variables["u"].dimensions == (3,)  # the start value of n
+
+
+@pytest.mark.parametrize("interface", ["cs", "me"])
+def test_structural_parameters_from_the_experiment_on_the_env(
+    fmu: Path, tmp_path: Path, interface: str
+) -> None:
+    exp = parse_experiment(
+        sized_experiment(fmu, tmp_path, 5, interface=interface), source=tmp_path / "x.yaml"
+    )
+    with FmuEnv(exp) as env:
+        assert env.observation_space.shape == (11,)
+        rows = sized_episode(env, 5)
+    tolerance = 1e-6 if interface == "cs" else 2e-5
+    expected = closed_form(TIMES, 5)
+    # at t0 the inputs hold 0: the declared start (3 values) does not apply to 5 elements
+    np.testing.assert_allclose(rows[0, 5:10], -expected[0, :5], rtol=1e-7)
+    np.testing.assert_allclose(rows[1:], expected[1:], rtol=tolerance, atol=tolerance)
+    np.testing.assert_allclose(rows[0, :5], expected[0, :5], rtol=1e-7)
+
+
+def test_structural_parameters_on_the_batch_env_and_a_node(fmu: Path, tmp_path: Path, loopback: Any) -> None:
+    from bridge.env import RemoteFmuEnv
+    from tests.conftest import node_process
+
+    sized_experiment(fmu, tmp_path, 4)
+    path = tmp_path / "sized.yaml"
+    env = BatchEnv(path, 2, native=True)
+    try:
+        rows = [env.reset_all([0, 1])[0]]
+        rows += [env.step(np.zeros((2, 4), dtype=np.float32))[0] for _ in range(STEPS)]
+    finally:
+        env.close()
+    every = np.asarray(rows, dtype=np.float64)
+    for i in range(2):  # from the first step on: at t0 the inputs hold 0 (no start for 4 elements)
+        np.testing.assert_allclose(every[1:, i], closed_form(TIMES, 4)[1:], rtol=1e-6, atol=1e-6)
+    with node_process(path, "sized", loopback):
+        remote = RemoteFmuEnv(path, "sized", session=loopback.session, prefix=loopback.prefix)
+        try:
+            np.testing.assert_array_equal(sized_episode(remote, 4), every[:, 0].astype(np.float32))
+        finally:
+            remote.close()
+
+
+def test_structural_parameters_refused_where_they_do_not_belong(fmu: Path, tmp_path: Path) -> None:
+    from bridge.errors import ConfigError
+
+    with pytest.raises(
+        ConfigError, match=r"'k' of strict_arrays is a fixed parameter.*structural parameters.*\['n'\]"
+    ):
+        Model(fmu, structural_parameters={"k": 2})
+    with (
+        Model(fmu) as model,
+        pytest.raises(VariableError, match=r"'n' .* structural parameter .* configuration mode"),
+    ):
+        model.initialize({"n": 5})  # not in initialisation mode, where the model would refuse it
+    data = sized_experiment(fmu, tmp_path, 5)
+    data["model"]["structural_parameters"] = {}  # u[5] does not exist at the default size 3
+    with pytest.raises(ConfigError, match=r"u\[4\]"):
+        FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
