@@ -317,14 +317,18 @@ def test_a_structural_parameter_sizes_the_arrays_in_configuration_mode(fmu: Path
         assert default.info.variables["u"].dimensions == (3,)  # the start value of n
 
 
-@pytest.mark.parametrize("interface", ["cs", "me"])
+@pytest.mark.parametrize(
+    ("interface", "isolation"),
+    [("cs", None), ("me", None), ("cs", {"timeout": 60.0})],
+    ids=["cs", "me", "isolated"],
+)
 def test_structural_parameters_from_the_experiment_on_the_env(
-    fmu: Path, tmp_path: Path, interface: str
+    fmu: Path, tmp_path: Path, interface: str, isolation: dict[str, float] | None
 ) -> None:
-    exp = parse_experiment(
-        sized_experiment(fmu, tmp_path, 5, interface=interface), source=tmp_path / "x.yaml"
-    )
+    model: dict[str, Any] = {"interface": interface, **({"isolation": isolation} if isolation else {})}
+    exp = parse_experiment(sized_experiment(fmu, tmp_path, 5, **model), source=tmp_path / "x.yaml")
     with FmuEnv(exp) as env:
+        assert env.unwrapped.plant.isolated == (isolation is not None)  # type: ignore[attr-defined]
         assert env.observation_space.shape == (11,)
         rows = sized_episode(env, 5)
     tolerance = 1e-6 if interface == "cs" else 2e-5
