@@ -67,9 +67,11 @@ def _signals(
 def served_info(system: SystemDescription, name: str) -> ModelInfo:
     """The model of component ``name``, served on this machine: its FMU must be here."""
     from bridge.fmu import read_model_info
+    from bridge.plant.system.plant import sized_info
 
     _check_here(system, name)
-    return read_model_info(system.components[name].fmu)
+    component = system.components[name]
+    return sized_info(component, read_model_info(component.fmu))
 
 
 def _check_here(system: SystemDescription, name: str) -> None:
@@ -147,7 +149,8 @@ def component_model(
     experiment: Experiment, system: SystemDescription, name: str, served: Served
 ) -> Experiment:
     """The component's model as the plant factory reads it: FMU, interface, step size, sampling
-    time (the macro step) and parameters; its signal sections only name what ``served`` serves."""
+    time (the macro step), parameters and structural parameters; its signal sections only name
+    what ``served`` serves."""
     component = system.components[name]
     t = served.timing
     data = {
@@ -161,6 +164,7 @@ def component_model(
             "start_time": t.start_time_s,
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
+            "structural_parameters": dict(component.structural_parameters),
         },
         "actions": {  # bounds the model's checks ask for; the node checks served.low/high itself
             "inputs": list(served.input_names),

@@ -378,3 +378,35 @@ def test_structural_parameters_refused_where_they_do_not_belong(fmu: Path, tmp_p
     data["model"]["structural_parameters"] = {}  # u[5] does not exist at the default size 3
     with pytest.raises(ConfigError, match=r"u\[4\]"):
         FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
+
+
+@pytest.mark.parametrize("node", [False, True], ids=["in-process", "node"])
+def test_structural_parameters_of_a_system_component(
+    fmu: Path, tmp_path: Path, loopback: Any, node: bool
+) -> None:
+    """``b`` at n = 4: ``a.y[1,j] -> b.u[j]`` for j <= 3; ``b.u[4]`` keeps its value from the FMU
+    (configuration sets u_i = i; no one writes it), so ``x_4`` of ``b`` follows the closed form."""
+    from bridge.experiment.config import load_experiment
+    from bridge.net.system_node import NodeComponents
+    from tests.plant.test_system_nodes import serve
+
+    data = system_data(fmu)
+    data["system"]["components"]["b"]["structural_parameters"] = {"n": 4}
+    if node:
+        data["system"]["components"]["b"]["node"] = "b-sized"
+    data["observations"]["outputs"] = [f"b.y[1,{j}]" for j in range(1, 5)]
+    path = tmp_path / "sized_system.yaml"
+    path.write_text(yaml.safe_dump(data))
+    names = data["observations"]["outputs"]
+    remote = (
+        NodeComponents(session=loopback.session, prefix=loopback.prefix, timeout_s=60.0) if node else None
+    )
+    with serve(path, loopback, "b") if node else contextlib.nullcontext():
+        plant = SystemPlant(load_experiment(path), remote=remote)
+        with plant:
+            plant.bind([f"a.{u}" for u in U], names)
+            rows = [plant.reset({}, [1.0, 2.0, 3.0])]
+            rows += [plant.step([1.0, 2.0, 3.0]) for _ in range(STEPS)]
+    got = np.asarray(rows)
+    np.testing.assert_allclose(got[1:, :3], system_closed_form()[1:, 2 * N : 3 * N], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got[:, 3], closed_form(TIMES, 4)[:, 3], rtol=1e-12)  # u_4 = 4 held
