@@ -89,6 +89,10 @@ class ModelSection(Strict):
     start_time: FiniteFloat = 0.0
     parameters: dict[str, Scalar] = {}
     start_values: dict[str, Scalar] = {}
+    structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(
+        default={},
+        description="FMI 3.0 structural parameters (array sizes), set in configuration mode per instance",
+    )
     reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
     tolerance: PositiveFloat | None = None
     solver: Literal["cvode", "rk4", "euler"] = Field(

@@ -37,6 +37,9 @@ class ComponentSection(_Strict):
     interface: Literal["auto", "cs", "me"] = "auto"
     step_size: PositiveFloat | None = None
     parameters: dict[str, Scalar] = {}
+    structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(
+        default={}, description="FMI 3.0 structural parameters (array sizes), set in configuration mode"
+    )
     feedthrough: bool | None = Field(
         default=None,
         description="whether an output depends directly on an input; default: the FMU's declared "

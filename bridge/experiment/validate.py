@@ -21,6 +21,7 @@ from bridge.experiment.config import (
     sampling_ratio,
     scenario_inputs,
 )
+from bridge.fmu import structure
 from bridge.fmu.vocab import ModelInfo, Variable
 
 
@@ -98,8 +99,10 @@ def _check_episode_lengths(experiment: Experiment, sampling_time_s: float) -> No
 
 
 def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
-    """Check every name and role in ``experiment`` against the model ``info``; returns ``info``."""
+    """Check every name and role in ``experiment`` against the model ``info``; returns ``info``
+    with the array sizes the experiment's structural parameters give (``model.structural_parameters``)."""
     where = f" [{experiment.source}]" if experiment.source else ""
+    info = configured(experiment, info)
     variables = with_elements(info.variables)
     timing(experiment, info)
     _check_values(experiment, variables, where)
@@ -109,6 +112,15 @@ def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     _check_reward_and_termination(experiment, variables, signals, where)
     _check_evaluation(experiment, signals, where)
     return info
+
+
+def configured(experiment: Experiment, info: ModelInfo) -> ModelInfo:
+    """``info`` with the array sizes ``model.structural_parameters`` set (where there are any)."""
+    values = experiment.model.structural_parameters
+    if not values:
+        return info
+    checked = structure.check(info, values, "model.structural_parameters")
+    return structure.resized(info, structure.sizes_of(checked))
 
 
 def with_elements(variables: Mapping[str, Variable]) -> dict[str, Variable]:

@@ -58,6 +58,8 @@ class BatchSpec(ctypes.Structure):
         ("t0", ctypes.c_double),
         ("h", ctypes.c_double),
         ("steps", ctypes.c_int),
+        ("nv_in", ctypes.c_int),  # values (arrays count every element); n_in counts value references
+        ("nv_out", ctypes.c_int),
     ]
 
 
@@ -105,6 +107,8 @@ class FixedBatchSpec(ctypes.Structure):
         ("h", ctypes.c_double),
         ("steps", ctypes.c_int),
         ("substeps", ctypes.c_int),
+        ("nv_in", ctypes.c_int),  # values (arrays count every element); n_in counts value references
+        ("nv_out", ctypes.c_int),
     ]
 
 
@@ -128,6 +132,8 @@ class MasterComponent(ctypes.Structure):
         ("h", ctypes.c_double),
         ("steps", ctypes.c_int),
         ("k", ctypes.c_longlong),
+        ("nv_in", ctypes.c_int),  # values of u (arrays count every element); n_in counts value references
+        ("nv_out", ctypes.c_int),
     ]
 
 

@@ -4,7 +4,9 @@
  * `steps` doStep calls at t = t0 + k*h (k is the instance's own integer step counter, updated
  * here), read its outputs (one fmi2GetReal / fmi3GetFloat64 call). The FMU's functions come as
  * pointers resolved from the FMU's own shared library, so the calls are exactly those the
- * per-instance path makes, in the same order, with the same arguments.
+ * per-instance path makes, in the same order, with the same arguments. An FMI 3.0 array is one value
+ * reference whose elements all travel in the call (nValues counts every element, row-major), so
+ * n_in/n_out count value references and nv_in/nv_out values (the rows of inputs and outputs).
  *
  * status[i] is the FMI status of the call that decided the instance's fate: OK/Warning, the
  * doStep status on failure, BATCH_TERMINATED when the FMU asked to stop (FMI 2.0: Discard with
@@ -40,6 +42,8 @@ typedef struct {
     double t0;
     double h;
     int steps;
+    int nv_in;          /* values of the inputs: n_in for scalars, FMI 3.0 arrays count every element */
+    int nv_out;         /* values of the outputs */
 } BatchSpec;
 
 typedef struct {
@@ -88,7 +92,7 @@ static int step3(const BatchSpec* s, void* c, long long* k) {
 static int one(const BatchSpec* s, void* c, const double* u, double* y, long long* k) {
     int st;
     if (s->n_in > 0) {
-        st = s->major == 3 ? ((fmi3SetFloat64TYPE*)s->set_real)(c, s->in_vr, s->n_in, u, s->n_in)
+        st = s->major == 3 ? ((fmi3SetFloat64TYPE*)s->set_real)(c, s->in_vr, s->n_in, u, s->nv_in)
                            : ((fmi2SetRealTYPE*)s->set_real)(c, s->in_vr, s->n_in, u);
         if (st > BATCH_WARNING) return BATCH_SET + st;
     }
@@ -96,7 +100,7 @@ static int one(const BatchSpec* s, void* c, const double* u, double* y, long lon
     if (result != BATCH_OK) {
         if (result != BATCH_TERMINATED) return result;
     }
-    st = s->major == 3 ? ((fmi3GetFloat64TYPE*)s->get_real)(c, s->out_vr, s->n_out, y, s->n_out)
+    st = s->major == 3 ? ((fmi3GetFloat64TYPE*)s->get_real)(c, s->out_vr, s->n_out, y, s->nv_out)
                        : ((fmi2GetRealTYPE*)s->get_real)(c, s->out_vr, s->n_out, y);
     if (st > BATCH_WARNING) return BATCH_GET + st;
     return result;
@@ -110,7 +114,7 @@ static void* run_slice(void* arg) {
             b->status[i] = BATCH_INACTIVE;
             continue;
         }
-        b->status[i] = one(s, b->comps[i], b->inputs + (size_t)i * s->n_in, b->outputs + (size_t)i * s->n_out,
+        b->status[i] = one(s, b->comps[i], b->inputs + (size_t)i * s->nv_in, b->outputs + (size_t)i * s->nv_out,
                            b->k + i);
     }
     return NULL;

@@ -4,8 +4,8 @@ A step writes every active instance's inputs, advances one sample and reads its 
 the native stepper (``batch.c``, co-simulation) or the fixed-step integrator's batch loop
 (``fixed_step.c``, model exchange with solver 'rk4' or 'euler') that is one foreign call for the
 whole batch with the GIL released, optionally over several threads; otherwise (no compiler, FMI
-1.0, inputs or outputs that are not all Float64 scalars) the same FMI calls are made from Python
-through each ``Model``, with the same results.
+1.0, inputs or outputs that are not all Float64 scalars or whole Float64 arrays) the same FMI calls
+are made from Python through each ``Model``, with the same results.
 
 The batch keeps no clock of its own: each model's step counter is one cell of :attr:`clock`,
 which the native loops advance in place, so ``models[i].time_s`` is instance ``i``'s time
@@ -120,7 +120,7 @@ class ModelBatch:
             self._inputs[i].write(inputs)
         outputs = self._outputs[i].read()
         if not self._decided:
-            self._decide(model)
+            self._decide(model, i)
         if self._me is not None:
             self._check_library(i, model._native_handles())
             self._me.bind(i, model)
@@ -134,15 +134,15 @@ class ModelBatch:
         if any(handles[key] != value for key, value in self._handles.items()):
             raise ConfigError(f"{self.name}: instance {i} loaded another copy of the FMU's library")
 
-    def _decide(self, model: Model) -> None:
-        """Choose the native loop or Python, once, on the first initialised instance."""
+    def _decide(self, model: Model, i: int) -> None:
+        """Choose the native loop or Python, once, on the first initialised instance (``i``)."""
         self._decided = True
         if self._want_native is False:
             return
-        reason = self._native_refusal(model)
+        reason = self._native_refusal(model, i)
         stepper = batch_stepper.load() if reason is None and model.interface == "cs" else None
         if reason is None and model.interface == "me":
-            self._setup_me(model)
+            self._setup_me(model, i)
             return
         if stepper is None:
             if self._want_native:
@@ -150,46 +150,52 @@ class ModelBatch:
             _log.info("%s: stepping in Python (%s)", self.name, reason or "no native stepper")
             return
         h = model._native_handles()
-        self._in_vr, self._out_vr = self._value_references(model)
+        self._in_vr, self._out_vr, counts = self._value_references(i)
         self._spec = BatchSpec(
             h["major"], h["set_real"], h["get_real"], h["do_step"], h["bool_status"],
             len(self._in_vr), self._in_vr.ctypes.data, len(self._out_vr), self._out_vr.ctypes.data,
-            model.start_time_s, model.step_size_s, self.steps,
+            model.start_time_s, model.step_size_s, self.steps, *counts,
         )  # fmt: skip
         self._handles = {key: value for key, value in h.items() if key != "component"}
         self._stepper = stepper
 
-    def _value_references(self, model: Model) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32]]:
-        vrs = model.info.variables
-        return (
-            np.array([vrs[n].value_reference for n in self.input_names], dtype=np.uint32),
-            np.array([vrs[n].value_reference for n in self.output_names], dtype=np.uint32),
+    def _value_references(
+        self, i: int
+    ) -> tuple[npt.NDArray[np.uint32], npt.NDArray[np.uint32], tuple[int, int]]:
+        """The inputs' and outputs' value references and value counts (FMI 3.0 arrays: one value
+        reference, every element a value); _native_refusal checked both layouts exist."""
+        (in_vr, nv_in), (out_vr, nv_out) = (
+            group[i].float64_layout() or ([], 0) for group in (self._inputs, self._outputs)
         )
+        return np.array(in_vr, dtype=np.uint32), np.array(out_vr, dtype=np.uint32), (nv_in, nv_out)
 
-    def _setup_me(self, model: Model) -> None:
+    def _setup_me(self, model: Model, i: int) -> None:
         stepper = model._fixed_stepper
         if stepper is None:  # _native_refusal checked the solver
             raise ConfigError(f"{self.name}: model exchange without a fixed-step solver")
-        self._in_vr, self._out_vr = self._value_references(model)
+        self._in_vr, self._out_vr, counts = self._value_references(i)
         h = model._native_handles()
         self._handles = {key: h[key] for key in ("major", "set_real", "get_real")}
         self._me = MeBatch(
             h, in_vr=self._in_vr, out_vr=self._out_vr, start_time_s=model.start_time_s,
             step_size_s=model.step_size_s, steps=self.steps, substeps=stepper.substeps, n=self.n,
+            values=counts,
         )  # fmt: skip
 
-    def _native_refusal(self, model: Model) -> str | None:
+    def _native_refusal(self, model: Model, i: int) -> str | None:
         info = model.info
         if info.fmi_major < 2 or (model.interface == "me" and model._fixed_stepper is None):
             return (
                 f"it needs FMI 2.0/3.0 co-simulation, or model exchange with solver 'rk4' or 'euler'; "
                 f"this is FMI {info.fmi_version} {model.interface} (solver {model.solver!r})"
             )
-        names = [*self.input_names, *self.output_names]
-        other = [n for n in names if n not in info.variables or info.variables[n].type != "Float64"]
-        if other:
-            return f"signals {other} are not Float64 scalars"
-        discrete = [n for n in self.input_names if info.variables[n].variability != "continuous"]
+        ins, outs = (group[i].float64_layout() for group in (self._inputs, self._outputs))
+        if outs is None or (self.input_names and ins is None):
+            return (
+                f"signals {[*self.input_names, *self.output_names]} are not all Float64 scalars or "
+                f"whole Float64 arrays in row-major order"
+            )
+        discrete = [v.name for v in self._inputs[i].variables if v.variability != "continuous"]
         if model.interface == "me" and discrete:  # they are set in event mode, by the Python path
             return f"model-exchange inputs {discrete} are discrete"
         return None

@@ -38,6 +38,7 @@ class MeBatch:
         start_time_s, step_size_s, steps: the time grid ``t0 + k h`` and FMU steps per sample.
         substeps: the integrator's steps per FMU step.
         n: instances.
+        values: the values of the inputs and of the outputs (FMI 3.0 arrays count every element).
     """
 
     def __init__(
@@ -51,11 +52,12 @@ class MeBatch:
         steps: int,
         substeps: int,
         n: int,
+        values: tuple[int, int],
     ) -> None:
         self._vrs = (in_vr, out_vr)
         self.spec = FixedBatchSpec(
             handles["major"], handles["set_real"], handles["get_real"], len(in_vr), in_vr.ctypes.data,
-            len(out_vr), out_vr.ctypes.data, start_time_s, step_size_s, steps, substeps,
+            len(out_vr), out_vr.ctypes.data, start_time_s, step_size_s, steps, substeps, *values,
         )  # fmt: skip
         self.steps = steps
         self.specs = np.zeros(n, dtype=np.uintp)

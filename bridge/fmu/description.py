@@ -209,6 +209,10 @@ def _variable(v: ModelVariable) -> Variable:
         enum_items=items,
         is_array=bool(v.dimensions),
         dimensions=_dimensions(v),
+        dimension_vrs=tuple(
+            int(d.valueReference) if d.start is None and d.valueReference is not None else None
+            for d in v.dimensions or ()
+        ),
         clock=ClockInfo(str(v.intervalVariability or "unspecified")) if var_type == "Clock" else None,
     )
 

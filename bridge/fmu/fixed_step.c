@@ -227,6 +227,8 @@ typedef struct {
     double h;        /* FMU step */
     int steps;       /* FMU steps per sample */
     int substeps;    /* integration steps per FMU step */
+    int nv_in;       /* values of the inputs (FMI 3.0 arrays count every element): a row of inputs */
+    int nv_out;      /* values of the outputs */
 } FixedBatch;
 
 static bool near(double a, double b) { /* Python's math.isclose(a, b, rel_tol=1e-12, abs_tol=1e-12) */
@@ -240,7 +242,7 @@ static int batch_one(const FixedBatch* b, const FixedSpec* spec, FixedCall* call
     void* c = call->component;
     int st;
     if (b->n_in > 0) {
-        st = b->major == 3 ? ((fmi3SetFloat64TYPE*)b->set_real)(c, b->in_vr, b->n_in, u, b->n_in)
+        st = b->major == 3 ? ((fmi3SetFloat64TYPE*)b->set_real)(c, b->in_vr, b->n_in, u, b->nv_in)
                            : ((fmi2SetRealTYPE*)b->set_real)(c, b->in_vr, b->n_in, u);
         if (st > WARNING) return FB_SET + st;
     }
@@ -255,7 +257,7 @@ static int batch_one(const FixedBatch* b, const FixedSpec* spec, FixedCall* call
     int r = fixed_step_advance(spec, call);
     if (r != FS_END) return r;
     *k += b->steps;
-    st = b->major == 3 ? ((fmi3GetFloat64TYPE*)b->get_real)(c, b->out_vr, b->n_out, y, b->n_out)
+    st = b->major == 3 ? ((fmi3GetFloat64TYPE*)b->get_real)(c, b->out_vr, b->n_out, y, b->nv_out)
                        : ((fmi2GetRealTYPE*)b->get_real)(c, b->out_vr, b->n_out, y);
     return st > WARNING ? FB_GET + st : 0;
 }
@@ -277,8 +279,8 @@ static void* run_fixed_slice(void* arg) {
     const FixedSlice* s = (const FixedSlice*)arg;
     const FixedBatch* b = s->b;
     for (int i = s->first; i < s->last; i++) {
-        s->codes[i] = s->active[i] ? batch_one(b, s->specs[i], s->calls[i], s->inputs + (size_t)i * b->n_in,
-                                               s->outputs + (size_t)i * b->n_out, s->k + i)
+        s->codes[i] = s->active[i] ? batch_one(b, s->specs[i], s->calls[i], s->inputs + (size_t)i * b->nv_in,
+                                               s->outputs + (size_t)i * b->nv_out, s->k + i)
                                    : -1;
     }
     return NULL;

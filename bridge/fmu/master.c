@@ -44,6 +44,8 @@ typedef struct {
     double h;
     int steps;
     long long k;
+    int nv_in;          /* values of u (FMI 3.0 arrays count every element) */
+    int nv_out;         /* values of y */
 } Component;
 
 typedef struct {
@@ -88,13 +90,13 @@ static int do_steps3(Component* c) {
 static int sample(Component* c) {
     int st;
     if (c->n_in > 0) {
-        st = c->major == 3 ? ((fmi3SetFloat64TYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u, c->n_in)
+        st = c->major == 3 ? ((fmi3SetFloat64TYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u, c->nv_in)
                            : ((fmi2SetRealTYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u);
         if (st > MASTER_WARNING) return MASTER_SET + st;
     }
     int result = c->major == 3 ? do_steps3(c) : do_steps2(c);
     if (result != MASTER_OK && result != MASTER_TERMINATED) return result;
-    st = c->major == 3 ? ((fmi3GetFloat64TYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y, c->n_out)
+    st = c->major == 3 ? ((fmi3GetFloat64TYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y, c->nv_out)
                        : ((fmi2GetRealTYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y);
     if (st > MASTER_WARNING) return MASTER_GET + st;
     return result;
@@ -109,7 +111,7 @@ static void gather(Component* comps, const Link* links, int n_links, int target)
 }
 
 static int finite_inputs(const Component* c) {
-    for (int j = 0; j < c->n_in; j++) {
+    for (int j = 0; j < c->nv_in; j++) {
         if (!isfinite(c->u[j])) return 0;
     }
     return 1;

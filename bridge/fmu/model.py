@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
-from bridge.fmu import access, archive, once
+from bridge.fmu import access, archive, once, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
@@ -73,6 +73,9 @@ class Model:
             (``bridge.fmu.fixed_step``; FMI 2.0/3.0).
         solver_substeps: fixed-step integration steps per FMU step.
         instance_name: the FMU instance's name (default: ``<model name>#<counter>``).
+        structural_parameters: FMI 3.0 structural parameters (array sizes) by name, set in
+            configuration mode after every instantiation and fmi reset; :attr:`info` then holds the
+            array sizes the FMU reports (``bridge.fmu.structure``).
 
     The model keeps the only clock of its instance: :attr:`step_index` ``k`` (time
     ``t0 + k * h``), advanced by :meth:`advance` and, in place, by the native steppers of this
@@ -92,8 +95,12 @@ class Model:
         instance_name: str | None = None,
         solver: Solver = "cvode",
         solver_substeps: int = 1,
+        structural_parameters: Mapping[str, int] | None = None,
     ) -> None:
         self.info: ModelInfo = read_model_info(path)
+        self._structural = structure.check(self.info, structural_parameters) if structural_parameters else {}
+        self._configured = False  # structural parameters applied (sizes in info) at least once
+        self._initialized_once = False
         self.interface: Interface = _choose_interface(self.info, interface)
         self.step_size_s = _step_size(self.info, step_size_s)
         de = self.info.default_experiment
@@ -126,6 +133,13 @@ class Model:
             once.release(self.info, self)
             raise
         self._do_step = self._backend.stepper() if self.interface == "cs" else self._backend.do_step
+        if self._structural:  # the array sizes decide every signal's layout: configure before any use
+            try:
+                self._backend.instantiate()
+                self._configure()
+            except BaseException:
+                self.close()
+                raise
 
     # -- context management -------------------------------------------------------------------
     def __enter__(self) -> Model:
@@ -336,10 +350,33 @@ class Model:
         self._backend.instantiate()
         self._initialize(values)
 
+    def _configure(self) -> None:
+        """Structural parameters in configuration mode; the FMU's array sizes into :attr:`info`."""
+        backend, values = self._backend, self._structural
+        wanted = structure.integer_structural(self.info)
+        backend.call("fmi3EnterConfigurationMode", backend.fmu.enterConfigurationMode)
+        try:
+            flat = {v.name: [self._to_c(v, value)] for v, value in values.items()}
+            access.write(backend, list(values), flat, self._where)
+            read = access.read(backend, wanted, self._where)  # the sizes the FMU reports, not what was asked
+        finally:
+            backend.call("fmi3ExitConfigurationMode", backend.fmu.exitConfigurationMode)
+        sizes = {v.value_reference: int(read[v.name][0]) for v in wanted}
+        wrong = structure.refused(self.info, values, sizes)
+        if wrong is not None:
+            raise FmuError(wrong, log=backend.log.recent())
+        info = structure.resized(self.info, sizes)
+        if self._configured and info != self.info:
+            raise FmuError(f"{self.info.model_name}: the FMU changed its array sizes on reconfiguration")
+        self.info = self._backend.info = info
+        self._configured = True
+
     def _initialize(self, values: dict[Variable, Any]) -> None:
         self._initialized = False
         self._init_failed = True  # until it completes
         self._backend.log.clear()
+        if self._structural and not self._fresh_configuration():
+            self._configure()  # instantiated or fmi reset: structural parameters are back at their starts
         # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
         early = [
             v
@@ -377,6 +414,12 @@ class Model:
             self._me = self._me_stepper(next_event)
         else:
             self._me.next_event_s = next_event
+
+    def _fresh_configuration(self) -> bool:
+        """True once, right after the configuration made when the model was opened."""
+        fresh = self._configured and not self._initialized_once
+        self._initialized_once = True
+        return fresh
 
     def _me_stepper(self, next_event: float | None) -> MeStepper | FixedStepper:
         if self.solver != "cvode":
@@ -692,6 +735,13 @@ def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:
 
 
 def _not_settable_at_init(var: Variable, info: ModelInfo) -> str:
+    if var.causality == "structuralParameter":
+        return (
+            f"{var.name!r} of {info.model_name} is a structural parameter (an array size): it is set in "
+            f"configuration mode, once per instance, not at initialisation; give it as "
+            f"Model(structural_parameters={{{var.name!r}: ...}}) or under model.structural_parameters "
+            f"in the experiment"
+        )
     return (
         f"{var.name!r} of {info.model_name} cannot be set: it is a {var.variability} "
         f"{var.causality} (initial={var.initial}); only parameters, inputs and variables with "

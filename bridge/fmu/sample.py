@@ -7,7 +7,8 @@ same order, with the same arguments and the same time grid ``t0 + k*h``, in one,
 the model's own clock in place.
 
 It serves initialised FMI 2.0/3.0 co-simulation instances whose inputs and outputs are all
-Float64 scalars (the common case); anything else, or a machine without a C compiler, takes the
+Float64 scalars (the common case) or whole Float64 arrays in row-major order (one value reference
+and all its elements: ``nValues`` counts them); anything else, or a machine without a C compiler, takes the
 Python path, with the same results (tests/plant/test_native_sample.py compares both).
 """
 
@@ -88,13 +89,13 @@ class NativeSample:
         spec.major, spec.set_real, spec.get_real = h["major"], h["set_real"], h["get_real"]
         spec.do_step, spec.bool_status = h["do_step"], h["bool_status"]
         spec.t0, spec.h, spec.steps = model.start_time_s, model.step_size_s, self._n
-        spec.n_in, spec.in_vr, self._u = 0, None, None
+        spec.n_in, spec.nv_in, spec.in_vr, self._u = 0, 0, None, None
         if self._inputs is not None:
-            vrs, n, self._u = self._inputs.native_buffer(writing=True) or (0, 0, None)
-            spec.n_in, spec.in_vr = n, vrs
+            vrs, n, values, self._u = self._inputs.native_buffer(writing=True) or (0, 0, 0, None)
+            spec.n_in, spec.nv_in, spec.in_vr = n, values, vrs
         out = self._outputs.native_buffer(writing=False)
         assert out is not None  # checked in create()
-        spec.out_vr, spec.n_out, self._y = out
+        spec.out_vr, spec.n_out, spec.nv_out, self._y = out
         self._component.value = h["component"]
         self._refs = (self._refs[0], ctypes.byref(model._clock))
 

@@ -203,14 +203,24 @@ class SignalGroup:
         if self._notify:
             self._model._inputs_written()
 
-    def native_buffer(self, *, writing: bool) -> tuple[int, int, int] | None:
-        """(value-reference array address, count, float64 buffer address) of an all-Float64
-        group, for a native stepper that sets (``writing``) or gets the group itself; None for
-        other groups (mixed types, array elements, not settable during a step, model exchange)."""
+    def native_buffer(self, *, writing: bool) -> tuple[int, int, int, int] | None:
+        """(value-reference array address, value references, values, float64 buffer address) of
+        an all-Float64 group, for a native stepper that sets (``writing``) or gets the group
+        itself; None for other groups (mixed types, some elements of an array or out of row-major
+        order, not settable during a step, model exchange). An FMI 3.0 array is one value
+        reference and all its elements: the stepper passes the values as ``nValues``."""
         block = self._blocks[0]
         if not self._direct or self._notify or (writing and block.set is None):
             return None
-        return block.vrs, block.n, block.ptr
+        return block.vrs, block.n, len(block.buf), block.ptr
+
+    def float64_layout(self) -> tuple[list[int], int] | None:
+        """(value references, values) of an all-Float64 group of whole variables in row-major
+        order (what a batch loop passes to the FMU), else None."""
+        if not self._direct:
+            return None
+        block = self._blocks[0]
+        return list(block._vrs), len(block.buf)
 
     def stage(self, values: Any) -> None:
         """Check ``values`` (finite, one per variable) and place them in the group's buffer

@@ -105,14 +105,14 @@ class NativeMaster:
             c.do_step, c.bool_status, c.component = h["do_step"], h["bool_status"], h["component"]
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
             c.k = model.step_index  # kept here from now on; each step hands it to the model
-            c.n_in, c.in_vr = 0, None
+            c.n_in, c.nv_in, c.in_vr = 0, 0, None
             if inputs is not None:
-                vrs, c.n_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0)
+                vrs, c.n_in, c.nv_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0, 0)
                 c.in_vr = vrs
             master.inputs[name] = u = np.ascontiguousarray(master.inputs[name], dtype=np.float64)
             master.outputs[name] = y = np.ascontiguousarray(master.outputs[name], dtype=np.float64).copy()
             c.u, c.y = u.ctypes.data, y.ctypes.data
-            c.out_vr, c.n_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0)
+            c.out_vr, c.n_out, c.nv_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0, 0)
 
     def run(self, count: int) -> None:
         """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its

@@ -68,6 +68,7 @@ class Variable:
     enum_items: tuple[tuple[str, int], ...] = ()
     is_array: bool = False
     dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays: the size of each dimension, row-major
+    dimension_vrs: tuple[int | None, ...] = ()  # per dimension: the structural parameter sizing it
     clock: ClockInfo | None = None  # FMI 3.0 Clock variables
 
     @property
@@ -93,7 +94,11 @@ class Variable:
     @property
     def settable_at_init(self) -> bool:
         """Whether a value may be given before/at initialisation (parameter or start value)."""
-        if self.variability == "constant" or self.causality in ("calculatedParameter", "independent"):
+        if self.variability == "constant" or self.causality in (
+            "calculatedParameter",
+            "independent",
+            "structuralParameter",  # set in configuration mode only (bridge.fmu.structure)
+        ):
             return False
         return self.causality in ("parameter", "input") or self.initial in ("exact", "approx")
 

@@ -33,6 +33,7 @@ import numpy as np
 
 from bridge.errors import BridgeError, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.validate import with_elements
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import protocol as proto
@@ -113,7 +114,8 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
-        starts = [self.info.variables[n].start for n in self.input_names]
+        variables = with_elements(self.info.variables)  # inputs may be array elements, u[2]
+        starts = [variables[n].start for n in self.input_names]
         self._held_inputs = [float(v) if isinstance(v, int | float) else 0.0 for v in starts]
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None

@@ -21,7 +21,7 @@ import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError, StepTimeout, TransportError
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, check_experiment, timing
+from bridge.experiment.validate import Timing, check_experiment, timing, with_elements
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.channel import ChannelWaiting, Waiting
@@ -158,6 +158,8 @@ class RemotePlant(Plant):
         self._node_outputs: list[str] = list(d["output_names"])
         self._defaults = dict(role.component.parameters) if role is not None else {}
         self._u = np.zeros(len(self._node_inputs))
+        elements = with_elements(self.info.variables)  # the node's inputs may be array elements, u[2]
+        self._starts = {name: _start(elements[name].start) for name in self._node_inputs}
         self._held: Sequence[float] = []
         self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
 
@@ -221,7 +223,7 @@ class RemotePlant(Plant):
         self.sample, self.terminated, self._flags = 0, False, 0
         merged = {**self._defaults, **values}
         for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
-            self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
+            self._u[i] = float(merged.get(name, self._starts[name]))
         if inputs is not None:
             self._u[self._in_index] = inputs
         self._held = held = self._u.tolist()

@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING, Any
 
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, parse_experiment
-from bridge.experiment.validate import Timing
+from bridge.experiment.validate import Timing, with_elements
 from bridge.fmu.vocab import ModelInfo, info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.remote import SERVE_HINT, RemotePlant
@@ -57,7 +57,8 @@ def _signals(
     task = task_signal_names(experiment, _known_names(experiment, system, name, info))
     ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
     ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
-    outs = [v.name for v in info.by_causality("output") if v.is_numeric]
+    # FMI 3.0 arrays are served element by element (y[1,1], y[1,2], ...): the names a system binds
+    outs = [e for v in info.by_causality("output") if v.is_numeric for e in v.element_names()]
     outs += [c.source.variable for c in system.connections if c.source.component == name]
     outs += [e.variable for e in _ends(task.outputs, system, "observations") if e.component == name]
     return list(dict.fromkeys(ins)), list(dict.fromkeys(outs))
@@ -66,9 +67,11 @@ def _signals(
 def served_info(system: SystemDescription, name: str) -> ModelInfo:
     """The model of component ``name``, served on this machine: its FMU must be here."""
     from bridge.fmu import read_model_info
+    from bridge.plant.system.plant import sized_info
 
     _check_here(system, name)
-    return read_model_info(system.components[name].fmu)
+    component = system.components[name]
+    return sized_info(component, read_model_info(component.fmu))
 
 
 def _check_here(system: SystemDescription, name: str) -> None:
@@ -121,7 +124,7 @@ def component_served(experiment: Experiment, system: SystemDescription, name: st
             f"system.components.{name}.node: a component served by a node needs at least one input "
             f"(connected or driven by the task); {name!r} has none: run it in this process{system.where}"
         )
-    low, high = declared_ranges(info.variables, ins)
+    low, high = declared_ranges(with_elements(info.variables), ins)
     prefix = f"{name}."  # what the system's experiment sets on this component, by its own names
     on_component = {prefix + k: v for k, v in info.variables.items()}
     settable = {n[len(prefix) :] for n in declared_names(experiment, on_component)}
@@ -146,7 +149,8 @@ def component_model(
     experiment: Experiment, system: SystemDescription, name: str, served: Served
 ) -> Experiment:
     """The component's model as the plant factory reads it: FMU, interface, step size, sampling
-    time (the macro step) and parameters; its signal sections only name what ``served`` serves."""
+    time (the macro step), parameters and structural parameters; its signal sections only name
+    what ``served`` serves."""
     component = system.components[name]
     t = served.timing
     data = {
@@ -160,6 +164,7 @@ def component_model(
             "start_time": t.start_time_s,
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
+            "structural_parameters": dict(component.structural_parameters),
         },
         "actions": {  # bounds the model's checks ask for; the node checks served.low/high itself
             "inputs": list(served.input_names),

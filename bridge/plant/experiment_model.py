@@ -13,7 +13,7 @@ def experiment_model(
     experiment: Experiment, fmu_path: Path, t: Timing, instance_name: str | None = None
 ) -> Model:
     """An instance of the experiment's FMU with its ``model`` section's settings (interface, reset
-    policy, tolerance, solver) on the experiment's time grid."""
+    policy, tolerance, solver, structural parameters) on the experiment's time grid."""
     m = experiment.model
     return Model(
         fmu_path,
@@ -25,4 +25,5 @@ def experiment_model(
         solver=m.solver,
         solver_substeps=m.solver_substeps,
         instance_name=instance_name,
+        structural_parameters=m.structural_parameters or None,
     )

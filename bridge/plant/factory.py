@@ -55,10 +55,10 @@ def model_info_for(experiment: Experiment, remote: RemoteComponents | None = Non
         from bridge.plant.system.plant import describe_system
 
         return describe_system(experiment, remote)
-    from bridge.experiment.validate import resolve_fmu
+    from bridge.experiment.validate import configured, resolve_fmu
     from bridge.fmu import read_model_info
 
-    return read_model_info(resolve_fmu(experiment))
+    return configured(experiment, read_model_info(resolve_fmu(experiment)))
 
 
 def model_fingerprint(experiment: Experiment, remote: RemoteComponents | None = None) -> tuple[str, str]:

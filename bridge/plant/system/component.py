@@ -53,7 +53,9 @@ class FmuComponent(FmuInstancePlant):
             start_time_s=start_time_s,
             interface=component.interface,
             instance_name=component.name,
+            structural_parameters=component.structural_parameters or None,
         )
+        self.info = self.model.info  # the array sizes after configuration mode
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         return {**self.component.parameters, **values}

@@ -86,8 +86,9 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         parameters = {**(old.parameters if old else {}), **spec.parameters}
         interface = spec.interface if spec.interface != "auto" or old is None else old.interface
         units = old.connector_units if old else {}
+        sizes = {**(old.structural_parameters if old else {}), **spec.structural_parameters}
         components[name] = Component(
-            name, fmu, parameters, spec.step_size, interface, spec.feedthrough, spec.node, units
+            name, fmu, parameters, spec.step_size, interface, spec.feedthrough, spec.node, units, sizes
         )
     if not components:
         raise ConfigError(f"system.components: a system needs at least one component{where}")

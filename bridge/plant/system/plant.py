@@ -272,12 +272,24 @@ def describe_system(experiment: Experiment, remote: RemoteComponents | None = No
     return system_info(experiment, system, infos, system_timing(experiment, system))
 
 
+def sized_info(component: Component, info: ModelInfo) -> ModelInfo:
+    """``info`` with the array sizes the component's structural parameters give."""
+    if not component.structural_parameters:
+        return info
+    from bridge.fmu import structure
+
+    key = f"system.components.{component.name}.structural_parameters"
+    return structure.resized(
+        info, structure.sizes_of(structure.check(info, component.structural_parameters, key))
+    )
+
+
 def component_info(component: Component, remote: RemoteComponents | None, where: str) -> ModelInfo:
     """The component's model: its FMU's description, else (a node's component) its node's."""
     from bridge.fmu import read_model_info
 
     if component.node is None or component.fmu.exists():
-        return read_model_info(component.fmu)
+        return sized_info(component, read_model_info(component.fmu))
     if remote is None:
         raise ConfigError(
             f"system.components.{component.name}.fmu: {component.fmu} is not on this machine; the "

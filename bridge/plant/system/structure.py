@@ -80,6 +80,7 @@ class Component:
     feedthrough: bool | None = None
     node: str | None = None
     connector_units: dict[str, str] = field(default_factory=dict)  # from an SSD's connectors
+    structural_parameters: dict[str, int] = field(default_factory=dict)  # FMI 3.0 array sizes
 
 
 @dataclass(frozen=True)
