@@ -485,6 +485,11 @@ class Model:
         """Whether the FMU can save its state to bytes (canSerializeFMUstate and canGetAndSetFMUstate)."""
         return serial.refusal(self.info, self.interface) is None
 
+    @property
+    def serialize_refusal(self) -> str | None:
+        """Why the FMU cannot save its state to a file (naming the capability flags), or None."""
+        return serial.refusal(self.info, self.interface)
+
     def state_file(self, state: ModelState | None = None, *, max_bytes: int = MAX_STATE_BYTES) -> StateFile:
         """``state`` (default: the state now) serialised by the FMU, with a header naming the FMU
         and the time grid (``bridge.fmu.state_file``); :class:`StateFileError` where it cannot."""
