@@ -170,7 +170,7 @@ def prepare_run_dir(
     return run_dir
 
 
-_PATH_KEYS = ("fmu", "file")  # model.fmu, system.components.*.fmu, csv profiles' file
+_PATH_KEYS = ("fmu", "file", "state_file")  # model.fmu, system.components.*.fmu, csv profiles, state files
 
 
 def write_run_experiment(path: Path, run_dir: Path, *, fmu: str = "absolute") -> Path:
@@ -202,6 +202,13 @@ def write_run_experiment(path: Path, run_dir: Path, *, fmu: str = "absolute") ->
             )
         shutil.copy(source, run_dir / source.name)
         replace[model_fmu] = source.name
+    policy = model.get("reset_policy") if isinstance(model, dict) else None
+    saved = policy.get("state_file") if isinstance(policy, dict) else None
+    if fmu == "copy" and isinstance(saved, str):  # the state file travels with the FMU it belongs to
+        source = Path(replace.get(saved, saved)).expanduser()
+        if source.is_file():
+            shutil.copy(source, run_dir / source.name)
+            replace[saved] = source.name
     for spec, new in replace.items():
         text = _with_value(text, spec, new)
     if yaml.safe_load(text) != _substituted(data, replace):

@@ -1,18 +1,22 @@
 """bridge.fmu stepping vs a raw FMPy loop on the same FMU, and the cost of each reset policy.
 
-Run: python benchmarks/bench_fmu.py [--steps N] [--repeats R]
-Prints medians of interleaved repetitions; the ratio is cost(bridge) / cost(raw FMPy).
+Run: python benchmarks/bench_fmu.py [--steps N] [--repeats R] [--only state]
+Prints medians of interleaved repetitions; the ratio is cost(bridge) / cost(raw FMPy). The last
+table puts a start from a state file beside a full initialisation on the slow-initialisation model
+(``slow_init``, whose initialisation runs ``warmup_steps`` pseudo-time steps).
 """
 
 from __future__ import annotations
 
 import argparse
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 from common import RawFmpyLoop, fmt_us, interleaved, table
 
-from bridge.fmu import Model
+from bridge.fmu import Model, state_file
 from bridge.models import example_fmu
 
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
@@ -23,7 +27,14 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--resets", type=int, default=2_000)
+    parser.add_argument("--only", choices=("state",), help="only the state-file table")
     args = parser.parse_args()
+    if args.only != "state":
+        stepping_and_resets(args)
+    state_files(args.repeats)
+
+
+def stepping_and_resets(args: argparse.Namespace) -> None:
     path = example_fmu("cartpole", "2.0", "cs")
 
     raw = RawFmpyLoop(path, ["force"], OUTPUTS, 0.02)
@@ -72,6 +83,52 @@ def main() -> None:
     print("\ntarget: fmi reset or state restore <= 50 us on the example models")
     model.close()
     del rewind
+
+
+def state_files(repeats: int) -> None:
+    """A fresh instance started by initialisation vs from a state file, and a reset by fmi reset
+    plus initialisation vs a reset to the state file's state, on ``slow_init`` (FMI 2.0 CS)."""
+    path = example_fmu("slow_init", "2.0", "cs")
+    with tempfile.TemporaryDirectory() as tmp:
+        saved = Path(tmp) / "slow_init.state"
+        with Model(path) as m:
+            m.initialize()
+            state_file.write(saved, m.state_file())
+
+        def open_initialise() -> None:
+            with Model(path) as m:
+                m.initialize()
+
+        def open_from_file() -> None:
+            with Model(path) as m:
+                m.start_from(state_file.read(saved))
+                m.reset()
+
+        init_model, file_model = Model(path, reset_policy="reset"), Model(path)
+        init_model.initialize()
+        file_model.start_from(state_file.read(saved))
+        file_model.reset()
+        cases = {
+            "new instance, full initialisation": open_initialise,
+            "new instance, from the state file": open_from_file,
+            "reset: fmi reset + initialisation": init_model.reset,
+            "reset: to the state file's state": file_model.reset,
+        }
+        times: dict[str, list[float]] = {name: [] for name in cases}
+        for _ in range(repeats):  # interleaved: load drifts hit every case alike
+            for name, case in cases.items():
+                start = time.perf_counter()
+                case()
+                times[name].append(time.perf_counter() - start)
+        init_model.close()
+        file_model.close()
+    medians = {name: statistics.median(t) for name, t in times.items()}
+    names = list(medians)
+    rows = [(n, f"{medians[n] * 1e3:.3f}") for n in names]
+    print(f"\nstate files on {path.name} (FMI 2.0 CS), {repeats} interleaved repeats\n")
+    print(table(rows, ("start", "ms (median)")))
+    for full, fast in ((names[0], names[1]), (names[2], names[3])):
+        print(f"{fast!r} is {medians[full] / medians[fast]:,.0f}x faster than {full!r}")
 
 
 if __name__ == "__main__":

@@ -106,6 +106,11 @@ class PlantDied(PlantError):
     """The plant is gone: its node's liveliness token disappeared, or its process exited."""
 
 
+class StateFileError(ConfigError):
+    """A saved FMU state is refused: the file is cut, corrupt, too large or not ours, it was saved
+    by another FMU, or the FMU cannot serialise its state (canSerializeFMUstate)."""
+
+
 class TransportError(BridgeError):
     """A network peer is unreachable, died, or sent something that is not our protocol."""
 

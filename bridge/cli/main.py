@@ -521,6 +521,9 @@ def _load_plugins() -> None:
     from bridge.cli import system as cli_system
 
     cli_system.register(app)
+    from bridge.cli import state as cli_state
+
+    cli_state.register(app)
     for entry in entry_points(group="fmu_bridge.commands"):
         try:
             register = entry.load()

@@ -77,6 +77,13 @@ class LicenceSection(Strict):
     per_instance: PositiveFloat = Field(default=1.0, description="seats one FMU instance takes")
 
 
+class StateFilePolicy(Strict):
+    """``model.reset_policy: {state_file: PATH}``: every episode starts from an FMU state saved by
+    ``fmu-bridge state save`` instead of initialising (a path relative to the experiment file)."""
+
+    state_file: str = Field(min_length=1, description="state file (relative to the experiment file)")
+
+
 class ModelSection(Strict):
     fmu: str = Field(
         default="",
@@ -93,7 +100,7 @@ class ModelSection(Strict):
         default={},
         description="FMI 3.0 structural parameters (array sizes), set in configuration mode per instance",
     )
-    reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
+    reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] | StateFilePolicy = "auto"
     tolerance: PositiveFloat | None = None
     solver: Literal["cvode", "rk4", "euler"] = Field(
         default="cvode",

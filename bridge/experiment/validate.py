@@ -52,6 +52,23 @@ def resolve_fmu(experiment: Experiment) -> Path:
     return path
 
 
+def resolve_state_file(experiment: Experiment) -> Path | None:
+    """The file of ``model.reset_policy: {state_file: PATH}`` (relative to the experiment file), or None."""
+    policy = experiment.model.reset_policy
+    if isinstance(policy, str):
+        return None
+    path = Path(policy.state_file).expanduser()
+    if not path.is_absolute():
+        path = experiment.base_dir / path
+    if not path.is_file():
+        raise ConfigError(
+            f"model.reset_policy.state_file: {policy.state_file!r} does not exist (looked at {path}); save "
+            f"one with `fmu-bridge state save` or give a path relative to the experiment file "
+            f"[{experiment.source}]"
+        )
+    return path
+
+
 @dataclass(frozen=True)
 class Timing:
     step_size_s: float

@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
-from bridge.fmu import access, archive, once, structure
+from bridge.fmu import access, archive, once, serial, start_state, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
@@ -30,6 +30,7 @@ from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.solver import MeStepper
+from bridge.fmu.state_file import MAX_STATE_BYTES, StateFile
 from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
@@ -123,6 +124,8 @@ class Model:
         self._me: MeStepper | FixedStepper | None = None
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
+        self._init_values: dict[str, Any] = {}  # of the last initialisation, for state files
+        self._start: start_state.StartState | None = None  # episodes start from a state file
         name = instance_name or f"{self.info.model_name}#{next(_counter)}"
         once.claim(self.info, self)  # canBeInstantiatedOnlyOncePerProcess: refused if one is open
         self._unzip = archive.acquire(self.info.path)
@@ -155,6 +158,8 @@ class Model:
         self._closed = True
         was_initialized, self._initialized = self._initialized, False
         self._drop_snapshots()
+        if self._start is not None:
+            start_state.free(self, self._start)
         self._me = None
         try:
             if was_initialized and self._failed_status < FATAL:
@@ -316,7 +321,11 @@ class Model:
         return self._init_failed
 
     def reset(self, values: Mapping[str, Any] | None = None) -> None:
-        """Return to ``t0`` with parameters/start values ``values``, by the configured policy."""
+        """Return to ``t0`` with parameters/start values ``values``, by the configured policy
+        (or to the saved state of :meth:`start_from`)."""
+        if self._start is not None:
+            start_state.restore(self, self._start, dict(values or {}))
+            return
         if not self._initialized:
             self.initialize(values)
             return
@@ -385,6 +394,7 @@ class Model:
         ]
         late = [v for v in values if v not in early]
         by_name = {v.name: value for v, value in values.items()}
+        self._init_values = by_name
         self._write(early, by_name)
         # Tolerance steers a co-simulation FMU's own solver; for model exchange it is ours (CVode).
         tolerance = self.tolerance if self.interface == "cs" else None
@@ -420,6 +430,13 @@ class Model:
         fresh = self._configured and not self._initialized_once
         self._initialized_once = True
         return fresh
+
+    def _resume_me(self, next_event_s: float | None) -> None:
+        """Integrate on from the current time after a state was set in place of an initialisation."""
+        if self._me is None or self._me.fmu is not self._backend.fmu:
+            self._me = self._me_stepper(next_event_s)
+        self._me.restart(self.time_s)
+        self._me.next_event_s = next_event_s
 
     def _me_stepper(self, next_event: float | None) -> MeStepper | FixedStepper:
         if self.solver != "cvode":
@@ -504,6 +521,34 @@ class Model:
         if state.handle is not None and not self._closed:
             self._backend.free_state(state.handle)
         state.handle = None
+
+    # -- state files ----------------------------------------------------------------------------
+    @property
+    def can_serialize(self) -> bool:
+        """Whether the FMU can save its state to bytes (canSerializeFMUstate and canGetAndSetFMUstate)."""
+        return serial.refusal(self.info, self.interface) is None
+
+    @property
+    def serialize_refusal(self) -> str | None:
+        """Why the FMU cannot save its state to a file (naming the capability flags), or None."""
+        return serial.refusal(self.info, self.interface)
+
+    def state_file(self, state: ModelState | None = None, *, max_bytes: int = MAX_STATE_BYTES) -> StateFile:
+        """``state`` (default: the state now) serialised by the FMU, with a header naming the FMU
+        and the time grid (``bridge.fmu.state_file``); :class:`StateFileError` where it cannot."""
+        return start_state.to_file(self, state, max_bytes)
+
+    def start_from(self, file: StateFile, source: str = "the state") -> None:
+        """Start every episode from now on at ``file``'s state instead of initialising.
+
+        Raises:
+            StateFileError: the state was saved by another FMU, or this FMU cannot deserialise.
+        """
+        start = start_state.prepare(self, file, source)
+        if self._start is not None:
+            start_state.free(self, self._start)
+        self._drop_snapshots()
+        self._start = start
 
     # -- stepping -----------------------------------------------------------------------------
     def advance(self, n: int = 1) -> bool:

@@ -40,7 +40,7 @@ _WRAPPERS: Final = {
     ("3.0", "cs"): "fmi3.c",
     ("3.0", "me"): "fmi3.c",
 }
-_CORE_SOURCES: Final = ("fmu_core.c", "fmu_vars.c", "fmu_solver.c")
+_CORE_SOURCES: Final = ("fmu_core.c", "fmu_vars.c", "fmu_solver.c", "fmu_serial.c")
 _FMI_HEADERS: Final = {
     "1.0": ("fmi1Functions.h",),
     "2.0": ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),

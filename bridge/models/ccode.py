@@ -48,6 +48,7 @@ def c_header(spec: Spec, fmi_version: str, interface: str, token: str) -> str:
         f"#define MODEL_NZ {nz}",
         f"#define MODEL_NZ_ALLOC {max(nz, 1)}",
         f"#define MODEL_N_VARS {len(spec.variables)}",
+        f"#define MODEL_CAN_SERIALIZE {int(spec.can_serialize)}",
         "",
         "/* value references */",
         *(f"#define VR_{v.c_name} {v.vr}" for v in spec.variables),

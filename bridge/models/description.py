@@ -176,10 +176,12 @@ def _interface_element(spec: Spec, fmi_version: str, interface: str) -> ET.Eleme
     if spec.once_per_process:  # its state is in globals, which an instance's FMU state does not hold
         flags["canBeInstantiatedOnlyOncePerProcess"] = "true"
         state = "false"
+    serialize = str(spec.can_serialize and state == "true").lower()
     if fmi_version == "2.0":
         flags |= {"canGetAndSetFMUstate": state, "canNotUseMemoryManagementFunctions": "true"}
+        flags |= {"canSerializeFMUstate": serialize}
     else:
-        flags |= {"canGetAndSetFMUState": state}
+        flags |= {"canGetAndSetFMUState": state, "canSerializeFMUState": serialize}
     if interface == "cs":
         return ET.Element("CoSimulation", flags | {"canHandleVariableCommunicationStepSize": "true"})
     if fmi_version == "2.0":

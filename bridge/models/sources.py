@@ -38,7 +38,7 @@ _C_KEYWORD_TEXT: Final = """
 _C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
-    | {"type_definitions", "variables", "once_per_process"}
+    | {"type_definitions", "variables", "once_per_process", "can_serialize"}
 )
 
 
@@ -100,6 +100,7 @@ def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> Spec:
         enums={k: _parse_enum(k, v) for k, v in raw.get("type_definitions", {}).items()},
         variables=(TIME, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1))),
         once_per_process=bool(raw.get("once_per_process", False)),
+        can_serialize=bool(raw.get("can_serialize", False)),
     )
     _check_spec(spec)
     return spec
@@ -156,6 +157,8 @@ def _check_spec(spec: Spec) -> None:
     if len(set(names)) != len(names):
         raise ValueError(f"variable names are not unique: {names}")
     _check_c_names(spec.variables)
+    if spec.can_serialize and any(v.type in ("String", "Binary") for v in spec.variables):
+        raise ValueError("can_serialize: the state is saved as bytes; String and Binary are pointers")
     table = units()
     for v in spec.variables:
         _check_variable(spec, v, table)

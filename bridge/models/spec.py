@@ -133,6 +133,7 @@ class Spec:
     enums: Mapping[str, EnumType]
     variables: tuple[Variable, ...]
     once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (and no FMU state): globals
+    can_serialize: bool = False  # canSerializeFMUstate: the state as bytes (no String/Binary variables)
 
     def variable(self, name: str) -> Variable:
         return next(v for v in self.variables if v.name == name)

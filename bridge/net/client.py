@@ -195,6 +195,23 @@ class NodeClient:
             step=None,
         )
 
+    def send_state(self, data: bytes) -> dict[str, Any]:
+        """Hand the node a state file (its bytes) to start its episodes from, from the next reset
+        on (``bridge.net.node_start``); the node's JSON answer, or TransportError saying why not."""
+        from bridge.net.node_start import encode_request
+
+        payload = encode_request(self.client_id, self.key, data)
+        key, limit = self.keys.state, proto.MAX_REQUEST_BYTES
+        replies = self.session.get(key, payload=payload, target=query_target(), timeout=self.timeout_s)
+        for reply in replies:
+            if self.node_zid and replier(reply) not in (None, self.node_zid):
+                continue
+            if reply.ok is not None:
+                return proto.decode_json(reply.ok.payload.to_bytes(), "state reply", limit=limit)
+            message = reply.err.payload.to_bytes().decode(errors="replace")
+            raise TransportError(f"node {self.name!r} refused the state file: {message} [{key}]")
+        raise TransportError(f"node {self.name!r} did not answer the state request [{key}]")
+
     def _session(self, plant: Plant, sample: Any, episode: int) -> proto.Frame:
         """The step-0 frame of a reset reply, and the session key beside it, both checked."""
         payload = sample.payload.to_bytes()

@@ -99,6 +99,10 @@ class Lease:
                 )
             )
 
+    def has_token(self, client: int) -> bool:
+        """Whether ``client``'s liveliness token is live."""
+        return client in self._live
+
     def allows(self, client: int, payload: bytes) -> bool:
         """Whether an action ``payload`` from ``client`` may step the node: nobody holds it, or
         it comes from the holder's session (its MAC is right). Cheap: called every step."""

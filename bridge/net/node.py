@@ -22,10 +22,11 @@ waiting for it, while an isolated one is killed by its plant and restarted by th
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Literal
 
@@ -36,6 +37,7 @@ from bridge.experiment.config import Experiment, as_experiment
 from bridge.experiment.validate import with_elements
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
+from bridge.net import node_start
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.node_health import Health
@@ -150,6 +152,7 @@ class FmuNode:
             node=self,
             on_reset=lambda query: replies.answer_reset(self, query),
             on_info=lambda query: replies.answer_info(self, query),
+            on_state=lambda query: node_start.answer_state(self, query),
             lease=self.lease,
         )
         self._pub, self._clock_pub = link.outputs, link.clock
@@ -305,6 +308,16 @@ class FmuNode:
             _log.info("node %s rejected an action (%s): %s", self.name, reject.reason, reject.detail)
         key = self.lockstep.reject_key(reject, frame.sim_time_ns, payload)
         self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns, key))
+
+    @contextlib.contextmanager
+    def locked(self, what: str) -> Iterator[None]:
+        """Hold the node's FMU for ``what`` (no step or reset meanwhile); Refused if a step hangs."""
+        if not self._lock.acquire(timeout=self.step_timeout_s):
+            raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned ({what})")
+        try:
+            yield
+        finally:
+            self._lock.release()
 
     def reset(self, values: dict[str, Any], inputs: list[float] | None, episode: int) -> bytes:
         """Reset the model for ``episode``; returns the OUTPUTS frame of step 0."""

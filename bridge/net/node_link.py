@@ -39,6 +39,7 @@ class NodeLink:
         node: FmuNode,
         on_reset: Handler,
         on_info: Handler,
+        on_state: Handler,
         lease: Lease,
     ) -> None:
         self.session, self.keys, self.own_session, self.lease = session, keys, own_session, lease
@@ -59,6 +60,7 @@ class NodeLink:
             session.declare_subscriber(keys.actions, self._on_action),
             session.declare_queryable(keys.reset, on_reset, complete=True),
             session.declare_queryable(keys.info, on_info, complete=True),
+            session.declare_queryable(keys.state, on_state, complete=True),
             session.liveliness().declare_subscriber(keys.client(0), self._on_client_token, history=True),
             session.liveliness().declare_token(keys.alive),
         ]

@@ -9,6 +9,7 @@ key expression                        kind       payload
 ``<prefix>/<node>/actions``           put        ``Frame`` kind ACTION (FMU input values)
 ``<prefix>/<node>/reset``             query      request: JSON (``ResetRequest``); reply: OUTPUTS (step 0)
 ``<prefix>/<node>/info``              query      no payload; reply: JSON (model, health, holder, counters)
+``<prefix>/<node>/state``             query      request: a state file to start episodes from (``node_start``)
 ``<prefix>/<node>/clock``             put        int64 LE simulation time in ns (real-time mode)
 ``<prefix>/<node>/alive``             liveliness token while the node serves
 ``<prefix>/<node>/unhealthy``         liveliness token while the node's FMU is hung
@@ -65,6 +66,7 @@ KEY_SIZE = 32  # a session key: random, learnt only from the reset reply
 
 MAX_REQUEST_BYTES = 64 * 1024  # a reset request larger than this is refused unread
 MAX_INFO_BYTES = 16 * 1024 * 1024  # an info reply larger than this is refused unread
+MAX_STATE_BYTES = 16 * 1024 * 1024  # a state request larger than this is refused unread
 MAX_SIGNALS = 100_000  # inputs or outputs a node may declare
 MAX_JSON_DEPTH = 8  # reset requests are flat: deeper nesting is refused before parsing
 EPISODE_MAX = 2**32 - 1  # the header's uint32
@@ -109,6 +111,10 @@ class Keys:
     @property
     def info(self) -> str:
         return f"{self.base}/info"
+
+    @property
+    def state(self) -> str:
+        return f"{self.base}/state"
 
     @property
     def clock(self) -> str:

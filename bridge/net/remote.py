@@ -21,7 +21,8 @@ import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError, StepTimeout, TransportError
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, check_experiment, timing, with_elements
+from bridge.experiment.validate import Timing, check_experiment, resolve_state_file, timing, with_elements
+from bridge.fmu import state_file
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.channel import ChannelWaiting, Waiting
@@ -150,6 +151,8 @@ class RemotePlant(Plant):
                 assert experiment is not None, "a remote env's plant needs its experiment"
                 check_experiment(experiment, self.info)
                 self.timing = timing(experiment, self.info)
+            if experiment is not None:
+                _send_state_file(self.client, experiment)
         except BaseException:
             self.close()
             raise
@@ -162,6 +165,11 @@ class RemotePlant(Plant):
         self._starts = {name: _start(elements[name].start) for name in self._node_inputs}
         self._held: Sequence[float] = []
         self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
+
+    def start_from(self, data: bytes) -> dict[str, Any]:
+        """Hand the node a state file's bytes: its episodes start from that state from the next
+        reset on (``bridge.net.node_start``)."""
+        return self.client.send_state(data)
 
     @property
     def component(self) -> Component | None:
@@ -323,3 +331,12 @@ def _start(value: Any) -> float:
         return float(value) if value is not None else 0.0
     except (TypeError, ValueError):
         return 0.0
+
+
+def _send_state_file(client: NodeClient, experiment: Experiment) -> None:
+    """``model.reset_policy: {state_file: ...}`` of a remote env's experiment: the node gets the
+    file from here, so the FMU's machine need not have it."""
+    path = resolve_state_file(experiment)
+    if path is not None:
+        saved = state_file.read(path)  # checked here first: sizes, checksum
+        client.send_state(state_file.encode(saved.header, saved.payload))

@@ -23,6 +23,7 @@ from bridge.errors import BridgeError, FmuError, StepError
 from bridge.fmu import Model, ModelState, sha256
 from bridge.fmu.sample import NativeSample
 from bridge.fmu.signals import SignalGroup
+from bridge.fmu.state_file import StateFile
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
 _EMPTY = np.zeros(0)
@@ -131,6 +132,10 @@ class FmuInstancePlant(Plant):
     def _failed(self, exc: FmuError, **fields: Any) -> StepError:
         detail = exc.detail if isinstance(exc, StepError) else str(exc)
         return self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, log=exc.log, **fields)
+
+    def start_from(self, file: StateFile, source: str) -> None:
+        """Start every episode from the next reset on at ``file``'s saved state (``Model.start_from``)."""
+        self.model.start_from(file, source)
 
     def set_values(self, values: Mapping[str, Any]) -> None:
         self.model.set(values)

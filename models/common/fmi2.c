@@ -150,27 +150,20 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate* FMUstate) {
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t* size) {
-    (void)FMUstate;
-    (void)size;
     INSTANCE_OR_ERROR(c);
-    return (fmi2Status)fmu_unsupported(inst, "fmi2SerializedFMUstateSize", "canSerializeFMUstate is false");
+    return (fmi2Status)fmu_serialized_size(inst, "fmi2SerializedFMUstateSize", FMUstate, size);
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[], size_t size) {
-    (void)FMUstate;
-    (void)serializedState;
-    (void)size;
     INSTANCE_OR_ERROR(c);
-    return (fmi2Status)fmu_unsupported(inst, "fmi2SerializeFMUstate", "canSerializeFMUstate is false");
+    return (fmi2Status)fmu_serialize(inst, "fmi2SerializeFMUstate", FMUstate, (uint8_t*)serializedState, size);
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate* FMUstate) {
-    (void)serializedState;
-    (void)size;
-    (void)FMUstate;
     INSTANCE_OR_ERROR(c);
-    return (fmi2Status)fmu_unsupported(inst, "fmi2DeSerializeFMUstate", "canSerializeFMUstate is false");
+    return (fmi2Status)fmu_deserialize(inst, "fmi2DeSerializeFMUstate", (const uint8_t*)serializedState, size,
+                                       (FmuSnapshot**)FMUstate);
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

@@ -320,28 +320,21 @@ fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState* FMUState) {
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t* size) {
-    UNUSED(FMUState);
-    UNUSED(size);
     INSTANCE_OR_ERROR(instance);
-    return (fmi3Status)fmu_unsupported(inst, "fmi3SerializedFMUStateSize", "canSerializeFMUState is false");
+    return (fmi3Status)fmu_serialized_size(inst, "fmi3SerializedFMUStateSize", FMUState, size);
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
                                  size_t size) {
-    UNUSED(FMUState);
-    UNUSED(serializedState);
-    UNUSED(size);
     INSTANCE_OR_ERROR(instance);
-    return (fmi3Status)fmu_unsupported(inst, "fmi3SerializeFMUState", "canSerializeFMUState is false");
+    return (fmi3Status)fmu_serialize(inst, "fmi3SerializeFMUState", FMUState, serializedState, size);
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
                                    fmi3FMUState* FMUState) {
-    UNUSED(serializedState);
-    UNUSED(size);
-    UNUSED(FMUState);
     INSTANCE_OR_ERROR(instance);
-    return (fmi3Status)fmu_unsupported(inst, "fmi3DeserializeFMUState", "canSerializeFMUState is false");
+    return (fmi3Status)fmu_deserialize(inst, "fmi3DeserializeFMUState", serializedState, size,
+                                       (FmuSnapshot**)FMUState);
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance instance, const fmi3ValueReference unknowns[],

@@ -86,6 +86,10 @@ FmuStatus fmu_snapshot_update(FmuInstance* inst, const char* fn, FmuSnapshot* sn
 FmuStatus fmu_snapshot_restore(FmuInstance* inst, const char* fn, const FmuSnapshot* snap);
 void fmu_snapshot_free(FmuSnapshot* snap);
 void fmu_free_owned(ModelData* d); /* strings and binaries */
+/* Serialised snapshots (fmu_serial.c), for models built with MODEL_CAN_SERIALIZE; else FMU_ERROR. */
+FmuStatus fmu_serialized_size(FmuInstance* inst, const char* fn, const FmuSnapshot* snap, size_t* size);
+FmuStatus fmu_serialize(FmuInstance* inst, const char* fn, const FmuSnapshot* snap, uint8_t* out, size_t size);
+FmuStatus fmu_deserialize(FmuInstance* inst, const char* fn, const uint8_t* in, size_t size, FmuSnapshot** snap);
 
 /* --- co-simulation ------------------------------------------------------------------------- */
 FmuStatus fmu_do_step(FmuInstance* inst, const char* fn, double t, double h);

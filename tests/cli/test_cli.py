@@ -62,8 +62,9 @@ def test_models_lists_and_builds_every_variant() -> None:
     rows = json.loads(invoke("models", "--json"))
     models = {"cartpole", "dcmotor", "bouncing_ball", "stair", "typed", "typed3", "feedthrough"}
     models |= {"gearload", "pi_controller", "motor_gearload", "vehicle", "modelica_names", "global_state"}
+    models |= {"slow_init"}
     assert {r["model"] for r in rows} == models
-    assert len(rows) == 37 and all(Path(r["path"]).is_file() for r in rows)
+    assert len(rows) == 41 and all(Path(r["path"]).is_file() for r in rows)
     assert "cartpole" in invoke("models")  # and the table for people
 
 

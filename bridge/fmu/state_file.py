@@ -1,0 +1,242 @@
+"""State files: an FMU's serialised state with a header that says whose state it is.
+
+Layout (all integers little-endian)::
+
+    8 bytes   magic b"FMUSTATE"
+    2 bytes   format version (1)
+    4 bytes   length L of the header (at most 64 KiB)
+    L bytes   the header: UTF-8 JSON (fields of :class:`StateHeader`)
+    N bytes   the FMU's own serialised state (fmi2SerializeFMUstate / fmi3SerializeFMUState);
+              N is the header's ``size`` and SHA-256 of these bytes its ``sha256``
+
+A reader never trusts a length it has not checked: the header length and the state's size are
+weighed against a budget before anything is read, the file must end exactly after the state, and
+the checksum must match, so a cut, padded or corrupted file is refused before the FMU sees a byte.
+The header names the FMU (instantiation token / GUID, model identifier, FMI version, interface), so a
+state is only ever handed to the FMU that made it. This module imports no FMPy: the node and the
+CLI read headers without loading an FMU.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import struct
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Final
+
+from bridge.errors import StateFileError
+from bridge.fmu.vocab import ModelInfo
+
+MAGIC: Final = b"FMUSTATE"
+FORMAT_VERSION: Final = 1
+MAX_HEADER_BYTES: Final = 64 * 1024
+#: Default budget for the FMU's serialised state; readers may pass another.
+MAX_STATE_BYTES: Final = 256 * 1024 * 1024
+_PREFIX: Final = struct.Struct("<8sHI")
+
+
+@dataclass(frozen=True)
+class StateHeader:
+    """Whose state it is and where on the time grid it was saved.
+
+    ``time_s`` is ``start_time_s + step_index * step_size_s``; ``start_values`` are the parameters
+    and start values the FMU was initialised with (a state holds them, so they cannot change).
+    """
+
+    fmi_version: str
+    model_name: str
+    model_identifier: str
+    instantiation_token: str
+    interface: str
+    time_s: float
+    start_time_s: float
+    step_size_s: float
+    step_index: int
+    terminated: bool
+    next_event_s: float | None
+    size: int
+    sha256: str
+    start_values: dict[str, Any] = field(default_factory=dict)
+    format_version: int = FORMAT_VERSION
+
+
+@dataclass(frozen=True)
+class StateFile:
+    """A decoded state file: its header and the FMU's serialised state."""
+
+    header: StateHeader
+    payload: bytes = field(repr=False)
+
+
+def encode(header: StateHeader, payload: bytes) -> bytes:
+    """The bytes of a state file (``header.size`` and ``sha256`` must describe ``payload``)."""
+    text = json.dumps(asdict(header), sort_keys=True, allow_nan=False).encode()
+    if len(text) > MAX_HEADER_BYTES:
+        raise StateFileError(f"the state header is {len(text)} bytes; at most {MAX_HEADER_BYTES} are allowed")
+    return _PREFIX.pack(MAGIC, FORMAT_VERSION, len(text)) + text + payload
+
+
+def digest(payload: bytes) -> str:
+    return hashlib.sha256(payload).hexdigest()
+
+
+def decode(data: bytes, *, source: str = "the state", max_bytes: int = MAX_STATE_BYTES) -> StateFile:
+    """A state file from its bytes (a file's content, or a message's); :class:`StateFileError`
+    when it is cut, padded, corrupted, too large or not a state file."""
+    header, start = _header(data[: _PREFIX.size + MAX_HEADER_BYTES], len(data), source, max_bytes)
+    payload = data[start:]
+    if digest(payload) != header.sha256:
+        raise StateFileError(
+            f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{source}]"
+        )
+    return StateFile(header, payload)
+
+
+def read(path: Path, *, max_bytes: int = MAX_STATE_BYTES) -> StateFile:
+    """Read and check a state file; the sizes are checked before the state is read."""
+    with _open(path) as f:
+        head = f.read(_PREFIX.size + MAX_HEADER_BYTES)
+        total = os.fstat(f.fileno()).st_size
+        header, start = _header(head, total, str(path), max_bytes)
+        f.seek(start)
+        payload = f.read(header.size + 1)
+    if digest(payload) != header.sha256:
+        raise StateFileError(
+            f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{path}]"
+        )
+    return StateFile(header, payload)
+
+
+def read_header(path: Path, *, max_bytes: int = MAX_STATE_BYTES) -> StateHeader:
+    """Only the header (sizes checked, the state itself neither read nor verified)."""
+    with _open(path) as f:
+        head = f.read(_PREFIX.size + MAX_HEADER_BYTES)
+        total = os.fstat(f.fileno()).st_size
+    return _header(head, total, str(path), max_bytes)[0]
+
+
+def write(path: Path, state: StateFile) -> None:
+    """Write atomically: a reader sees the old file or the whole new one, never a part."""
+    data = encode(state.header, state.payload)
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise StateFileError(f"cannot write the state file: {exc} [{path}]") from exc
+
+
+def check_fits(header: StateHeader, info: ModelInfo, interface: str, source: str) -> None:
+    """Refuse a state saved by another FMU (token, identifier, FMI version) or interface."""
+    ours = {
+        "instantiation token": info.guid,
+        "model identifier": info.model_identifiers.get(interface, ""),
+        "FMI version": info.fmi_version,
+        "interface": interface,
+    }
+    theirs = {
+        "instantiation token": header.instantiation_token,
+        "model identifier": header.model_identifier,
+        "FMI version": header.fmi_version,
+        "interface": header.interface,
+    }
+    wrong = [f"{key} {theirs[key]!r} (this FMU: {ours[key]!r})" for key in ours if ours[key] != theirs[key]]
+    if wrong:
+        raise StateFileError(
+            f"the state was saved by another FMU ({header.model_name}), not by {info.model_name}: "
+            f"{'; '.join(wrong)}; save a state of this FMU with `fmu-bridge state save` [{source}]"
+        )
+
+
+def _open(path: Path) -> Any:
+    try:
+        return open(path, "rb")
+    except OSError as exc:
+        raise StateFileError(f"cannot read the state file: {exc.strerror or exc} [{path}]") from exc
+
+
+def _header(head: bytes, total: int, source: str, max_bytes: int) -> tuple[StateHeader, int]:
+    """The header from the file's first bytes, and where the state starts; sizes are checked
+    against the budget and against ``total`` (the file's length)."""
+    if len(head) < _PREFIX.size or head[:8] != MAGIC:
+        raise StateFileError(
+            f"not an fmu-bridge state file: expected it to start with {MAGIC!r}, got {head[:8]!r}; "
+            f"save one with `fmu-bridge state save` [{source}]"
+        )
+    _, version, length = _PREFIX.unpack_from(head)
+    if version != FORMAT_VERSION:
+        raise StateFileError(
+            f"state file format version {version} is not supported; this fmu-bridge reads version "
+            f"{FORMAT_VERSION}; save the state again with this version [{source}]"
+        )
+    if length > MAX_HEADER_BYTES:
+        raise StateFileError(
+            f"the state file's header claims {length} bytes; at most {MAX_HEADER_BYTES} are allowed: "
+            f"the file is corrupt or not ours [{source}]"
+        )
+    start = _PREFIX.size + length
+    if len(head) < start:
+        raise StateFileError(
+            f"the state file is cut: its header needs {length} bytes, "
+            f"{len(head) - _PREFIX.size} are there [{source}]"
+        )
+    header = _parse(head[_PREFIX.size : start], source)
+    if header.size > max_bytes:
+        raise StateFileError(
+            f"the saved state is {header.size} bytes, more than the {max_bytes} allowed; raise the "
+            f"limit only for a file you trust [{source}]"
+        )
+    if total != start + header.size:
+        what = "cut" if total < start + header.size else "longer than its header says"
+        raise StateFileError(
+            f"the state file is {what}: expected {start + header.size} bytes, it has {total} [{source}]"
+        )
+    return header, start
+
+
+def _parse(text: bytes, source: str) -> StateHeader:
+    try:
+        raw = json.loads(text.decode())
+        if not isinstance(raw, dict):
+            raise TypeError(f"a JSON object was expected, got {type(raw).__name__}")
+        header = StateHeader(**raw)
+        _check_types(header)
+    except (UnicodeDecodeError, ValueError, TypeError) as exc:
+        raise StateFileError(f"the state file's header is invalid ({exc}) [{source}]") from None
+    return header
+
+
+_TYPES: Final[dict[str, type | tuple[type, ...]]] = {
+    "fmi_version": str,
+    "model_name": str,
+    "model_identifier": str,
+    "instantiation_token": str,
+    "interface": str,
+    "time_s": (int, float),
+    "start_time_s": (int, float),
+    "step_size_s": (int, float),
+    "step_index": int,
+    "terminated": bool,
+    "size": int,
+    "sha256": str,
+    "start_values": dict,
+    "format_version": int,
+}
+
+
+def _check_types(header: StateHeader) -> None:
+    for name, kind in _TYPES.items():
+        value = getattr(header, name)
+        if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
+            raise TypeError(f"{name} has the wrong type ({type(value).__name__})")
+    if header.size < 0 or header.step_index < 0 or header.step_size_s <= 0:
+        raise ValueError("size and step_index must be >= 0 and step_size_s > 0")
+    if header.next_event_s is not None and not isinstance(header.next_event_s, (int, float)):
+        raise TypeError("next_event_s must be a number or null")
