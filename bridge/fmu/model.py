@@ -21,10 +21,11 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
+from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
+from bridge.fmu.clocks import ClockDriver, clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -53,6 +54,7 @@ class ModelState:
     step_index: int
     terminated: bool
     next_event_s: float | None
+    clocks: tuple[Any, ...] | None = None  # the clock schedule (FMUs with clocks that tick)
 
 
 class Model:
@@ -73,6 +75,13 @@ class Model:
             (``bridge.fmu.fixed_step``; FMI 2.0/3.0).
         solver_substeps: fixed-step integration steps per FMU step.
         instance_name: the FMU instance's name (default: ``<model name>#<counter>``).
+        clock_intervals: FMI 3.0 fixed/tunable input clocks with an ``intervalDecimal``: the
+            interval (s) to set in initialization mode instead of the XML's.
+        clock_schedule: FMI 3.0 triggered input clocks: the times (s) at which to activate them.
+
+    FMI 3.0 clocks tick in co-simulation with event mode and in scheduled execution
+    (``interface="se"``, chosen by ``"auto"`` for an FMU that offers nothing else): see
+    :mod:`bridge.fmu.clocks`; :attr:`clock_ticks` lists the ticks since the start.
 
     The model keeps the only clock of its instance: :attr:`step_index` ``k`` (time
     ``t0 + k * h``), advanced by :meth:`advance` and, in place, by the native steppers of this
@@ -92,6 +101,8 @@ class Model:
         instance_name: str | None = None,
         solver: Solver = "cvode",
         solver_substeps: int = 1,
+        clock_intervals: Mapping[str, float] | None = None,
+        clock_schedule: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self.info: ModelInfo = read_model_info(path)
         self.interface: Interface = _choose_interface(self.info, interface)
@@ -126,6 +137,32 @@ class Model:
             once.release(self.info, self)
             raise
         self._do_step = self._backend.stepper() if self.interface == "cs" else self._backend.do_step
+        self._clocks: ClockDriver | None = None
+        if clock_driver_needed(self.info, self.interface):
+            self._clocks = self._start_clocks(clock_intervals, clock_schedule)
+        elif clock_intervals or clock_schedule:
+            self.close()
+            raise ConfigError(
+                f"{self.info.model_name}: clock_intervals and clock_schedule need FMI 3.0 input clocks "
+                f"in co-simulation with event mode or in scheduled execution; this FMU runs "
+                f"FMI {self.info.fmi_version} {self.interface.upper()} without them"
+            )
+
+    def _start_clocks(
+        self, intervals: Mapping[str, float] | None, schedule: Mapping[str, Sequence[float]] | None
+    ) -> ClockDriver:
+        try:
+            driver = ClockDriver(
+                self._backend, self.info, self.interface, intervals=intervals, schedule=schedule
+            )
+        except BaseException:
+            self.close()
+            raise
+        backend: Any = self._backend
+        backend.event_mode = self.interface == "cs"
+        backend.clock_update = driver.clock_update
+        self._do_step = driver.step
+        return driver
 
     # -- context management -------------------------------------------------------------------
     def __enter__(self) -> Model:
@@ -153,6 +190,22 @@ class Model:
         finally:
             archive.release(self.info.path)
             once.release(self.info, self)
+
+    # -- FMI 3.0 clocks ------------------------------------------------------------------------
+    @property
+    def clock_ticks(self) -> list[tuple[float, str]]:
+        """``(time in s, clock name)`` of every clock tick since the start (input clocks as activated,
+        output clocks as the FMU reported them; the most recent 100 000), in order."""
+        return list(self._clocks.ticks) if self._clocks is not None else []
+
+    def activate_clock(self, name: str) -> None:
+        """Tick the triggered input clock ``name`` at the current time (before the next step)."""
+        if self._clocks is None:
+            raise ConfigError(
+                f"{self.info.model_name}: clocks tick only in FMI 3.0 co-simulation with event mode or "
+                f"scheduled execution; {name!r} cannot be activated here"
+            )
+        self._clocks.activate(name)
 
     # -- the clock ----------------------------------------------------------------------------
     @property
@@ -222,6 +275,10 @@ class Model:
         flat = access.merge(self._backend, elements, values, self._to_c, self._where)
         if self.interface == "me" and any(v.variability != "continuous" for v in variables):
             self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
+            return
+        clocks = self._clocks
+        if clocks is not None and self._initialized and any(v.variability != "continuous" for v in variables):
+            clocks.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
             return
         access.write(self._backend, variables, flat, self._where)
         if self.interface == "me":
@@ -317,6 +374,8 @@ class Model:
             if self._me is not None:
                 self._me.restart(self.start_time_s)
                 self._me.next_event_s = next_event_s
+            elif self._clocks is not None:
+                self._clocks.rewind(self.start_time_s)
             return
         policy = self.reset_policy
         if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
@@ -353,9 +412,13 @@ class Model:
         tolerance = self.tolerance if self.interface == "cs" else None
         self._backend.enter_initialization(self.start_time_s, self.stop_time_s, tolerance)
         self._write(late, by_name)
+        if self._clocks is not None:
+            self._clocks.configure(self.start_time_s)
         self._backend.exit_initialization()
         if self.interface == "me":
             self._start_me()
+        if self._clocks is not None:
+            self._clocks.start(self.start_time_s)
         self._initialized = True
         self._init_failed = False
         self._failed_status = 0
@@ -442,7 +505,8 @@ class Model:
                 f"(canGetAndSetFMUstate={self.can_restore}) [{self.info.path}]"
             )
         next_event_s = self._me.next_event_s if self._me is not None else None
-        return ModelState(self._backend.get_state(), self.step_index, self.terminated, next_event_s)
+        clocks = self._clocks.save() if self._clocks is not None else None
+        return ModelState(self._backend.get_state(), self.step_index, self.terminated, next_event_s, clocks)
 
     def restore_state(self, state: ModelState) -> None:
         """Back to ``state`` (from :meth:`save_state` of this model, not yet freed)."""
@@ -455,6 +519,8 @@ class Model:
         if self._me is not None:
             self._me.restart(self.time_s)
             self._me.next_event_s = state.next_event_s
+        if self._clocks is not None and state.clocks is not None:
+            self._clocks.load(state.clocks)
 
     def free_state(self, state: ModelState) -> None:
         """Release ``state``'s memory in the FMU; safe to call twice."""
@@ -538,6 +604,10 @@ class Model:
         b, cached = self._backend, self._handles
         if cached is not None and cached[0] is b.component:  # the same instance: the same addresses
             return cached[1]
+        if self._clocks is not None:
+            raise FmuError(
+                f"{self.info.model_name}: its clocks tick in Python (bridge.fmu.clocks), not natively"
+            )
         if b.major < 2 or not b.component or (self.interface == "me" and self._fixed_stepper is None):
             raise FmuError(
                 f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
@@ -612,7 +682,8 @@ class Model:
         return terminated
 
     def _step_failed(self, status: int) -> bool:
-        if status == DISCARD and self._backend.terminated_after_discard():
+        stopped = self._clocks.terminated if self._clocks is not None else False
+        if status == DISCARD and (stopped or self._backend.terminated_after_discard()):
             self.step_index += 1
             self.terminated = True
             return True
@@ -644,16 +715,10 @@ class Model:
 
 
 def _choose_interface(info: ModelInfo, interface: str) -> Interface:
-    if not info.interfaces:
-        raise FmuLoadError(
-            f"{info.path.name} offers scheduled execution only (FMI 3.0), which fmu-bridge does not run: "
-            f"it runs co-simulation and model exchange; re-export the model with one of those "
-            f"interfaces [{info.path}]"
-        )
-    if interface == "auto":
-        return "cs" if "cs" in info.interfaces else "me"
-    if interface not in ("cs", "me"):
-        raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me' or 'auto'")
+    if interface == "auto":  # co-simulation, else model exchange, else scheduled execution
+        return next(i for i in ("cs", "me", "se") if i in info.interfaces)  # type: ignore[return-value]
+    if interface not in ("cs", "me", "se"):
+        raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me', 'se' or 'auto'")
     if interface not in info.interfaces:
         raise ConfigError(
             f"{info.path.name} has no {interface.upper()} interface; it provides "
