@@ -25,4 +25,6 @@ def experiment_model(
         solver=m.solver,
         solver_substeps=m.solver_substeps,
         instance_name=instance_name,
+        clock_intervals=m.clock_intervals,
+        clock_schedule=m.clock_schedule,
     )

@@ -27,7 +27,7 @@ def fmu(request: pytest.FixtureRequest) -> Path:
 
 
 def _upto(times: Iterator[float]) -> list[float]:
-    out = []
+    out: list[float] = []
     for t in times:
         if t > STOP_S + EPS:
             return out
@@ -76,7 +76,9 @@ def test_every_clock_kind_ticks_at_its_closed_form(fmu: Path) -> None:
             assert ticks[name] == pytest.approx(expected, abs=EPS), name
         assert "trigger" not in ticks  # a triggered clock without a schedule never ticks
         # the clocked variables: tick counts and the time of the last tick
-        observed = model.get(["n_ctrl", "n_const", "n_fixed", "n_calc", "n_tunable", "n_changing", "n_countdown"])
+        observed = model.get(
+            ["n_ctrl", "n_const", "n_fixed", "n_calc", "n_tunable", "n_changing", "n_countdown"]
+        )
         for short, count in observed.items():
             assert count == len(ticks["c_" + short[2:]]), short
         assert model.get(["n_out"])["n_out"] == len(ticks["c_out"])
@@ -147,7 +149,9 @@ def test_saved_states_carry_the_clock_schedule(fmu: Path) -> None:
         assert model.get(["n_changing"])["n_changing"] == len(first["c_changing"])
 
 
-def _controller_reference(setpoints: list[float], agent_h: float, gain: float = 2.0) -> list[tuple[float, float]]:
+def _controller_reference(
+    setpoints: list[float], agent_h: float, gain: float = 2.0
+) -> list[tuple[float, float]]:
     """x' = -x + u, u := gain * (r - x) at every 0.1 s, r changed by the agent every agent_h:
     the exact solution, event by event. Returns (x, u) after each agent sample."""
     x = u = 0.0
