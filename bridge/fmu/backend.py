@@ -454,6 +454,10 @@ class Fmi3Backend(Backend):
     def terminated_after_discard(self) -> bool:
         return bool(self._terminate.value)
 
+    def event_handling_needed(self) -> bool:
+        """After a doStep in event mode: whether the FMU asked for an event at the step's end."""
+        return bool(self._event.value)
+
     def get_state(self) -> ctypes.c_void_p:
         state = ctypes.c_void_p()
         self.call("fmi3GetFMUState", lambda: self.fmu.fmi3GetFMUState(self.component, ctypes.byref(state)))

@@ -185,6 +185,8 @@ class ModelBatch:
                 f"it needs FMI 2.0/3.0 co-simulation, or model exchange with solver 'rk4' or 'euler'; "
                 f"this is FMI {info.fmi_version} {model.interface} (solver {model.solver!r})"
             )
+        if model._clocks is not None:
+            return "its FMI 3.0 clocks tick in Python (bridge.fmu.clocks)"
         names = [*self.input_names, *self.output_names]
         other = [n for n in names if n not in info.variables or info.variables[n].type != "Float64"]
         if other:

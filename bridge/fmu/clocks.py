@@ -34,7 +34,7 @@ from typing import Any
 from fmpy import fmi3
 
 from bridge.errors import ConfigError, FmuError
-from bridge.fmu.abi import DISCARD, ERROR, OK
+from bridge.fmu.abi import DISCARD, ERROR, OK, WARNING
 from bridge.fmu.description import ModelInfo, Variable
 
 NOT_YET_KNOWN, UNCHANGED, CHANGED = 0, 1, 2
@@ -101,6 +101,8 @@ class ClockDriver:
         self._in_event = False
         self._activation_time = 0.0
         self._callback_error: Exception | None = None
+        self._fmu_event_s: float | None = None  # the FMU's next time event (co-simulation)
+        self._initial_event_s: float | None = None
         self._start_ticks: list[tuple[float, str]] = []
         self._start_positions: dict[str, int] = {}
 
@@ -144,7 +146,7 @@ class ClockDriver:
     def start(self, start_s: float) -> None:
         """Right after initialization: the FMU is in event mode (co-simulation) or clock activation
         mode (scheduled execution); the clocks due at the start tick now."""
-        self._time, self.terminated = start_s, False
+        self._time, self.terminated, self._fmu_event_s = start_s, False, None
         self._pending.clear()
         self._schedule_pos = {name: 0 for name in self._schedule}
         self.ticks.clear()
@@ -154,12 +156,12 @@ class ClockDriver:
             self._in_event = True
             self._event(start_s, self._due(start_s))
         self._start_ticks = list(self.ticks)
-        self._initial = dict(self.timing)
+        self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
         self._start_positions = dict(self._schedule_pos)
 
     def rewind(self, start_s: float) -> None:
         """After the instance was set back to the state saved right after :meth:`start`."""
-        self.timing = dict(self._initial)
+        self.timing, self._fmu_event_s = dict(self._initial), self._initial_event_s
         self._time, self.terminated, self._in_event = start_s, False, False
         self._pending.clear()
         self._schedule_pos = dict(self._start_positions)
@@ -168,10 +170,11 @@ class ClockDriver:
 
     def save(self) -> tuple[Any, ...]:
         """What :meth:`load` needs to continue from now (for a saved model state)."""
-        return dict(self.timing), self._time, dict(self._schedule_pos), set(self._pending), self.terminated
+        positions, pending = dict(self._schedule_pos), set(self._pending)
+        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s
 
     def load(self, saved: tuple[Any, ...]) -> None:
-        timing, self._time, positions, pending, self.terminated = saved
+        timing, self._time, positions, pending, self.terminated, self._fmu_event_s = saved
         self.timing, self._schedule_pos, self._pending = dict(timing), dict(positions), set(pending)
         self._in_event = False
 
@@ -223,7 +226,7 @@ class ClockDriver:
             tick = end if due >= end - tolerance else max(due, now)
             if tick > now and not self.scheduled:
                 status = self._do_step(now, tick - now)
-                if status != OK:
+                if status > WARNING:
                     return status
             now = self._time = tick
             self._tick(tick, self._due(tick, tolerance))
@@ -231,17 +234,22 @@ class ClockDriver:
             return DISCARD
         if end > now and not self.scheduled:
             status = self._do_step(now, end - now)
-            if status != OK:
+            if status > WARNING:
                 return status
         self._time = end
         return DISCARD if self.terminated else OK
 
     def _do_step(self, t: float, h: float) -> int:
+        """``fmi3DoStep`` over ``[t, t + h]``; an event the FMU asks for at its end is handled there."""
         status: int = self._backend.do_step(t, h)
+        if status <= WARNING and self._backend.event_handling_needed():
+            self._time = t + h
+            self._event(t + h, [])
         return status
 
     def _tick(self, t: float, names: list[str]) -> None:
-        if not names:
+        fmu_event = self._fmu_event_s is not None and self._fmu_event_s <= t + 1e-12 * max(1.0, abs(t))
+        if not names and not fmu_event:
             return
         if self.scheduled:
             self._activate(t, names)
@@ -250,7 +258,10 @@ class ClockDriver:
 
     # -- which clocks are due -------------------------------------------------------------------
     def _next_due(self) -> float | None:
+        """The earliest tick ahead: a time-based clock's, the schedule's or the FMU's next time event."""
         times = [d for d in (timing.due_s for timing in self.timing.values()) if d is not None]
+        if self._fmu_event_s is not None:
+            times.append(self._fmu_event_s)
         for name, times_s in self._schedule.items():
             position = self._schedule_pos.get(name, 0)
             if position < len(times_s):
@@ -301,14 +312,16 @@ class ClockDriver:
 
     def _update_discrete_states(self) -> None:
         fmu, component = self._backend.fmu, self._backend.component
-        need, terminate = self._flags[0], self._flags[1]
+        need, terminate, defined = self._flags[0], self._flags[1], self._flags[4]
         refs = [ctypes.byref(f) for f in self._flags] + [ctypes.byref(self._next_event)]
         for _ in range(_MAX_ITERATIONS):
             self._call("fmi3UpdateDiscreteStates", lambda: fmu.fmi3UpdateDiscreteStates(component, *refs))
             if terminate.value:
                 self.terminated = True
                 return
-            if not need.value:
+            if not need.value:  # the FMU's own next time event, if it has one
+                later = defined.value and self._next_event.value > self._time  # as FMI 3.0 requires
+                self._fmu_event_s = float(self._next_event.value) if later else None
                 return
         raise FmuError(
             f"{self.info.model_name}: fmi3UpdateDiscreteStates still needs updates after {_MAX_ITERATIONS} "

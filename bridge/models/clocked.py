@@ -80,6 +80,10 @@ def model_description(interface: str) -> str:
         'description="interval of c_calc (its shift is half of it)"/>',
         '<Float64 name="tunable_period" valueReference="26" causality="parameter" variability="tunable" '
         'start="0.5" description="interval of c_tunable"/>',
+        '<Float64 name="alarm_time" valueReference="27" causality="parameter" variability="fixed" '
+        'start="1.737" description="co-simulation: the FMU\'s own time event"/>',
+        '<Float64 name="t_alarm" valueReference="49" causality="output" variability="discrete" '
+        'description="when the time event was handled (-1 before)"/>',
     ]
     names = [name for name, _, _ in _CLOCKS]
     for i, name in enumerate(names):
@@ -96,7 +100,7 @@ def model_description(interface: str) -> str:
             f'<Float64 name="t_{name.removeprefix("c_")}" valueReference="{41 + i}" causality="output" '
             f'variability="discrete" clocks="{i + 1}" description="time of the last tick of {name}"/>'
         )
-    outputs = [9, 20, 21, *range(31, 40), *range(41, 49)]
+    outputs = [9, 20, 21, *range(31, 40), *range(41, 50)]
     structure = "\n    ".join(f'<Output valueReference="{vr}"/>' for vr in outputs)
     body = "\n    ".join(variables)
     return f"""<?xml version="1.0" encoding="UTF-8"?>

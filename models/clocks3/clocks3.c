@@ -19,7 +19,9 @@
  *                         (its interval is not yet known between its tick and the next c_const tick)
  *   trigger     triggered input: whenever the importer activates it
  *   c_out       triggered output: at every second c_const tick
- * Clocked outputs n_<clock> count each clock's ticks and t_<clock> hold the time of the last one. */
+ * Clocked outputs n_<clock> count each clock's ticks and t_<clock> hold the time of the last one.
+ * Co-simulation only: a time event of the FMU's own at alarm_time (announced as nextEventTime, and
+ * with eventHandlingNeeded by a doStep that passes it) sets t_alarm to the time it was handled at. */
 #include "fmi3Functions.h"
 
 #include <math.h>
@@ -35,7 +37,8 @@
 enum { C_CTRL = 1, C_CONST, C_FIXED, C_CALC, C_TUNABLE, C_CHANGING, C_COUNTDOWN, C_TRIGGER, C_OUT };
 #define N_INPUT_CLOCKS 8 /* value references 1..8; c_out is 9 */
 /* Float64 value references */
-enum { VR_TIME = 0, VR_X = 20, VR_U, VR_R, VR_GAIN, VR_X0, VR_PERIOD, VR_TUNABLE_PERIOD };
+enum { VR_TIME = 0, VR_X = 20, VR_U, VR_R, VR_GAIN, VR_X0, VR_PERIOD, VR_TUNABLE_PERIOD, VR_ALARM_TIME };
+#define VR_T_ALARM 49
 #define VR_N_FIRST 31 /* Int32 n_<clock>: 31..39 (c_ctrl .. c_out) */
 #define VR_T_FIRST 41 /* Float64 t_<clock>: 41..48 (c_ctrl .. trigger) */
 
@@ -44,7 +47,8 @@ typedef enum { INSTANTIATED, INITIALIZATION, EVENT, STEP, CLOCK_ACTIVATION, TERM
 typedef struct {
     double time;
     Mode mode;
-    double x, u, r, gain, x0, period, tunable_period, fixed_interval;
+    double x, u, r, gain, x0, period, tunable_period, fixed_interval, alarm_time, t_alarm;
+    bool alarm_fired;
     bool active[N_INPUT_CLOCKS + 2];
     bool out_clock;
     bool evaluated;
@@ -85,6 +89,8 @@ static void set_start_values(State* s) {
     s->tunable_period = 0.5;
     s->fixed_interval = 0.25;
     s->r = 1.0;
+    s->alarm_time = 1.737;
+    s->t_alarm = -1.0;
 }
 
 static fmi3Instance instantiate(fmi3String name, fmi3String token, fmi3InstanceEnvironment env,
@@ -268,6 +274,8 @@ static double* float_ref(State* s, fmi3ValueReference vr) {
         case VR_X0: return &s->x0;
         case VR_PERIOD: return &s->period;
         case VR_TUNABLE_PERIOD: return &s->tunable_period;
+        case VR_ALARM_TIME: return &s->alarm_time;
+        case VR_T_ALARM: return &s->t_alarm;
         default:
             if (vr >= VR_T_FIRST && vr < VR_T_FIRST + N_INPUT_CLOCKS) return &s->t_last[vr - VR_T_FIRST + 1];
             return NULL;
@@ -300,7 +308,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
             REQUIRE(values[k] > 0, "tunable_period must be > 0, got %g", values[k]);
             if (values[k] != s->tunable_period) s->tunable_qualifier = fmi3IntervalChanged;
             s->tunable_period = values[k];
-        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD) && init) {
+        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD || v == VR_ALARM_TIME) && init) {
             *float_ref(s, v) = values[k];
         } else {
             REQUIRE(false, "fmi3SetFloat64: %u cannot be set now (mode %d)", v, (int)s->mode);
@@ -357,12 +365,16 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean* discrete
             if (c->s.active[clock]) run_partition(c, clock);
         c->s.evaluated = true;
     }
+    if (!c->s.alarm_fired && c->s.time >= c->s.alarm_time - 1e-12) { /* the FMU's own time event */
+        c->s.alarm_fired = true;
+        c->s.t_alarm = c->s.time;
+    }
     *discreteStatesNeedUpdate = false;
     *terminateSimulation = false;
     *nominalsOfContinuousStatesChanged = false;
     *valuesOfContinuousStatesChanged = false;
-    *nextEventTimeDefined = false;
-    *nextEventTime = 0.0;
+    *nextEventTimeDefined = !c->s.alarm_fired;
+    *nextEventTime = c->s.alarm_fired ? 0.0 : c->s.alarm_time;
     return fmi3OK;
 }
 
@@ -443,7 +455,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
             c->s.time);
     REQUIRE(communicationStepSize > 0, "fmi3DoStep: step size %g <= 0", communicationStepSize);
     integrate_to(&c->s, currentCommunicationPoint + communicationStepSize);
-    *eventHandlingNeeded = false;
+    *eventHandlingNeeded = !c->s.alarm_fired && c->s.time >= c->s.alarm_time - 1e-12; /* passed it */
     *terminateSimulation = false;
     *earlyReturn = false;
     *lastSuccessfulTime = c->s.time;

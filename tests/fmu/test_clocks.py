@@ -201,3 +201,14 @@ def test_bad_clock_settings_are_refused_saying_what_is_allowed(fmu: Path) -> Non
         Model(fmu, step_size_s=0.25, clock_schedule={"c_ctrl": [0.5]})
     with pytest.raises(ConfigError, match=r"increasing order"):
         Model(fmu, step_size_s=0.25, clock_schedule={"trigger": [0.5, 0.2]})
+
+
+def test_the_fmus_own_time_event_splits_the_step_where_it_says() -> None:
+    """Co-simulation in event mode: the FMU announces its next time event (nextEventTime)."""
+    with Model(clocks_fmu("cs"), step_size_s=0.25) as model:
+        model.reset({"alarm_time": 1.737})
+        model.advance(6)
+        assert model.get(["t_alarm"])["t_alarm"] == -1.0
+        model.advance(1)  # 1.5 -> 1.75 s, split at 1.737 s
+        assert model.get(["t_alarm"])["t_alarm"] == pytest.approx(1.737, abs=1e-12)
+        assert _ticks(model)["c_ctrl"][-1] == pytest.approx(1.7)  # the clocks' grid is unchanged
