@@ -87,6 +87,9 @@ class ClockDriver:
         self.inputs = sorted((v for v in info.clocks if v.causality == "input"), key=_priority)
         self.outputs = [v for v in info.clocks if v.causality == "output"]
         self._by_name = {v.name: v for v in self.inputs}
+        self.triggered = {
+            n for n, v in self._by_name.items() if v.clock and v.clock.interval_variability == "triggered"
+        }
         self._intervals = _check_intervals(info, self._by_name, intervals or {})
         self._schedule = _check_schedule(info, self._by_name, schedule or {})
         self.timing: dict[str, Timing] = {}
@@ -415,6 +418,29 @@ class ClockDriver:
     def _log(self, t: float, names: Iterable[str]) -> None:
         for name in names:
             self.ticks.append((t, name))
+
+
+class ClockInputs:
+    """Inputs of a sample where some are triggered input clocks: a clock's value above 0.5 ticks it
+    at the current time, before the next step (an agent's action); the others are written as the
+    :class:`~bridge.fmu.signals.SignalGroup` ``numeric`` does."""
+
+    def __init__(self, driver: ClockDriver, names: Sequence[str], numeric: Any) -> None:
+        self.names = tuple(names)
+        self._driver, self._numeric = driver, numeric
+        self._clocks = [(i, n) for i, n in enumerate(names) if n in driver.triggered]
+        self._others = [i for i, n in enumerate(names) if n not in driver.triggered]
+
+    def write(self, values: Sequence[float]) -> None:
+        if self._numeric is not None:
+            self._numeric.write([values[i] for i in self._others])
+        for i, name in self._clocks:
+            if values[i] > 0.5:
+                self._driver.activate(name)
+
+    def native_buffer(self, *, writing: bool) -> None:
+        """No native sample: the clocks tick in Python."""
+        return None
 
 
 def _priority(var: Variable) -> tuple[int, int]:

@@ -25,7 +25,7 @@ from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
-from bridge.fmu.clocks import ClockDriver, clock_driver_needed
+from bridge.fmu.clocks import ClockDriver, ClockInputs, clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -238,7 +238,16 @@ class Model:
         return self.info.variable(name)
 
     def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
-        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`)."""
+        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`).
+
+        Writable groups may name FMI 3.0 triggered input clocks: a value above 0.5 ticks the clock
+        before the next step (:class:`bridge.fmu.clocks.ClockInputs`).
+        """
+        clocks = self._clocks
+        if writable and clocks is not None and any(n in clocks.triggered for n in names):
+            others = [n for n in names if n not in clocks.triggered]
+            numeric = self.signals(others, writable=True, role=role) if others else None
+            return ClockInputs(clocks, names, numeric)  # type: ignore[return-value]
         elements = [self._element(n, role) for n in names]
         if not elements and not writable:  # an empty input group: an observation-only experiment
             raise ConfigError(f"{role}: at least one variable is needed")
