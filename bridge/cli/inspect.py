@@ -39,9 +39,9 @@ def type_cell(var: dict[str, Any]) -> str:
 
 
 def interfaces_text(info: dict[str, Any]) -> str:
-    names = list(info["interfaces"])
-    if info.get("scheduled_execution"):
-        names.append("scheduled execution (not run by fmu-bridge)")
+    names = ["SE (scheduled execution)" if name == "SE" else name for name in info["interfaces"]]
+    if info.get("has_event_mode"):
+        names = ["CS (event mode)" if name == "CS" else name for name in names]
     return ", ".join(names) or "none"
 
 

@@ -89,7 +89,7 @@ class ModelSection(Strict):
         default="",
         description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
-    interface: Literal["auto", "cs", "me"] = "auto"
+    interface: Literal["auto", "cs", "me", "se"] = "auto"
     step_size: PositiveFloat | None = None
     sampling_time: PositiveFloat | None = None
     episode_duration: PositiveFloat
@@ -108,6 +108,12 @@ class ModelSection(Strict):
     )
     solver_substeps: Annotated[int, Field(ge=1)] = Field(
         default=1, description="fixed-step solvers: integration steps per FMU step (step_size)"
+    )
+    clock_intervals: dict[str, PositiveFloat] = Field(
+        default={}, description="FMI 3.0 fixed/tunable input clocks: the interval (s) set at initialisation"
+    )
+    clock_schedule: dict[str, list[FiniteFloat]] = Field(
+        default={}, description="FMI 3.0 triggered input clocks: the times (s) they tick at, per episode"
     )
     isolation: IsolationSection | None = None
     licence: LicenceSection | None = None

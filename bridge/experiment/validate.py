@@ -248,8 +248,12 @@ def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: st
                 f"({var.variability}); the agent drives inputs and tunable parameters only "
                 f"({drivable or 'this FMU has none'}){where}"
             )
-        if not var.is_numeric:
-            raise ConfigError(f"actions.inputs: {name!r} is a {var.type} input; actions are numeric{where}")
+        triggered = var.clock is not None and var.clock.interval_variability == "triggered"
+        if not var.is_numeric and not triggered:
+            raise ConfigError(
+                f"actions.inputs: {name!r} is a {var.type} input; actions are numeric, or FMI 3.0 "
+                f"triggered input clocks (ticked when the action is above 0.5){where}"
+            )
         if actions.type == "continuous":
             low, high = action_bounds(exp, var)
             for side, bound, key in (("low", low, "actions.low"), ("high", high, "actions.high")):
@@ -266,7 +270,9 @@ def _check_actions(exp: Experiment, variables: Mapping[str, Variable], where: st
 
 
 def action_bounds(exp: Experiment, var: Variable) -> tuple[float | None, float | None]:
-    return exp.actions.low.get(var.name, var.min), exp.actions.high.get(var.name, var.max)
+    """An action's bounds: the experiment's, else the FMU's min/max ([0, 1] for a triggered clock)."""
+    low, high = (0.0, 1.0) if var.type == "Clock" else (var.min, var.max)
+    return exp.actions.low.get(var.name, low), exp.actions.high.get(var.name, high)
 
 
 def _check_observations(exp: Experiment, variables: Mapping[str, Variable], where: str) -> None:

@@ -364,9 +364,12 @@ class Fmi3Backend(Backend):
     major = 3
     _SET_STATE = "fmi3SetFMUState"
 
+    event_mode = False  # co-simulation: instantiate with eventModeUsed (clocks tick in event mode)
+    clock_update: Callable[[], None] | None = None  # scheduled execution: fmi3ClockUpdateCallback
+
     def _load(self, unzip_dir: pathlib.Path) -> Any:
-        cls = fmi3.FMU3Slave if self.interface == "cs" else fmi3.FMU3Model
-        fmu = cls(**self._fmpy_kwargs(unzip_dir))
+        classes = {"cs": fmi3.FMU3Slave, "me": fmi3.FMU3Model, "se": fmi3.FMU3ScheduledExecution}
+        fmu = classes[self.interface](**self._fmpy_kwargs(unzip_dir))
         self._event = fmi3.fmi3Boolean()
         self._terminate = fmi3.fmi3Boolean()
         self._early = fmi3.fmi3Boolean()
@@ -398,13 +401,23 @@ class Fmi3Backend(Backend):
                 resources,
                 False,
                 False,
-                False,
+                self.event_mode,
                 False,
                 no_vrs,
                 0,
                 env,
                 logs.V3_LOGGER,
                 self._intermediate,
+            )
+        elif self.interface == "se":
+            backend = self
+            self._se_callbacks = (
+                fmi3.fmi3ClockUpdateCallback(lambda _env: backend.clock_update and backend.clock_update()),
+                fmi3.fmi3LockPreemptionCallback(lambda: None),
+                fmi3.fmi3UnlockPreemptionCallback(lambda: None),
+            )
+            create = lambda: self.fmu.fmi3InstantiateScheduledExecution(  # noqa: E731
+                name, token, resources, False, False, env, logs.V3_LOGGER, *self._se_callbacks
             )
         else:
             create = lambda: self.fmu.fmi3InstantiateModelExchange(  # noqa: E731
@@ -440,6 +453,10 @@ class Fmi3Backend(Backend):
 
     def terminated_after_discard(self) -> bool:
         return bool(self._terminate.value)
+
+    def event_handling_needed(self) -> bool:
+        """After a doStep in event mode: whether the FMU asked for an event at the step's end."""
+        return bool(self._event.value)
 
     def get_state(self) -> ctypes.c_void_p:
         state = ctypes.c_void_p()

@@ -189,6 +189,8 @@ class ModelBatch:
                 f"it needs FMI 2.0/3.0 co-simulation, or model exchange with solver 'rk4' or 'euler'; "
                 f"this is FMI {info.fmi_version} {model.interface} (solver {model.solver!r})"
             )
+        if model._clocks is not None:
+            return "its FMI 3.0 clocks tick in Python (bridge.fmu.clocks)"
         ins, outs = (group[i].float64_layout() for group in (self._inputs, self._outputs))
         if outs is None or (self.input_names and ins is None):
             return (

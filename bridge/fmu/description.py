@@ -81,7 +81,7 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
     identifiers: dict[str, str] = {}
     can_state: dict[str, bool] = {}
     once_per_process = False
-    for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange)):
+    for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange), ("se", md.scheduledExecution)):
         if iface is not None:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
@@ -110,6 +110,7 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
         description=md.description,
         problems=problems,
         scheduled_execution=scheduled,
+        has_event_mode=bool(md.coSimulation is not None and md.coSimulation.hasEventMode),
         once_per_process=once_per_process,
         raw=md,
     )
@@ -243,6 +244,7 @@ def _clock(var: Variable, attributes: dict[str, str]) -> ClockInfo:
         interval_s=_float(attributes.get("intervalDecimal")),
         shift_s=_float(attributes.get("shiftDecimal")),
         can_be_deactivated=attributes.get("canBeDeactivated") in ("true", "1"),
+        priority=int(attributes.get("priority") or 0),
     )
 
 

@@ -21,10 +21,11 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import ConfigError, FmuError, FmuLoadError, StepError, VariableError
+from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once, serial, start_state, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
+from bridge.fmu.clocks import ClockDriver, ClockInputs, clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -54,6 +55,7 @@ class ModelState:
     step_index: int
     terminated: bool
     next_event_s: float | None
+    clocks: tuple[Any, ...] | None = None  # the clock schedule (FMUs with clocks that tick)
 
 
 class Model:
@@ -77,6 +79,13 @@ class Model:
         structural_parameters: FMI 3.0 structural parameters (array sizes) by name, set in
             configuration mode after every instantiation and fmi reset; :attr:`info` then holds the
             array sizes the FMU reports (``bridge.fmu.structure``).
+        clock_intervals: FMI 3.0 fixed/tunable input clocks with an ``intervalDecimal``: the
+            interval (s) to set in initialization mode instead of the XML's.
+        clock_schedule: FMI 3.0 triggered input clocks: the times (s) at which to activate them.
+
+    FMI 3.0 clocks tick in co-simulation with event mode and in scheduled execution
+    (``interface="se"``, chosen by ``"auto"`` for an FMU that offers nothing else): see
+    :mod:`bridge.fmu.clocks`; :attr:`clock_ticks` lists the ticks since the start.
 
     The model keeps the only clock of its instance: :attr:`step_index` ``k`` (time
     ``t0 + k * h``), advanced by :meth:`advance` and, in place, by the native steppers of this
@@ -97,6 +106,8 @@ class Model:
         solver: Solver = "cvode",
         solver_substeps: int = 1,
         structural_parameters: Mapping[str, int] | None = None,
+        clock_intervals: Mapping[str, float] | None = None,
+        clock_schedule: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self.info: ModelInfo = read_model_info(path)
         self._structural = structure.check(self.info, structural_parameters) if structural_parameters else {}
@@ -143,6 +154,37 @@ class Model:
             except BaseException:
                 self.close()
                 raise
+        self._clocks: ClockDriver | None = self._clocks_for(clock_intervals, clock_schedule)
+
+    def _clocks_for(
+        self, intervals: Mapping[str, float] | None, schedule: Mapping[str, Sequence[float]] | None
+    ) -> ClockDriver | None:
+        if clock_driver_needed(self.info, self.interface):
+            return self._start_clocks(intervals, schedule)
+        if intervals or schedule:
+            self.close()
+            raise ConfigError(
+                f"{self.info.model_name}: clock_intervals and clock_schedule need FMI 3.0 input clocks "
+                f"in co-simulation with event mode or in scheduled execution; this FMU runs "
+                f"FMI {self.info.fmi_version} {self.interface.upper()} without them"
+            )
+        return None
+
+    def _start_clocks(
+        self, intervals: Mapping[str, float] | None, schedule: Mapping[str, Sequence[float]] | None
+    ) -> ClockDriver:
+        try:
+            driver = ClockDriver(
+                self._backend, self.info, self.interface, intervals=intervals, schedule=schedule
+            )
+        except BaseException:
+            self.close()
+            raise
+        backend: Any = self._backend
+        backend.event_mode = self.interface == "cs"
+        backend.clock_update = driver.clock_update
+        self._do_step = driver.step
+        return driver
 
     # -- context management -------------------------------------------------------------------
     def __enter__(self) -> Model:
@@ -172,6 +214,22 @@ class Model:
         finally:
             archive.release(self.info.path)
             once.release(self.info, self)
+
+    # -- FMI 3.0 clocks ------------------------------------------------------------------------
+    @property
+    def clock_ticks(self) -> list[tuple[float, str]]:
+        """``(time in s, clock name)`` of every clock tick since the start (input clocks as activated,
+        output clocks as the FMU reported them; the most recent 100 000), in order."""
+        return list(self._clocks.ticks) if self._clocks is not None else []
+
+    def activate_clock(self, name: str) -> None:
+        """Tick the triggered input clock ``name`` at the current time (before the next step)."""
+        if self._clocks is None:
+            raise ConfigError(
+                f"{self.info.model_name}: clocks tick only in FMI 3.0 co-simulation with event mode or "
+                f"scheduled execution; {name!r} cannot be activated here"
+            )
+        self._clocks.activate(name)
 
     # -- the clock ----------------------------------------------------------------------------
     @property
@@ -204,7 +262,16 @@ class Model:
         return self.info.variable(name)
 
     def signals(self, names: Sequence[str], *, writable: bool = False, role: str = "signal") -> SignalGroup:
-        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`)."""
+        """A batched accessor for numeric variables and array elements ``y[2,3]`` (:class:`SignalGroup`).
+
+        Writable groups may name FMI 3.0 triggered input clocks: a value above 0.5 ticks the clock
+        before the next step (:class:`bridge.fmu.clocks.ClockInputs`).
+        """
+        clocks = self._clocks
+        if writable and clocks is not None and any(n in clocks.triggered for n in names):
+            others = [n for n in names if n not in clocks.triggered]
+            numeric = self.signals(others, writable=True, role=role) if others else None
+            return ClockInputs(clocks, names, numeric)  # type: ignore[return-value]
         elements = [self._element(n, role) for n in names]
         if not elements and not writable:  # an empty input group: an observation-only experiment
             raise ConfigError(f"{role}: at least one variable is needed")
@@ -241,6 +308,10 @@ class Model:
         flat = access.merge(self._backend, elements, values, self._to_c, self._where)
         if self.interface == "me" and any(v.variability != "continuous" for v in variables):
             self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
+            return
+        clocks = self._clocks
+        if clocks is not None and self._initialized and any(v.variability != "continuous" for v in variables):
+            clocks.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
             return
         access.write(self._backend, variables, flat, self._where)
         if self.interface == "me":
@@ -340,6 +411,8 @@ class Model:
             if self._me is not None:
                 self._me.restart(self.start_time_s)
                 self._me.next_event_s = next_event_s
+            elif self._clocks is not None:
+                self._clocks.rewind(self.start_time_s)
             return
         policy = self.reset_policy
         if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
@@ -400,9 +473,13 @@ class Model:
         tolerance = self.tolerance if self.interface == "cs" else None
         self._backend.enter_initialization(self.start_time_s, self.stop_time_s, tolerance)
         self._write(late, by_name)
+        if self._clocks is not None:
+            self._clocks.configure(self.start_time_s)
         self._backend.exit_initialization()
         if self.interface == "me":
             self._start_me()
+        if self._clocks is not None:
+            self._clocks.start(self.start_time_s)
         self._initialized = True
         self._init_failed = False
         self._failed_status = 0
@@ -502,7 +579,8 @@ class Model:
                 f"(canGetAndSetFMUstate={self.can_restore}) [{self.info.path}]"
             )
         next_event_s = self._me.next_event_s if self._me is not None else None
-        return ModelState(self._backend.get_state(), self.step_index, self.terminated, next_event_s)
+        clocks = self._clocks.save() if self._clocks is not None else None
+        return ModelState(self._backend.get_state(), self.step_index, self.terminated, next_event_s, clocks)
 
     def restore_state(self, state: ModelState) -> None:
         """Back to ``state`` (from :meth:`save_state` of this model, not yet freed)."""
@@ -515,6 +593,8 @@ class Model:
         if self._me is not None:
             self._me.restart(self.time_s)
             self._me.next_event_s = state.next_event_s
+        if self._clocks is not None and state.clocks is not None:
+            self._clocks.load(state.clocks)
 
     def free_state(self, state: ModelState) -> None:
         """Release ``state``'s memory in the FMU; safe to call twice."""
@@ -626,6 +706,10 @@ class Model:
         b, cached = self._backend, self._handles
         if cached is not None and cached[0] is b.component:  # the same instance: the same addresses
             return cached[1]
+        if self._clocks is not None:
+            raise FmuError(
+                f"{self.info.model_name}: its clocks tick in Python (bridge.fmu.clocks), not natively"
+            )
         if b.major < 2 or not b.component or (self.interface == "me" and self._fixed_stepper is None):
             raise FmuError(
                 f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
@@ -700,7 +784,8 @@ class Model:
         return terminated
 
     def _step_failed(self, status: int) -> bool:
-        if status == DISCARD and self._backend.terminated_after_discard():
+        stopped = self._clocks.terminated if self._clocks is not None else False
+        if status == DISCARD and (stopped or self._backend.terminated_after_discard()):
             self.step_index += 1
             self.terminated = True
             return True
@@ -732,16 +817,10 @@ class Model:
 
 
 def _choose_interface(info: ModelInfo, interface: str) -> Interface:
-    if not info.interfaces:
-        raise FmuLoadError(
-            f"{info.path.name} offers scheduled execution only (FMI 3.0), which fmu-bridge does not run: "
-            f"it runs co-simulation and model exchange; re-export the model with one of those "
-            f"interfaces [{info.path}]"
-        )
-    if interface == "auto":
-        return "cs" if "cs" in info.interfaces else "me"
-    if interface not in ("cs", "me"):
-        raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me' or 'auto'")
+    if interface == "auto":  # co-simulation, else model exchange, else scheduled execution
+        return next(i for i in ("cs", "me", "se") if i in info.interfaces)  # type: ignore[return-value]
+    if interface not in ("cs", "me", "se"):
+        raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me', 'se' or 'auto'")
     if interface not in info.interfaces:
         raise ConfigError(
             f"{info.path.name} has no {interface.upper()} interface; it provides "

@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from bridge.errors import VariableError
 
-Interface = Literal["cs", "me"]
+Interface = Literal["cs", "me", "se"]
 
 NUMERIC_TYPES = frozenset(
     {
@@ -46,6 +46,7 @@ class ClockInfo:
     interval_s: float | None = None
     shift_s: float | None = None
     can_be_deactivated: bool = False
+    priority: int = 0  # a smaller value is a higher priority (same-time ticks run in that order)
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,8 @@ class ModelInfo:
     generation_tool: str | None = None
     description: str | None = None
     problems: tuple[str, ...] = ()
-    scheduled_execution: bool = False  # FMI 3.0 scheduled execution (listed, not run)
+    scheduled_execution: bool = False  # FMI 3.0 scheduled execution (interface "se")
+    has_event_mode: bool = False  # FMI 3.0 co-simulation with event mode (clocks tick there)
     once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (either interface)
     raw: Any = field(default=None, repr=False, compare=False)  # FMPy's ModelDescription, in-process only
 
@@ -219,6 +221,7 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
         "continuous_states": info.number_of_states,
         "event_indicators": info.number_of_event_indicators,
         "scheduled_execution": info.scheduled_execution,
+        "has_event_mode": info.has_event_mode,
         "once_per_process": info.once_per_process,
         "problems": list(info.problems),
         "variables": [
@@ -249,6 +252,7 @@ def _clock_summary(clock: ClockInfo) -> dict[str, Any]:
         "interval_s": clock.interval_s,
         "shift_s": clock.shift_s,
         "can_be_deactivated": clock.can_be_deactivated,
+        "priority": clock.priority,
     }
 
 
@@ -297,6 +301,7 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
         number_of_states=int(data.get("continuous_states", 0)),
         number_of_event_indicators=int(data.get("event_indicators", 0)),
         scheduled_execution=bool(data.get("scheduled_execution", False)),
+        has_event_mode=bool(data.get("has_event_mode", False)),
         once_per_process=bool(data.get("once_per_process", False)),
         generation_tool=data.get("generation_tool"),
         description=data.get("description"),

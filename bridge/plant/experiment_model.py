@@ -34,6 +34,8 @@ def experiment_model(
         solver_substeps=m.solver_substeps,
         instance_name=instance_name,
         structural_parameters=m.structural_parameters or None,
+        clock_intervals=m.clock_intervals,
+        clock_schedule=m.clock_schedule,
     )
     if saved is not None:
         try:

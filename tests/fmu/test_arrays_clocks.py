@@ -1,7 +1,7 @@
 """FMI 3.0 arrays (element-wise as ``y[2,3]``, 1-based, row-major), Binary and clocks.
 
 Arrays run on an FMU exported by pythonfmu3; clocks and scheduled execution are read from a
-model description (``inspect`` needs no binary).
+model description (``inspect`` needs no binary); tests/fmu/test_clocks.py runs them.
 """
 
 from __future__ import annotations
@@ -134,13 +134,13 @@ def test_inspect_lists_clocks_with_kinds_and_intervals(scheduled_fmu: Path) -> N
     assert result.exit_code == 0, result.output
     assert "clock tick (input): constant, interval 0.01 s, shift 0.002 s" in result.output
     assert "clock trigger (input): triggered" in result.output
-    assert "scheduled execution (not run by fmu-bridge)" in result.output
+    assert "SE (scheduled execution)" in result.output
     data = json.loads(CliRunner().invoke(app, ["inspect", str(scheduled_fmu), "--json"]).output)
     assert data["clocks"] == ["tick", "trigger"] and data["scheduled_execution"] is True
 
 
-def test_scheduled_execution_only_fmu_is_refused_saying_so(scheduled_fmu: Path) -> None:
-    with pytest.raises(
-        FmuLoadError, match=r"offers scheduled execution only .*co-simulation and model exchange"
-    ):
+def test_scheduled_execution_only_fmu_is_run_as_such(scheduled_fmu: Path) -> None:
+    """Chosen as interface 'se' (this archive ships no binary, so loading it stops there)."""
+    assert read_model_info(scheduled_fmu).interfaces == ("se",)
+    with pytest.raises(FmuLoadError, match=r"sched.fmu has no binary for this platform"):
         Model(scheduled_fmu, step_size_s=0.01)

@@ -54,6 +54,7 @@ def test_inspect_shows_array_dimensions_binary_variables_and_the_clock(typed3: P
         "interval_s": 0.1,
         "shift_s": None,
         "can_be_deactivated": False,
+        "priority": 0,
     }
 
 
