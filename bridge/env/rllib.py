@@ -10,7 +10,7 @@ without an error. So:
   (RLlib passes ``num_envs`` with ``gym_env_vectorize_mode="vector_entry_point"``);
 - :class:`NextStepOnly`, an RLlib callback, refuses any env runner env that declares another
   autoreset mode (:func:`check_next_step`), so a SAME_STEP env fails at creation, not silently;
-- :func:`ppo_config` puts the two together.
+- :func:`algo_config` (PPO or SAC; :func:`ppo_config` for PPO) puts the two together.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
 from bridge.env.batch import BatchVectorEnv
@@ -76,22 +77,29 @@ class BatchEnvCreator:
         return BatchVectorEnv(self.experiment, int(env_config["num_envs"]), **self.kwargs)
 
 
-def ppo_config(
+ALGORITHMS = {"PPO": PPOConfig, "SAC": SACConfig}
+
+
+def algo_config(
+    algo: str,
     experiment: Experiment | str | Path,
     *,
     envs_per_runner: int,
     num_env_runners: int = 0,
     **env_kwargs: Any,
 ) -> Any:
-    """An RLlib ``PPOConfig`` whose env runners each host a NEXT_STEP batch env of ``envs_per_runner``
-    FMU instances, with :class:`NextStepOnly` installed (training settings are left to the caller)."""
+    """An RLlib config of ``algo`` (PPO or SAC) whose env runners each host a NEXT_STEP batch env of
+    ``envs_per_runner`` FMU instances, with :class:`NextStepOnly` installed (training settings are
+    left to the caller)."""
     from ray.tune.registry import register_env
 
+    if algo not in ALGORITHMS:
+        raise ConfigError(f"RLlib algorithm {algo!r}: supported here are {sorted(ALGORITHMS)}")
     creator = BatchEnvCreator(experiment, **env_kwargs)
     name = f"fmu_bridge_batch_{uuid.uuid4().hex[:12]}"  # the Algorithm takes a registered name
     register_env(name, creator)
     return (
-        PPOConfig()  # type: ignore[no-untyped-call]
+        ALGORITHMS[algo]()  # type: ignore[no-untyped-call]
         .environment(env=name)
         .env_runners(
             num_env_runners=num_env_runners,
@@ -99,4 +107,17 @@ def ppo_config(
             gym_env_vectorize_mode="vector_entry_point",
         )
         .callbacks(NextStepOnly)
+    )
+
+
+def ppo_config(
+    experiment: Experiment | str | Path,
+    *,
+    envs_per_runner: int,
+    num_env_runners: int = 0,
+    **env_kwargs: Any,
+) -> Any:
+    """:func:`algo_config` for PPO."""
+    return algo_config(
+        "PPO", experiment, envs_per_runner=envs_per_runner, num_env_runners=num_env_runners, **env_kwargs
     )
