@@ -148,3 +148,28 @@ def agent_check(run: Path, recording: Path, runtime: str) -> subprocess.Complete
         check=False,
         env={**os.environ, "COLUMNS": "200"},
     )
+
+
+def test_agent_run_deploys_the_rllib_run_without_torch(
+    trained: RllibResult, loopback: Any, tmp_path: Path
+) -> None:
+    """``agent run RUN --runtime onnx`` (torch and stable-baselines3 unimportable in its process)
+    closes the loop with a real cart-pole node in lockstep on a Zenoh router at 127.0.0.1."""
+    from tests.agents.test_deploy_torch_free import SUMMARY, agent_process, drive_one_episode
+    from tests.conftest import node_process
+
+    run = trained.run_dir
+    samples = 40
+    log = tmp_path / "blocked.txt"
+    with (
+        node_process(run / "experiment.yaml", "plant", loopback, "--mode", "lockstep"),
+        agent_process(run, loopback, "zenoh", log) as agent,
+    ):
+        episode = drive_one_episode(loopback, samples)
+    output = agent.stdout.read()
+    agent.stdout.close()
+    assert not log.exists(), f"the deployed agent tried to import torch:\n{log.read_text()}"
+    assert agent.returncode == 0, output[-3000:]
+    assert [f.step for f in episode] == list(range(samples))  # lockstep: each step waited for its action
+    found = SUMMARY.search(" ".join(output.split()))
+    assert found is not None and int(found.group(2)) >= samples - 1, output[-3000:]
