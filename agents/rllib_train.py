@@ -14,6 +14,8 @@ training           RLlib
 algo               PPO or SAC
 timesteps          env steps sampled before training stops
 n_envs             FMU instances per env runner (``num_envs_per_env_runner``)
+vec                ``remote``: each runner drives n_envs nodes of ``training.remote``
+                   (leased, a dead node replaced by a spare); anything else: a batch env
 seed               ``debugging(seed=...)``
 normalize          must be false (RLlib trains on the Task's observations as they are)
 PPO hyperparams:
@@ -211,12 +213,26 @@ def build_config(
 
     experiment = load_experiment(experiment_path, version=version)
     kwargs, model = training_kwargs(settings, runners)
+    nodes: dict[str, Any] = {}
+    if settings.vec == "remote":  # each runner leases n_envs nodes from the pool
+        remote = settings.remote
+        nodes = {
+            "nodes": remote.nodes,
+            "options": remote.options(),
+            "timeout_s": remote.timeout_s,
+            "replace_wait_s": max(remote.replace_wait_s, 60.0),
+            "prefix": experiment.node.prefix,
+        }
     config = algo_config(
-        settings.algo.upper(), experiment, envs_per_runner=max(1, settings.n_envs), num_env_runners=runners
+        settings.algo.upper(),
+        experiment,
+        envs_per_runner=max(1, settings.n_envs),
+        num_env_runners=runners,
+        **nodes,
     )
     config = config.training(**kwargs).debugging(seed=settings.seed)
     licence = experiment.model.licence
-    if licence is not None:  # each env runner holds n_envs instances' seats
+    if licence is not None and not nodes:  # each env runner holds n_envs instances' seats
         seats = {licence.resource: licence.per_instance * max(1, settings.n_envs)}
         config = config.env_runners(custom_resources_per_env_runner=seats)
     if model:
@@ -248,7 +264,7 @@ def train_rllib(
     config = build_config(experiment_path, settings, runners=runners, version=version)
     ray = connect(ray_address)
     licence = experiment.model.licence
-    if licence is not None:
+    if licence is not None and settings.vec != "remote":  # nodes hold the instances there
         check_resources(ray, {licence.resource: licence.per_instance * max(1, settings.n_envs)})
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
     info: dict[str, Any] = {
