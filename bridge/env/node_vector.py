@@ -30,7 +30,8 @@ import numpy.typing as npt
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from bridge.env.batch import _autoreset_mode, _seeds
+from bridge.env.autoreset import autoreset_mode as _autoreset_mode
+from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.vec import RemoteVecEnv, Result
 from bridge.experiment.config import Experiment
 
