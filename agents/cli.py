@@ -331,7 +331,8 @@ def train_cmd(
         ),
     ] = "absolute",
     engine: Annotated[
-        str, typer.Option(help="sb3 (stable-baselines3), or rllib: PPO on Ray, env runners of n_envs FMUs.")
+        str,
+        typer.Option(help="sb3 (stable-baselines3), or rllib: PPO or SAC on Ray, n_envs FMUs per runner."),
     ] = "sb3",
     runners: Annotated[int, typer.Option(help="RLlib env runners (with --engine rllib).")] = 1,
     ray_address: Annotated[
@@ -396,8 +397,6 @@ def _train_rllib(
     runners: int,
     ray_address: str | None,
 ) -> None:
-    import time
-
     from agents.rllib_train import train_rllib
     from bridge.errors import ConfigError
 
@@ -409,7 +408,6 @@ def _train_rllib(
         "n_envs": n_envs,
         "seed": seed,
     }
-    run_dir = run_dir or Path("runs") / f"rllib-{experiment.stem}-{time.strftime('%Y%m%d-%H%M%S')}"
     result = train_rllib(
         experiment,
         run_dir=run_dir,
@@ -421,7 +419,7 @@ def _train_rllib(
     console.print(
         f"trained {result.timesteps:,} steps in {result.iterations} iterations, {result.wall_time_s:.1f} s"
     )
-    console.print(f"run: {result.run_dir}\ncheckpoint: {result.checkpoint}")
+    console.print(f"run: {result.run_dir}\ncheckpoint: {result.checkpoint}\nONNX policy: {result.onnx}")
 
 
 def _residual_option(text: str) -> dict[str, Any]:

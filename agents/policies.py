@@ -280,9 +280,20 @@ class Sb3Policy:
         return action
 
 
+def rllib_run(run_dir: Path) -> bool:
+    """True for a run folder written by ``train --engine rllib``."""
+    return _run_info(run_dir).get("engine") == "rllib" if run_dir.is_dir() else False
+
+
 def _model_file(path: Path) -> Path:
     if path.is_file():
         return path
+    if rllib_run(path):
+        raise ConfigError(
+            "this run was trained with --engine rllib: it has no stable-baselines3 model; deploy its "
+            "ONNX export with --runtime onnx (training writes policy.onnx; `fmu-bridge agent export "
+            f"onnx RUN` writes it again) [{path}]"
+        )
     for name in ("best_model.zip", "model.zip"):
         if (path / name).is_file():
             return path / name
@@ -351,6 +362,10 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
     if spec.startswith("python:"):
         return PythonPolicy(name or spec, _import(spec.partition(":")[2], spec))
     path = Path(spec)
+    if rllib_run(path):  # trained on RLlib: its ONNX export acts
+        from agents.runtime import OnnxPolicy
+
+        return OnnxPolicy(path, name or path.name)
     if path.exists():
         return Sb3Policy(path, name)
     raise ConfigError(

@@ -99,6 +99,9 @@ def _head(parts: PolicyParts, outputs: Sequence[str]) -> list[str]:
     for j, c in enumerate(outputs):
         if parts.head == "clip":
             action = f"fmin(fmax(y[{j}], LOW[{j}]), HIGH[{j}])"
+        elif parts.head == "unsquash":
+            unsquashed = f"LOW[{j}] + (y[{j}] + 1.0) * (HIGH[{j}] - LOW[{j}]) / 2.0"
+            action = f"fmin(fmax({unsquashed}, LOW[{j}]), HIGH[{j}])"
         else:
             squashed = f"tanh(y[{j}])" if parts.head == "squash" else f"y[{j}]"
             action = f"LOW[{j}] + 0.5 * ({squashed} + 1.0) * (HIGH[{j}] - LOW[{j}])"

@@ -3,6 +3,8 @@
 The deterministic action of each algorithm (as ``model.predict(deterministic=True)`` computes it):
 PPO/A2C the Gaussian mean (or the argmax of the logits), clipped to the action space; SAC the tanh
 of the mean, unscaled; TD3 the actor's (tanh) output, unscaled; DQN the argmax of the Q-values.
+A run of ``train --engine rllib`` is read from its ``rllib_policy.npz`` (``agents.export.rllib_policy``):
+``unsquash`` (the mean mapped from [-1, 1] onto the Box, clipped) or ``argmax``, as RLlib acts.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import numpy.typing as npt
 from bridge.errors import ConfigError
 
 FloatArray = npt.NDArray[np.float64]
-Head = Literal["clip", "squash", "unscale", "argmax"]
+Head = Literal["clip", "squash", "unscale", "unsquash", "argmax"]
 ACTIVATIONS = ("tanh", "relu", "elu")
 _HEADS: dict[str, Head] = {"PPO": "clip", "A2C": "clip", "SAC": "squash", "TD3": "unscale", "DQN": "argmax"}
 
@@ -110,13 +112,16 @@ def network_ops(modules: list[Any]) -> list[Op]:
 
 
 def load_parts(run: Path) -> tuple[PolicyParts, Any]:
-    """Read a run directory (or its model .zip): the parts and the loaded SB3 model."""
+    """Read a run directory (or its model .zip): the parts and the loaded SB3 model (``None`` for
+    a run trained with ``--engine rllib``: its network is in the parts' ops)."""
     from agents.deploy import deployment_experiment, model_info_for
-    from agents.policies import Sb3Policy
+    from agents.policies import Sb3Policy, rllib_run
     from bridge.experiment.validate import check_experiment, timing
     from bridge.task.core import Task
 
     run_dir = run if run.is_dir() else run.parent
+    if rllib_run(run_dir):
+        return _rllib_parts(run_dir), None
     policy = Sb3Policy(run)
     if policy.residual:
         raise ConfigError(
@@ -139,8 +144,32 @@ def load_parts(run: Path) -> tuple[PolicyParts, Any]:
     )
     _set_normalisation(parts, policy)
     _set_actions(parts, task, policy.model)
-    parts.metadata = _metadata(parts, policy, experiment)
+    parts.metadata = _metadata(parts, policy.name, experiment)
     return parts, policy.model
+
+
+def _rllib_parts(run_dir: Path) -> PolicyParts:
+    from agents.deploy import deployment_experiment, model_info_for
+    from agents.export.rllib_policy import read_policy
+    from bridge.experiment.validate import check_experiment, timing
+    from bridge.task.core import Task
+
+    algo, ops, head = read_policy(run_dir)
+    experiment, _ = deployment_experiment(run_dir, None)
+    info = model_info_for(experiment, run_dir, None)
+    check_experiment(experiment, info)
+    task = Task(experiment, info.variables, timing(experiment, info))
+    parts = PolicyParts(
+        algo=algo,
+        observation_names=observation_names(task),
+        input_names=list(task.action_inputs),
+        units={n: info.variables[n].unit or "" for n in (*task.action_inputs, *task.output_names)},
+        ops=ops,
+        head="argmax" if head == "argmax" else "unsquash",
+    )
+    _set_actions(parts, task, task)
+    parts.metadata = _metadata(parts, run_dir.name, experiment) | {"engine": "rllib"}
+    return parts
 
 
 def observation_names(task: Any) -> list[str]:
@@ -162,6 +191,7 @@ def _set_normalisation(parts: PolicyParts, policy: Any) -> None:
 
 
 def _set_actions(parts: PolicyParts, task: Any, model: Any) -> None:
+    """Action space (of ``model``: the SB3 model, or the Task itself) and its map to input values."""
     import gymnasium as gym
 
     rng = np.random.default_rng(0)
@@ -182,7 +212,7 @@ def _set_actions(parts: PolicyParts, task: Any, model: Any) -> None:
         raise ConfigError(f"action space {space} cannot be exported; supported: Box and Discrete")
 
 
-def _metadata(parts: PolicyParts, policy: Any, experiment: Any) -> dict[str, Any]:
+def _metadata(parts: PolicyParts, name: str, experiment: Any) -> dict[str, Any]:
     from agents.settings import package_versions
 
     return {
@@ -195,5 +225,5 @@ def _metadata(parts: PolicyParts, policy: Any, experiment: Any) -> dict[str, Any
         "action_kind": "discrete" if parts.discrete else "continuous",
         "observation_processing": "caller (the Task: selection, scaling, errors, history)",
         "packages": package_versions(),
-        "run": policy.name,
+        "run": name,
     }

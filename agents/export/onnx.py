@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from agents.export.extract import PolicyParts, actor_modules, load_parts
+from agents.export.rllib_policy import actor_from_ops
 from bridge.errors import BridgeError
 
 _log = logging.getLogger(__name__)
@@ -37,7 +38,8 @@ def _wrapper(parts: PolicyParts, model: Any) -> Any:
 
         def __init__(self) -> None:
             super().__init__()
-            self.actor = nn.Sequential(*actor_modules(model, parts.algo))
+            modules = actor_modules(model, parts.algo) if model is not None else actor_from_ops(parts.ops)
+            self.actor = nn.Sequential(*modules)
             dim = len(parts.observation_names)
             normalise = parts.obs_mean is not None
             self.normalise = normalise
@@ -63,6 +65,9 @@ def _wrapper(parts: PolicyParts, model: Any) -> Any:
                 return action, self.get_buffer("table")[action]
             if parts.head == "clip":
                 action = torch.maximum(torch.minimum(y, high), low)
+            elif parts.head == "unsquash":  # RLlib: [-1, 1] onto the Box, then clipped to it
+                action = low + (y + 1.0) * (high - low) / 2.0
+                action = torch.maximum(torch.minimum(action, high), low)
             else:
                 squashed = torch.tanh(y) if parts.head == "squash" else y
                 action = low + 0.5 * (squashed + 1.0) * (high - low)

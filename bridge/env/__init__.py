@@ -6,7 +6,8 @@ only the CLI imports it.
 """
 
 from bridge.env.fmu_env import FmuEnv, as_experiment, make
+from bridge.env.node_vector import NodeVectorEnv
 from bridge.env.remote import RemoteFmuEnv
 from bridge.env.vec import PlantVecEnv, RemoteVecEnv
 
-__all__ = ["FmuEnv", "PlantVecEnv", "RemoteFmuEnv", "RemoteVecEnv", "as_experiment", "make"]
+__all__ = ["FmuEnv", "NodeVectorEnv", "PlantVecEnv", "RemoteFmuEnv", "RemoteVecEnv", "as_experiment", "make"]

@@ -32,6 +32,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from bridge.env.autoreset import autoreset_mode as _autoreset_mode
+from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
@@ -349,26 +351,3 @@ def _check_once_per_process(exp: Experiment, n_envs: int) -> None:
 def _per_episode(info: dict[str, Any]) -> dict[str, Any]:
     """An env's info less ``step`` and ``time_s`` (every env has them, as whole arrays)."""
     return {k: v for k, v in info.items() if k not in ("step", "time_s")}
-
-
-def _autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
-    supported = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
-    try:
-        value = AutoresetMode(mode)
-    except ValueError:
-        value = None
-    if value not in supported:
-        raise ConfigError(
-            f"autoreset_mode must be one of {[m.value for m in supported]} (gymnasium's AutoresetMode), "
-            f"got {mode!r}"
-        )
-    assert value is not None
-    return value
-
-
-def _seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
-    if isinstance(seed, list):
-        if len(seed) != n:
-            raise ConfigError(f"reset(seed=[...]) needs {n} seeds (one per env), got {len(seed)}")
-        return list(seed)
-    return [None] * n if seed is None else [seed + i for i in range(n)]

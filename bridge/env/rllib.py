@@ -10,7 +10,9 @@ without an error. So:
   (RLlib passes ``num_envs`` with ``gym_env_vectorize_mode="vector_entry_point"``);
 - :class:`NextStepOnly`, an RLlib callback, refuses any env runner env that declares another
   autoreset mode (:func:`check_next_step`), so a SAME_STEP env fails at creation, not silently;
-- :func:`ppo_config` puts the two together.
+- :class:`NodeEnvCreator` builds a NEXT_STEP :class:`NodeVectorEnv` instead: each env runner
+  drives ``num_envs`` nodes it leases from a pool (``claim``), a dead node replaced by a spare;
+- :func:`algo_config` (PPO or SAC; :func:`ppo_config` for PPO) puts them together.
 """
 
 from __future__ import annotations
@@ -22,9 +24,11 @@ from typing import Any
 
 from gymnasium.vector import AutoresetMode
 from ray.rllib.algorithms.ppo import PPOConfig
+from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
 from bridge.env.batch import BatchVectorEnv
+from bridge.env.node_vector import NodeVectorEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, as_experiment
 
@@ -76,22 +80,71 @@ class BatchEnvCreator:
         return BatchVectorEnv(self.experiment, int(env_config["num_envs"]), **self.kwargs)
 
 
-def ppo_config(
+class NodeEnvCreator:
+    """RLlib env creator: a NEXT_STEP :class:`NodeVectorEnv` of ``env_config["num_envs"]`` nodes.
+
+    Each env runner opens its own Zenoh session (``options``) and leases the nodes it drives
+    (``claim=True``): runners drawing on one pool never share a node, and a runner that dies
+    (its session with it) frees its nodes for its replacement. A node that dies or hangs is
+    replaced by a spare matching ``nodes`` (``replace_dead=True``, waiting up to
+    ``replace_wait_s``), its episode truncated.
+
+    Args:
+        experiment: the experiment the nodes serve.
+        nodes: a glob pattern (``"worker-*"``) or node names.
+        remote: passed on to :class:`NodeVectorEnv` (``options``, ``prefix``, ``timeout_s``,
+            ``replace_wait_s``, ``discovery_timeout_s``, ...).
+    """
+
+    def __init__(self, experiment: Experiment | str | Path, nodes: str | list[str], **remote: Any) -> None:
+        self.experiment = as_experiment(experiment)
+        self.nodes = nodes
+        self.remote = {"claim": True, "replace_dead": True, "replace_wait_s": 60.0, **remote}
+
+    def __call__(self, env_config: Mapping[str, Any]) -> NodeVectorEnv:
+        if "num_envs" not in env_config:
+            raise ConfigError(
+                "NodeEnvCreator builds a vector env: configure RLlib with "
+                "env_runners(gym_env_vectorize_mode='vector_entry_point', num_envs_per_env_runner=K)"
+            )
+        return NodeVectorEnv(
+            self.experiment,
+            self.nodes,
+            n_envs=int(env_config["num_envs"]),
+            autoreset_mode=AutoresetMode.NEXT_STEP,
+            **self.remote,
+        )
+
+
+ALGORITHMS = {"PPO": PPOConfig, "SAC": SACConfig}
+
+
+def algo_config(
+    algo: str,
     experiment: Experiment | str | Path,
     *,
     envs_per_runner: int,
     num_env_runners: int = 0,
+    nodes: str | list[str] | None = None,
     **env_kwargs: Any,
 ) -> Any:
-    """An RLlib ``PPOConfig`` whose env runners each host a NEXT_STEP batch env of ``envs_per_runner``
-    FMU instances, with :class:`NextStepOnly` installed (training settings are left to the caller)."""
+    """An RLlib config of ``algo`` (PPO or SAC) whose env runners each host a NEXT_STEP batch env of
+    ``envs_per_runner`` FMU instances, or (``nodes`` given) drive ``envs_per_runner`` leased nodes
+    (:class:`NodeEnvCreator`), with :class:`NextStepOnly` installed (training settings are left to
+    the caller). ``env_kwargs`` go to the creator."""
     from ray.tune.registry import register_env
 
-    creator = BatchEnvCreator(experiment, **env_kwargs)
+    if algo not in ALGORITHMS:
+        raise ConfigError(f"RLlib algorithm {algo!r}: supported here are {sorted(ALGORITHMS)}")
+    creator: Any = (
+        BatchEnvCreator(experiment, **env_kwargs)
+        if nodes is None
+        else NodeEnvCreator(experiment, nodes, **env_kwargs)
+    )
     name = f"fmu_bridge_batch_{uuid.uuid4().hex[:12]}"  # the Algorithm takes a registered name
     register_env(name, creator)
     return (
-        PPOConfig()  # type: ignore[no-untyped-call]
+        ALGORITHMS[algo]()  # type: ignore[no-untyped-call]
         .environment(env=name)
         .env_runners(
             num_env_runners=num_env_runners,
@@ -99,4 +152,17 @@ def ppo_config(
             gym_env_vectorize_mode="vector_entry_point",
         )
         .callbacks(NextStepOnly)
+    )
+
+
+def ppo_config(
+    experiment: Experiment | str | Path,
+    *,
+    envs_per_runner: int,
+    num_env_runners: int = 0,
+    **env_kwargs: Any,
+) -> Any:
+    """:func:`algo_config` for PPO."""
+    return algo_config(
+        "PPO", experiment, envs_per_runner=envs_per_runner, num_env_runners=num_env_runners, **env_kwargs
     )

@@ -87,18 +87,25 @@ class PlantVecEnv(Sb3VecEnv):
     def step_wait(
         self,
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.bool_], list[dict[str, Any]]]:
-        actions = self._actions
+        return self._collect(self.step_envs(self._actions))  # type: ignore[arg-type]  # all envs stepped
+
+    def step_envs(self, actions: Any, indices: Sequence[int] | None = None) -> list[Result | None]:
+        """Step envs ``indices`` (default: all) with ``actions[i]``: every action goes out before
+        any result is awaited; a failed env's result is its last observation, truncated, with
+        ``plant_error`` in its info (or the error is raised, as ``on_error`` says). No auto-reset;
+        envs not stepped get ``None``."""
+        stepped = list(range(self.num_envs)) if indices is None else list(indices)
         failed: dict[int, PlantError] = {}
-        for i, env in enumerate(self.envs):  # all actions out first: the plants step in parallel
+        for i in stepped:  # all actions out first: the plants step in parallel
             try:
-                env.send(actions[i])
+                self.envs[i].send(actions[i])
             except PlantError as exc:
                 failed[i] = exc
         results: list[Any] = [None] * self.num_envs
         for i, error in failed.items():
             if self._raises_at_once(error):
                 self._failed_result(i, error)
-        for i in self._in_answer_order([i for i in range(self.num_envs) if i not in failed]):
+        for i in self._in_answer_order([i for i in stepped if i not in failed]):
             try:
                 results[i] = self.envs[i].receive()
             except PlantError as exc:
@@ -111,7 +118,7 @@ class PlantVecEnv(Sb3VecEnv):
         for i, error in sorted(failed.items()):
             results[i] = self._failed_result(i, error)
         self.partial_results = []
-        return self._collect(results)
+        return results
 
     def _in_answer_order(self, pending: list[int]) -> Iterable[int]:
         """The envs to receive from, in the order their plants answer (in-process: in order)."""
@@ -160,11 +167,14 @@ class PlantVecEnv(Sb3VecEnv):
         self, index: int, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Any, dict[str, Any]]:
         try:
-            return self.envs[index].reset(seed=seed, options=options)
+            obs, info = self.envs[index].reset(seed=seed, options=options)
         except PlantError as exc:
-            info = self._recover(index, exc)
+            recovered = self._recover(index, exc)
             obs, reset_info = self.envs[index].reset(seed=seed, options=options)
-            return obs, {**reset_info, **info}
+            info = {**reset_info, **recovered}
+        if len(self._last_obs) == self.num_envs:
+            self._last_obs[index] = obs
+        return obs, info
 
     def close(self) -> None:
         for env in getattr(self, "envs", []):
@@ -199,6 +209,9 @@ class RemoteVecEnv(PlantVecEnv):
             ``partial_results``).
         on_error: what a failed model step does (``"truncate"``, the default, or ``"raise"``);
             dead and hung nodes are replaced first where ``replace_dead`` allows.
+        claim: lease each node as it is taken (a first reset): a node another client holds is
+            passed over for the next match, so vector envs drawing on one pool of nodes (e.g. one
+            per Ray env runner) never share a node; spares are claimed the same way.
     """
 
     def __init__(
@@ -215,8 +228,10 @@ class RemoteVecEnv(PlantVecEnv):
         on_error: OnError = "truncate",
         discovery_timeout_s: float = 10.0,
         replace_wait_s: float = 0.0,
+        claim: bool = False,
     ) -> None:
         self.experiment = as_experiment(experiment)
+        self.claim = claim
         self.replace_wait_s = replace_wait_s
         self._any_answer = threading.Event()
         self._own_session = session is None
@@ -225,8 +240,11 @@ class RemoteVecEnv(PlantVecEnv):
         self._pattern = nodes if isinstance(nodes, str) else None
         envs: list[FmuEnv] = []
         try:
-            for name in self._discover(nodes, n_envs, discovery_timeout_s):
-                envs.append(self._connect(name))
+            if claim:
+                envs = self._claim(nodes, n_envs, discovery_timeout_s, envs)
+            else:
+                for name in self._discover(nodes, n_envs, discovery_timeout_s):
+                    envs.append(self._connect(name))
             super().__init__(envs, on_error=on_error)
         except BaseException:
             for env in envs:
@@ -253,11 +271,51 @@ class RemoteVecEnv(PlantVecEnv):
             )
         return names[:wanted]
 
+    def _claim(
+        self, nodes: Sequence[str] | str, n_envs: int | None, timeout_s: float, envs: list[FmuEnv]
+    ) -> list[FmuEnv]:
+        """Connect to and lease ``n_envs`` nodes (default: all listed, or all matching at first
+        look), passing over the ones held by others, until the timeout."""
+        wanted = n_envs or (len(nodes) if not isinstance(nodes, str) else 0)
+        deadline = time.monotonic() + timeout_s
+        refused: dict[str, str] = {}
+        while True:
+            if isinstance(nodes, str):
+                names = list_nodes(self._session, prefix=self._prefix, pattern=nodes, timeout_s=1.0)
+                wanted = wanted or len(names)
+            else:
+                names = list(nodes)
+            held = {env.node for env in envs if isinstance(env, RemoteFmuEnv)}
+            for name in names:
+                if len(envs) >= wanted > 0:
+                    return envs
+                if name in held:
+                    continue
+                try:
+                    envs.append(self._connect(name))
+                except BridgeError as exc:
+                    refused[name] = str(exc)
+            if len(envs) >= wanted > 0:
+                return envs
+            if time.monotonic() > deadline:
+                raise ConfigError(
+                    f"RemoteVecEnv could lease {len(envs)} of {wanted or 'at least one'} node(s) matching "
+                    f"{nodes!r} under {self._prefix}/ (found {names}; refused: {refused or 'none'}); start "
+                    "more with `fmu-bridge node EXPERIMENT --name NAME`"
+                )
+            time.sleep(0.2)
+
     def _connect(self, name: str) -> RemoteFmuEnv:
         env = RemoteFmuEnv(
             self.experiment, name, session=self._session, prefix=self._prefix, timeout_s=self._timeout_s
         )
         env.plant.notify_answers(self._any_answer)
+        if self.claim:
+            try:
+                env.reset()  # the lease: refused while another client holds the node
+            except BaseException:
+                env.close()
+                raise
         return env
 
     def _in_answer_order(self, pending: list[int]) -> Iterable[int]:

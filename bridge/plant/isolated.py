@@ -17,6 +17,10 @@ unstable FMU.
 
 Cost: one pipe round trip per sample (see ``benchmarks/bench_env.py --plant isolated``). Use it
 for untrusted or unstable FMUs; the in-process plant stays the default.
+
+With ``component=`` the child runs one component of a system (an ``FmuComponent``: one macro step
+a sample) instead of the experiment's model: a system puts every component whose FMU declares
+``canBeInstantiatedOnlyOncePerProcess`` in a process of its own this way.
 """
 
 from __future__ import annotations
@@ -28,18 +32,30 @@ import os
 import signal
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepError, StepTimeout
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
+from bridge.experiment.validate import Timing, check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
+if TYPE_CHECKING:
+    from bridge.plant.system.description import Component
+
 _log = logging.getLogger(__name__)
 _START_TIMEOUT_S = 60.0  # loading an FMU (unpacking, instantiating) in a fresh interpreter
+
+
+class ChildComponent(NamedTuple):
+    """A system component for the child to run (the arguments of ``FmuComponent``)."""
+
+    component: Component
+    macro_step_s: float
+    start_time_s: float
+    where: str = ""
 
 
 class IsolatedFmuPlant(Plant):
@@ -50,6 +66,7 @@ class IsolatedFmuPlant(Plant):
         timeout_s: the longest a reset or one sample may take before :class:`StepTimeout`.
         memory_limit_mb: resident memory the child may add after loading the FMU (None: no limit).
         restart: start a fresh child at the next ``reset()`` after a hang or a crash.
+        component: run this system component in the child instead of the experiment's model.
     """
 
     can_set_values = True
@@ -62,14 +79,26 @@ class IsolatedFmuPlant(Plant):
         timeout_s: float = 10.0,
         memory_limit_mb: float | None = None,
         restart: bool = True,
+        component: ChildComponent | None = None,
     ) -> None:
         if not timeout_s > 0:
             raise ConfigError(f"timeout_s must be > 0 seconds, got {timeout_s}")
         self.experiment = experiment
-        self.fmu_path = resolve_fmu(experiment)
-        self.info = check_experiment(experiment, read_model_info(self.fmu_path))
-        self.timing = timing(experiment, self.info)
-        self.name = f"FMU {self.fmu_path.name} (child process)"
+        self.component = component
+        if component is None:
+            self.fmu_path = resolve_fmu(experiment)
+            self.info = check_experiment(experiment, read_model_info(self.fmu_path))
+            self.timing = timing(experiment, self.info)
+            self.name = f"FMU {self.fmu_path.name} (child process)"
+        else:
+            from bridge.plant.system.component import steps_per_macro
+
+            part, macro_s = component.component, component.macro_step_s
+            self.fmu_path = part.fmu
+            self.info = read_model_info(part.fmu)
+            n = steps_per_macro(part, macro_s, None, component.where)  # as FmuComponent divides it
+            self.timing = Timing(macro_s / n, n, macro_s, component.start_time_s)
+            self.name = f"component {part.name!r} ({part.fmu.name}, child process)"
         self.timeout_s, self.memory_limit_mb, self.restart = timeout_s, memory_limit_mb, restart
         self.restarts = 0
         self._time_s = self.timing.start_time_s
@@ -88,7 +117,9 @@ class IsolatedFmuPlant(Plant):
         try:
             parent, child = context.Pipe()
             args = (child, self.experiment, self.input_names, self.output_names, self.memory_limit_mb)
-            process = context.Process(target=_serve, args=args, name="fmu-plant", daemon=True)
+            process = context.Process(
+                target=_serve, args=args, kwargs={"component": self.component}, name="fmu-plant", daemon=True
+            )
             process.start()
         except (OSError, ValueError) as exc:  # no process: EAGAIN, EMFILE, ENOMEM, a bad executable
             for end in (parent, child):
@@ -297,15 +328,18 @@ def _serve(
     input_names: Sequence[str],
     output_names: Sequence[str],
     memory_limit_mb: float | None = None,
+    *,
+    component: ChildComponent | None = None,
 ) -> None:
-    """The child's loop: one LocalFmuPlant, one message in, one reply out."""
+    """The child's loop: one LocalFmuPlant (or FmuComponent), one message in, one reply out."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which stops us
     os.setpgid(0, 0)  # a process group of its own: the parent kills it whole, with whatever the FMU forked
     _follow_parent(os.getppid())
     from bridge.errors import BridgeError
     from bridge.plant.local import LocalFmuPlant
+    from bridge.plant.system.component import FmuComponent
 
-    plant = LocalFmuPlant(experiment)
+    plant = LocalFmuPlant(experiment) if component is None else FmuComponent(*component)
     plant.bind(input_names, output_names)
     if memory_limit_mb is not None:
         _cap_address_space(memory_limit_mb)

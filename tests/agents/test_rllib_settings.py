@@ -1,4 +1,4 @@
-"""The training section's mapping onto RLlib's PPO (agents/rllib_train.py) without Ray: the
+"""The training section's mapping onto RLlib's PPO and SAC (agents/rllib_train.py) without Ray: the
 documented subset is carried over, anything else is refused with the list."""
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ def test_the_documented_subset_maps_onto_ppo() -> None:
         "max_grad_norm": 0.7,
         "policy_kwargs": {"net_arch": [16, 8]},
     }
-    assert sorted(hyper) == sorted(SUPPORTED)
+    assert sorted(hyper) == sorted(SUPPORTED["PPO"])
     kwargs, model = training_kwargs(settings(n_envs=4, timesteps=1000, hyperparams=hyper), runners=2)
     assert kwargs == {
         "train_batch_size_per_learner": 32 * 4 * 2,
@@ -50,6 +50,38 @@ def test_the_documented_subset_maps_onto_ppo() -> None:
     assert model == {"fcnet_hiddens": [16, 8]}
 
 
+def test_the_documented_subset_maps_onto_sac() -> None:
+    hyper = {
+        "learning_rate": 0.0007,
+        "buffer_size": 50_000,
+        "learning_starts": 500,
+        "batch_size": 128,
+        "gamma": 0.97,
+        "tau": 0.01,
+        "ent_coef": "auto_0.2",
+        "target_entropy": -2,
+        "policy_kwargs": {"net_arch": [64, 64]},
+    }
+    assert sorted(hyper) == sorted(SUPPORTED["SAC"])
+    kwargs, model = training_kwargs(settings(algo="SAC", hyperparams=hyper), runners=3)
+    assert kwargs == {
+        "actor_lr": 0.0007,
+        "critic_lr": 0.0007,
+        "alpha_lr": 0.0007,
+        "replay_buffer_config": {"capacity": 50_000},
+        "num_steps_sampled_before_learning_starts": 500,
+        "train_batch_size_per_learner": 128,
+        "initial_alpha": 0.2,
+        "target_entropy": -2.0,
+        "gamma": 0.97,
+        "tau": 0.01,
+    }
+    assert model == {"fcnet_hiddens": [64, 64]}
+    decay = settings(algo="SAC", timesteps=800, hyperparams={"learning_rate": "lin_0.01"})
+    schedule = [[0, 0.01], [800, 0.0]]
+    assert training_kwargs(decay, 1)[0] == {"actor_lr": schedule, "critic_lr": schedule, "alpha_lr": schedule}
+
+
 def test_the_example_sections_own_schedules_are_refused_where_rllib_has_none() -> None:
     with pytest.raises(ConfigError, match=r"clip_range: 'lin_0.2' is not a number"):
         training_kwargs(settings(), runners=1)  # the example's clip_range: lin_0.2
@@ -58,8 +90,11 @@ def test_the_example_sections_own_schedules_are_refused_where_rllib_has_none() -
 @pytest.mark.parametrize(
     ("training", "message"),
     [
-        ({"algo": "SAC"}, "runs PPO"),
-        ({"hyperparams": {"use_sde": True}}, r"\['use_sde'\] have no RLlib mapping"),
+        ({"algo": "TD3"}, "runs PPO or SAC; the experiment asks for TD3"),
+        ({"hyperparams": {"use_sde": True}}, r"\['use_sde'\] have no RLlib PPO mapping"),
+        ({"algo": "SAC", "hyperparams": {"train_freq": 4}}, r"\['train_freq'\] have no RLlib SAC mapping"),
+        ({"algo": "SAC", "hyperparams": {"ent_coef": 0.1}}, "always learns its entropy coefficient"),
+        ({"algo": "SAC", "normalize": True}, "training.normalize"),
         ({"hyperparams": {"policy_kwargs": {"activation_fn": "relu"}}}, "net_arch: \\[sizes\\] only"),
     ],
 )

@@ -1,7 +1,7 @@
 """An FMU that declares canBeInstantiatedOnlyOncePerProcess (models/global_state: its integral is a
-static of the library) never has two instances in one process: FmuEnv and the vector envs over it put
-each instance in its own process and give what one instance per process gives; a batch env and a
-second in-process instance are refused with the reason."""
+static of the library) never has two instances in one process: FmuEnv, the vector envs over it and a
+system's components put each instance in its own process and give what one instance per process
+gives; a batch env and a second in-process instance are refused with the reason."""
 
 from __future__ import annotations
 
@@ -147,19 +147,40 @@ def test_a_batch_env_of_several_is_refused_and_of_one_runs_alone(tmp_path: Path)
     np.testing.assert_allclose(ys, alone(0), rtol=1e-6)
 
 
-def test_a_system_with_two_in_process_components_of_it_is_refused(tmp_path: Path) -> None:
+def test_a_systems_components_of_it_each_get_a_process_and_equal_one_instance_per_process(
+    tmp_path: Path,
+) -> None:
+    """Two components of the FMU, coupled a.y -> b.u (Jacobi), b with gain 2: each component runs in
+    a child process of its own, and the outputs are what one instance per process gives."""
     path = tmp_path / "system.yaml"
     path.write_text(
         "system:\n"
+        "  algorithm: jacobi\n"
         "  components:\n"
         "    a: {fmu: example:global_state}\n"
-        "    b: {fmu: example:global_state}\n"
+        "    b: {fmu: example:global_state, parameters: {gain: 2.0}}\n"
         "  connections:\n"
         "    - a.y -> b.u\n"
         f"model: {{step_size: {H}, episode_duration: 1.0}}\n"
         "actions: {inputs: [a.u], low: {a.u: -1}, high: {a.u: 1}}\n"
-        "observations: {outputs: [b.y], scale: none}\n"
+        "observations: {outputs: [a.y, b.y], scale: none}\n"
         "reward: {terms: [{alive: 1.0}]}\n"
     )
-    with pytest.raises(ConfigError, match=r"canBeInstantiatedOnlyOncePerProcess.*already open"):
-        FmuEnv(load_experiment(path)).reset(seed=0)
+    u = inputs(0).astype(np.float64)
+    a_y = np.cumsum(u * H)  # a alone: the integral of its input, at the end of each step
+    b_u = np.concatenate([[0.0], a_y[:-1]])  # Jacobi: b gets a.y at the start of the step
+    b_y = np.cumsum(2.0 * b_u * H)
+    env = FmuEnv(load_experiment(path))
+    try:
+        plants = env.plant.plants  # type: ignore[attr-defined]
+        assert all(isinstance(p, IsolatedFmuPlant) for p in plants.values())
+        env.reset(seed=0)
+        children = {p._process.pid for p in plants.values()}
+        assert len(children) == 2 and os.getpid() not in children
+        observed = [env.step(inputs(0)[k : k + 1])[0] for k in range(STEPS)]
+        np.testing.assert_allclose(np.array(observed), np.stack([a_y, b_y], axis=1), rtol=1e-6, atol=1e-9)
+        env.reset(seed=1)  # a second episode starts from zero in both processes
+        again = [env.step(inputs(0)[k : k + 1])[0] for k in range(STEPS)]
+        np.testing.assert_allclose(np.array(again), np.array(observed), rtol=0, atol=0)
+    finally:
+        env.close()

@@ -55,7 +55,11 @@ class RemoteComponents(Protocol):
 
 
 class SystemPlant(Plant):
-    """The system of ``experiment`` (its ``system:`` section, or the SSP ``model.fmu`` names)."""
+    """The system of ``experiment`` (its ``system:`` section, or the SSP ``model.fmu`` names).
+
+    A component runs in this process, in its node, or (its FMU declares
+    ``canBeInstantiatedOnlyOncePerProcess``) in a child process of its own
+    (:class:`~bridge.plant.isolated.IsolatedFmuPlant`), so that no two instances share it."""
 
     def __init__(
         self,
@@ -101,6 +105,20 @@ class SystemPlant(Plant):
         if component.node is None:
             from bridge.plant.system.component import FmuComponent
 
+            if self.infos[component.name].once_per_process:  # never beside another instance
+                from bridge.plant.isolated import ChildComponent, IsolatedFmuPlant
+
+                child = ChildComponent(component, t.step_size_s, t.start_time_s, where)
+                isolation = self.experiment.model.isolation  # its limits, where the file sets them
+                if isolation is None:
+                    return IsolatedFmuPlant(self.experiment, component=child)
+                return IsolatedFmuPlant(
+                    self.experiment,
+                    component=child,
+                    timeout_s=isolation.timeout,
+                    memory_limit_mb=isolation.memory_limit_mb,
+                    restart=isolation.restart,
+                )
             return FmuComponent(component, t.step_size_s, t.start_time_s, where)
         if self._remote is None:
             raise ConfigError(

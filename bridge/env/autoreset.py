@@ -1,0 +1,33 @@
+"""What the vector envs share about Gymnasium's autoreset modes and per-env seeds (no FMU runtime:
+the vector env over nodes imports it too)."""
+
+from __future__ import annotations
+
+from gymnasium.vector import AutoresetMode
+
+from bridge.errors import ConfigError
+
+
+def autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
+    """``mode`` (the enum or its value) if a vector env here offers it, else a ConfigError."""
+    supported = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
+    try:
+        value = AutoresetMode(mode)
+    except ValueError:
+        value = None
+    if value not in supported:
+        raise ConfigError(
+            f"autoreset_mode must be one of {[m.value for m in supported]} (gymnasium's AutoresetMode), "
+            f"got {mode!r}"
+        )
+    assert value is not None
+    return value
+
+
+def env_seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
+    """One seed per env: ``seed + i``, a list of ``n`` as given, or all None."""
+    if isinstance(seed, list):
+        if len(seed) != n:
+            raise ConfigError(f"reset(seed=[...]) needs {n} seeds (one per env), got {len(seed)}")
+        return list(seed)
+    return [None] * n if seed is None else [seed + i for i in range(n)]
