@@ -154,8 +154,9 @@ def agent_run_cmd(
     runtime: Annotated[
         str,
         typer.Option(
-            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed) or baseline "
-            "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
+            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed), fmu (the exported "
+            "policy FMU, no torch needed) or baseline (MODEL names one of the --config experiment's "
+            "evaluation.baselines, e.g. lqr)."
         ),
     ] = "torch",
     managed: Annotated[
@@ -279,8 +280,8 @@ def agent_settings(
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    if runtime not in ("torch", "onnx", "baseline"):
-        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
+    if runtime not in ("torch", "onnx", "fmu", "baseline"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx, fmu or baseline")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
     ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings
