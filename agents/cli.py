@@ -202,7 +202,10 @@ def agent_run_cmd(
         agent = AgentNode(model, config, settings, options)
         what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # SIGTERM as Ctrl-C: a KeyboardInterrupt in the main thread. Setting ``stop`` from the handler
+    # could deadlock: the handler runs in the main thread, possibly while it holds the Event's lock
+    # in ``stop.wait`` (seen: an agent that never exited after SIGTERM)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     console.print(f"{what}; Ctrl-C stops it", highlight=False)
     try:
         stats = agent.run(duration_s, stop)

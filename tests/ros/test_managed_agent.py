@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import signal
 import time
 from pathlib import Path
 
@@ -84,7 +85,7 @@ def test_configure_fails_on_an_observation_mapping_that_lacks_a_joint(balancer: 
 
 def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: Path, probe: Probe) -> None:
     """-p runtime:=fmu: the policy FMU acts as the in-process policy does; cleanup frees it and a
-    second configure loads it again."""
+    second configure loads it again; Ctrl-C while active ends the node within a second."""
     args = [
         "agent", "run", str(exported_run), "--transport", "rclpy", "--managed", "--node", "cart",
         "--observation-topic", "/robot/joint_states", "--action-topic", "/robot/effort",
@@ -95,7 +96,7 @@ def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: P
     probe.ask("subscribe", id="act", topic="/robot/effort", type=JOINT_STATE, keep_all=True)
     with command(*args, ready="Ctrl-C stops it") as agent:
         node = "/cart_agent"
-        for _ in range(2):  # configure, act, clean up; then once more
+        for round_ in range(2):  # configure, act, clean up; then once more, left active
             assert probe.ask("lifecycle_change", node=node, transition="configure") == {"success": True}
             assert probe.ask("lifecycle_change", node=node, transition="activate") == {"success": True}
             probe.wait(lambda: probe.ask("topic_info", topic="/robot/joint_states", kind="subscriptions"))
@@ -106,7 +107,11 @@ def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: P
                 actions = probe.ask("wait_count", id="act", count=i + 1)
                 assert isinstance(actions, list), agent.output
             assert [a["position"][0] for a in actions] == expected
-            assert probe.ask("lifecycle_change", node=node, transition="deactivate") == {"success": True}
-            assert probe.ask("lifecycle_change", node=node, transition="cleanup") == {"success": True}
-        assert "configured: fmu policy" in " ".join(agent.output.split())
+            if round_ == 0:
+                assert probe.ask("lifecycle_change", node=node, transition="deactivate") == {"success": True}
+                assert probe.ask("lifecycle_change", node=node, transition="cleanup") == {"success": True}
+        assert " ".join(agent.output.split()).count("configured: fmu policy") == 2
+        elapsed = agent.stop(signal.SIGINT)
+        assert agent.process.returncode == 0 and elapsed < 1.0, (elapsed, agent.output)
+        assert "Traceback" not in agent.output, agent.output
     assert len(set(expected)) == 2  # both levels: an agent stuck on one force would fail

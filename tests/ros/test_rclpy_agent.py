@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import os
 import signal
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -140,3 +142,41 @@ def test_launch_file_defaults_need_no_zenoh_router(balancer: Path, probe: Probe)
     with command(*node_line), command(*lines["fmu_agent"], ready="Ctrl-C stops it") as agent:
         actions = probe.ask("wait_count", id="act", count=50)
         assert isinstance(actions, list), agent.output
+
+
+def test_launch_file_with_the_zenoh_backend_closes_the_loop(
+    exported_run: Path, loopback: Loopback, ros_domain: int
+) -> None:
+    """The launch file's command lines with ``backend:=zenoh router:=... runtime:=fmu``: node and
+    agent on the rmw_zenoh wire through a router, the policy FMU acting; both stop within a second."""
+    import runpy
+
+    from rosbags.typesys import Stores, get_typestore
+
+    launch = Path(__file__).resolve().parents[2] / "launch_scripts" / "fmu_agent.launch.py"
+    lines = runpy.run_path(str(launch))["commands"](
+        str(exported_run), str(CARTPOLE), backend="zenoh", router=loopback.endpoint, runtime="fmu"
+    )
+    received: list[bytes] = []
+    session: Any = loopback.session
+    sub = session.declare_subscriber(  # the actions as any rmw_zenoh participant sees them
+        f"{ros_domain}/plant/actions/**", lambda sample: received.append(sample.payload.to_bytes())
+    )
+    try:
+        with (
+            command(*lines["fmu_node"]) as node,
+            command(*lines["fmu_agent"], ready="Ctrl-C stops it") as agent,
+        ):
+            deadline = time.monotonic() + 60
+            while len(received) < 50 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert len(received) >= 50, agent.output
+            assert "policy FMU export" in " ".join(agent.output.split())
+            for process in (agent, node):
+                elapsed = process.stop(signal.SIGTERM)
+                assert process.process.returncode == 0 and elapsed < 1.0, (elapsed, process.output)
+    finally:
+        sub.undeclare()
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    actions = [jazzy.deserialize_cdr(payload, "sensor_msgs/msg/JointState") for payload in received]
+    assert all(list(a.name) == ["force"] and a.position.tolist() in ([-10.0], [10.0]) for a in actions)
