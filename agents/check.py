@@ -101,14 +101,9 @@ class _FmuRuntime:
     """The exported policy FMU: physical outputs in, physical inputs out."""
 
     def __init__(self, run_dir: Path) -> None:
-        from agents.export.fmu_runner import FmuPolicy
+        from agents.export.fmu_runner import FmuPolicy, policy_fmu_file
 
-        found = sorted(run_dir.glob("policy*.fmu"))
-        if not found:
-            raise ConfigError(
-                f"{run_dir} has no policy FMU: export it first with `fmu-bridge agent export fmu {run_dir}`"
-            )
-        self.policy = FmuPolicy(found[0])
+        self.policy = FmuPolicy(policy_fmu_file(run_dir))  # the file `agent run --runtime fmu` deploys
 
     def act(self, named: dict[str, float]) -> dict[str, float]:
         try:

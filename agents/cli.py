@@ -154,8 +154,9 @@ def agent_run_cmd(
     runtime: Annotated[
         str,
         typer.Option(
-            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed) or baseline "
-            "(MODEL names one of the --config experiment's evaluation.baselines, e.g. lqr)."
+            help="torch (stable-baselines3), onnx (onnxruntime, no torch needed), fmu (the exported "
+            "policy FMU, no torch needed) or baseline (MODEL names one of the --config experiment's "
+            "evaluation.baselines, e.g. lqr)."
         ),
     ] = "torch",
     managed: Annotated[
@@ -201,7 +202,10 @@ def agent_run_cmd(
         agent = AgentNode(model, config, settings, options)
         what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # SIGTERM as Ctrl-C: a KeyboardInterrupt in the main thread. Setting ``stop`` from the handler
+    # could deadlock: the handler runs in the main thread, possibly while it holds the Event's lock
+    # in ``stop.wait`` (seen: an agent that never exited after SIGTERM)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     console.print(f"{what}; Ctrl-C stops it", highlight=False)
     try:
         stats = agent.run(duration_s, stop)
@@ -279,8 +283,8 @@ def agent_settings(
 
     if transport not in ("zenoh", "ros2", "rclpy") or missing not in ("hold", "safe"):
         raise ConfigError("--transport is zenoh, ros2 or rclpy; --missing is hold or safe")
-    if runtime not in ("torch", "onnx", "baseline"):
-        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
+    if runtime not in ("torch", "onnx", "fmu", "baseline"):
+        raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx, fmu or baseline")
     experiment, _ = deployment_experiment(model, config)
     n_inputs = len(experiment.actions.inputs)
     ros = current_ros_args()  # from ros2 launch: namespace, parameters, topic remappings

@@ -46,7 +46,7 @@ class DeploySettings:
     scenario: str | None = None
     domain_id: int | None = None
     namespace: str = "/"
-    runtime: Literal["torch", "onnx", "baseline"] = "torch"
+    runtime: Literal["torch", "onnx", "fmu", "baseline"] = "torch"
 
 
 @dataclass
@@ -81,10 +81,16 @@ def deployed_checkpoint(run_or_model: Path, runtime: str) -> str:
     periodic evaluation: its mean reward and step) before the final ``model.zip``."""
     import json
 
+    if runtime == "baseline":
+        return f"baseline {run_or_model} of the experiment's evaluation.baselines (no checkpoint)"
     if runtime == "onnx":
         from agents.runtime import onnx_file
 
         return f"checkpoint {onnx_file(run_or_model)} (ONNX export)"
+    if runtime == "fmu":
+        from agents.export.fmu_runner import policy_fmu_file
+
+        return f"checkpoint {policy_fmu_file(run_or_model)} (policy FMU export)"
     from agents.policies import _model_file
 
     path = _model_file(run_or_model)
@@ -157,8 +163,9 @@ class DeployedAgent:
     def _warm_up(self) -> None:
         """The first inference of a torch model is slow (allocations, kernel choice): do it before
         observations arrive, so the first real action is on time. One thread: lower latency.
-        A baseline has nothing to warm up (and acts only within an episode: its controller state)."""
-        if self.settings.runtime == "baseline":
+        A baseline has nothing to warm up (and acts only within an episode: its controller state),
+        nor has compiled C (a policy FMU, which also reads the task's signals of an episode)."""
+        if self.settings.runtime in ("baseline", "fmu"):
             return
         if self.settings.runtime == "torch":  # the onnx runtime must work without torch
             import torch

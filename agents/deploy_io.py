@@ -145,6 +145,9 @@ class AgentNode:
 
     def close(self) -> None:
         self.agent.close()  # first: callbacks that still arrive find a stopped agent
+        policy_close = getattr(self.agent.policy, "close", None)  # a policy FMU frees its instance
+        if policy_close is not None:
+            policy_close()
         for entity in reversed(self._declared):
             undeclare(entity)
         if self._ros is not None:

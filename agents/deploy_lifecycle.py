@@ -4,16 +4,16 @@ The node starts unconfigured and answers the usual lifecycle services (``~/chang
 ``~/get_state``, ``~/get_available_transitions``, ...), as ``ros2 lifecycle`` and launch_ros's
 lifecycle events drive them:
 
-- **configure** reads its settings from ROS parameters, loads the policy (torch or ONNX) and checks
-  the observation mapping: every observation the agent was trained on must be among the joint
-  names the robot publishes (``observation_names``; empty: the training names), and the run must
-  match the experiment. A failure leaves it unconfigured with the reason in its log.
+- **configure** reads its settings from ROS parameters, loads the policy (torch, ONNX or the policy
+  FMU) and checks the observation mapping: every observation the agent was trained on must be
+  among the joint names the robot publishes (``observation_names``; empty: the training names),
+  and the run must match the experiment. A failure leaves it unconfigured with the reason in its log.
 - **activate** starts acting: each observation message gets one action.
 - **deactivate** stops acting; with ``missing: safe`` it publishes the safe action once, with
   ``hold`` it publishes nothing (the plant holds the last action).
 - **cleanup** drops the policy and the topics; **shutdown** ends the node.
 
-Parameters: ``runtime`` (torch, onnx), ``missing`` (hold, safe), ``safe_value`` (one per action
+Parameters: ``runtime`` (torch, onnx, fmu), ``missing`` (hold, safe), ``safe_value`` (one per action
 input, or one for all), ``timeout`` (s without an observation before the missing rule, while
 active), ``observation_topic``, ``action_topic``, ``observation_names``.
 """
@@ -150,9 +150,9 @@ class ManagedAgent:
 
     def _settings(self) -> DeploySettings:
         runtime, missing = str(self._param("runtime")), str(self._param("missing"))
-        if runtime not in ("torch", "onnx") or missing not in ("hold", "safe"):
+        if runtime not in ("torch", "onnx", "fmu") or missing not in ("hold", "safe"):
             raise ConfigError(
-                f"parameters: runtime {runtime!r} (torch, onnx), missing {missing!r} (hold, safe)"
+                f"parameters: runtime {runtime!r} (torch, onnx, fmu), missing {missing!r} (hold, safe)"
             )
         n = len(self.experiment.actions.inputs)
         safe = [float(v) for v in self._param("safe_value")]
@@ -196,6 +196,9 @@ class ManagedAgent:
             agent, self.agent = self.agent, None
         if agent is not None:
             agent.close()
+        policy_close = getattr(self._policy, "close", None)  # a policy FMU frees its instance
+        if policy_close is not None:
+            policy_close()
         for entity, destroy in (
             (self._subscription, self.ros.node.destroy_subscription),
             (getattr(self._publisher, "_publisher", None), self.ros.node.destroy_publisher),

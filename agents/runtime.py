@@ -21,8 +21,9 @@ METADATA_KEY = "fmu_bridge"  # the same key as agents.export.onnx (not imported:
 
 
 def load_policy(path: Path, runtime: str, experiment: Any = None) -> Any:
-    """The deployed policy of a run: ``torch`` (stable-baselines3) or ``onnx`` (onnxruntime), or
-    ``baseline``: ``path`` names one of the experiment's ``evaluation.baselines`` (pid, lqr, mpc)."""
+    """The deployed policy of a run: ``torch`` (stable-baselines3), ``onnx`` (onnxruntime), ``fmu``
+    (the exported policy FMU), or ``baseline``: ``path`` names one of the experiment's
+    ``evaluation.baselines`` (pid, lqr, mpc)."""
     if runtime == "baseline":
         from agents.policies import baseline
 
@@ -35,11 +36,15 @@ def load_policy(path: Path, runtime: str, experiment: Any = None) -> Any:
         return baseline(str(path), baselines[str(path)].settings())
     if runtime == "onnx":
         return OnnxPolicy(path)
+    if runtime == "fmu":
+        from agents.export.fmu_runner import FmuAgentPolicy
+
+        return FmuAgentPolicy(path)
     if runtime == "torch":
         from agents.policies import Sb3Policy
 
         return Sb3Policy(path)
-    raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx or baseline")
+    raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx, fmu or baseline")
 
 
 def onnx_file(path: Path) -> Path:

@@ -6,8 +6,8 @@
 ``--closed-loop``: observation-to-action latency of ``fmu-bridge agent run`` closing the loop with
 a real-time FMU node (50 Hz, both subprocesses), seen by a third participant that receives both
 the node's outputs and the agent's actions: over DDS (rclpy, Fast DDS: the ``ros`` extra), over
-the rmw_zenoh view (``--transport ros2``) and over native Zenoh frames, for torch and ONNX, one
-after the other in one run. The policy FMU runs in-process only (the first table).
+the rmw_zenoh view (``--transport ros2``) and over native Zenoh frames, for torch, ONNX and the
+policy FMU (``--runtime fmu``), one after the other in one run.
 
 Without RUN_DIR it trains a tiny PPO run (SB3's default 64x64 MlpPolicy, VecNormalize) on
 examples/cartpole_continuous.yaml first. Each runtime answers the same observations one at a
@@ -194,13 +194,16 @@ def endless(source: Path, folder: Path) -> Path:
 
 def main_closed_loop(run: Path, tmp: Path, samples: int) -> None:
     from agents.export.onnx import export_onnx
+    from agents.export.policy_fmu import export_fmu
 
     if not (run / "policy.onnx").is_file():
         export_onnx(run)
+    if not (run / "policy-fmi2.fmu").is_file():
+        export_fmu(run, "2")
     experiment = endless(Path("examples/cartpole_continuous.yaml"), tmp)
     rows = {}
     for transport in TRANSPORTS:
-        for runtime in ("torch", "onnx"):
+        for runtime in ("torch", "onnx", "fmu"):
             rows[(transport, runtime)] = closed_loop(run, experiment, transport, runtime, samples)
     print(
         f"{'transport':24s} {'runtime':8s} {'p50 [us]':>10s} {'p99 [us]':>10s}   ({samples} samples at 50 Hz)"

@@ -3,13 +3,13 @@
 On a ROS 2 Jazzy machine with fmu-bridge installed in the same Python environment:
 
     ros2 launch launch_scripts/fmu_agent.launch.py run:=runs/cartpole-ppo \\
-        experiment:=examples/cartpole_balance.yaml backend:=rclpy rate:=1.0
+        experiment:=examples/cartpole_balance.yaml backend:=rclpy rate:=1.0 runtime:=onnx
 
 ``backend:=rclpy`` (the default) runs both as rclpy nodes on the machine's RMW and needs no Zenoh
 router: the agent opens no Zenoh session, the FMU node's own one is a peer. ``backend:=zenoh``
 speaks the rmw_zenoh wire format directly: start ``ros2 run rmw_zenoh_cpp rmw_zenohd`` first, pass
 ``router:=tcp/127.0.0.1:7447`` and export RMW_IMPLEMENTATION=rmw_zenoh_cpp for the ros2 CLI.
-See docs/ros2.md.
+``runtime`` is the agent's: torch (default), onnx or fmu (the exported policy FMU). See docs/ros2.md.
 
 Where launch_ros is installed both are launch_ros ``Node`` actions, so a namespace pushed by an
 enclosing launch file (``PushRosNamespace``), remappings and parameters reach them: ``fmu-bridge``
@@ -27,13 +27,15 @@ def commands(
     backend: str = "rclpy",
     rate: str = "1.0",
     router: str = "",
+    runtime: str = "torch",
 ) -> dict[str, list[str]]:
     """The two ``fmu-bridge`` command lines (without the program name) the launch file starts."""
     connect = ["--connect", router] if router else []
     transport = "rclpy" if backend == "rclpy" else "ros2"
     node = ["node", experiment, "--name", name, "--mode", "realtime", "--rate", rate, "--ros"]
     node += ["--ros-backend", backend, *connect]
-    agent = ["agent", "run", run, "--config", experiment, "--node", name, "--transport", transport, *connect]
+    agent = ["agent", "run", run, "--config", experiment, "--node", name, "--transport", transport]
+    agent += ["--runtime", runtime, *connect]
     return {"fmu_node": node, "fmu_agent": agent}
 
 
@@ -56,7 +58,7 @@ def generate_launch_description() -> Any:
     def start(context: Any) -> list[Any]:
         values = {
             key: LaunchConfiguration(key).perform(context)
-            for key in ("run", "experiment", "name", "backend", "rate", "router")
+            for key in ("run", "experiment", "name", "backend", "rate", "router", "runtime")
         }
         return [_process(name, arguments) for name, arguments in commands(**values).items()]
 
@@ -73,6 +75,9 @@ def generate_launch_description() -> Any:
                 "router",
                 default_value="",
                 description="Zenoh router (backend:=zenoh, e.g. tcp/127.0.0.1:7447); none by default",
+            ),
+            DeclareLaunchArgument(
+                "runtime", default_value="torch", description="the agent's runtime: torch, onnx or fmu"
             ),
             OpaqueFunction(function=start),
         ]

@@ -366,7 +366,9 @@ def node(
         isolate=isolate,
         step_timeout_s=step_timeout,
     )
-    signal.signal(signal.SIGTERM, lambda *_: server.close())
+    # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread; ``finally`` closes the server):
+    # closing from the handler could deadlock on the stop Event's lock the main thread may hold
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     err_console.print(
         f"node {name!r} serving {server.info.model_name} ({mode}) on {server.keys.base}/*; Ctrl-C stops it",
         highlight=False,

@@ -199,8 +199,9 @@ from agents.runtime import load_policy
 run = Path(sys.argv[1])
 experiment, _ = deployment_experiment(run, None)
 sent = []
-agent = DeployedAgent(load_policy(run, "onnx"), experiment, model_info_for(experiment, run, None),
-                      DeploySettings(runtime="onnx"), lambda inputs, step: sent.append(list(inputs)))
+runtime = sys.argv[3]
+agent = DeployedAgent(load_policy(run, runtime), experiment, model_info_for(experiment, run, None),
+                      DeploySettings(runtime=runtime), lambda inputs, step: sent.append(list(inputs)))
 for step, outputs in enumerate(json.loads(sys.argv[2])):
     agent.observe(outputs, episode=1, step=step)
 agent.close()
@@ -209,14 +210,24 @@ print(json.dumps({"sent": sent, "torch": loaded}))
 """
 
 
-def test_onnx_runtime_deploys_without_torch(runs: dict[str, Path]) -> None:
+@pytest.mark.parametrize(
+    ("runtime", "name"),
+    [
+        ("onnx", "SAC-cartpole_continuous"),
+        ("fmu", "SAC-cartpole_continuous"),
+        ("fmu", "PPO-cartpole_balance"),
+    ],
+)
+def test_deployed_runtime_acts_as_torch_without_torch(runs: dict[str, Path], runtime: str, name: str) -> None:
+    """``agent run --runtime onnx|fmu``: the deployed agent's physical inputs equal those of the
+    torch runtime on the same outputs, in a process where torch cannot be imported."""
     from agents.deploy import DeployedAgent, DeploySettings
 
-    run = runs["SAC-cartpole_continuous"]
-    export_onnx(run)
+    run = runs[name]
+    export_onnx(run) if runtime == "onnx" else export_fmu(run, "2")
     outputs = raw_signals(50, 3).tolist()
     result = subprocess.run(
-        [sys.executable, "-c", TORCH_FREE, str(run), json.dumps(outputs)],
+        [sys.executable, "-c", TORCH_FREE, str(run), json.dumps(outputs), runtime],
         capture_output=True,
         text=True,
         timeout=300,
@@ -237,6 +248,7 @@ def test_onnx_runtime_deploys_without_torch(runs: dict[str, Path]) -> None:
     agent.close()
     assert len(answer["sent"]) == 50
     np.testing.assert_allclose(answer["sent"], expected, rtol=0, atol=1e-4)  # 10 N * 1e-5
+    assert np.ptp(np.array(expected)) > 0.1  # the actions vary: a constant answer would fail
 
 
 def test_onnx_policy_refuses_a_mismatching_experiment(runs: dict[str, Path]) -> None:
@@ -255,3 +267,25 @@ def test_onnx_policy_refuses_a_mismatching_experiment(runs: dict[str, Path]) -> 
         OnnxPolicy(path).reset(task, None)
     with pytest.raises(ConfigError, match="export onnx"):
         OnnxPolicy(path.parent / "checkpoints")
+
+
+def test_policy_fmu_runtime_refuses_a_mismatching_experiment(runs: dict[str, Path]) -> None:
+    from agents.export.fmu_runner import FmuAgentPolicy
+    from bridge.errors import ConfigError
+    from bridge.experiment.config import load_experiment
+    from bridge.experiment.validate import resolve_fmu
+    from bridge.fmu import read_model_info
+
+    run = runs["DQN-cartpole_balance"]
+    export_fmu(run, "2")
+    experiment = load_experiment(example_experiment("dcmotor_tracking"))
+    info = read_model_info(resolve_fmu(experiment))
+    task = Task(experiment, info.variables, timing(experiment, info))
+    policy = FmuAgentPolicy(run)
+    try:
+        with pytest.raises(ConfigError, match=r"reads \['x', 'x_dot', 'theta', 'theta_dot'\] and acts on"):
+            policy.reset(task, None)
+    finally:
+        policy.close()
+    with pytest.raises(ConfigError, match="export fmu"):
+        FmuAgentPolicy(run / "checkpoints")

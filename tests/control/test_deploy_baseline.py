@@ -112,3 +112,21 @@ def test_a_deployed_baseline_needs_no_torch() -> None:
     done = subprocess.run(command, check=False, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert done.stdout.strip() == "False False"
+
+
+def test_agent_run_deploys_a_baseline_and_says_so(loopback: Loopback) -> None:
+    """``agent run lqr --runtime baseline``: no checkpoint to find, the command names the baseline."""
+    args = ["agent", "run", "lqr", "--config", str(CARTPOLE), "--runtime", "baseline", "--node", "plant",
+            "--prefix", loopback.prefix, "--connect", loopback.endpoint, "--duration", "2"]  # fmt: skip
+    with node_process(CARTPOLE, "plant", loopback, "--mode", "realtime"):
+        result = subprocess.run(
+            [sys.executable, "-m", "bridge.cli", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+            env={**os.environ, "COLUMNS": "200"},
+        )
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "agent deploys baseline lqr of the experiment's evaluation.baselines" in result.stdout
+    assert "inference latency median" in result.stdout

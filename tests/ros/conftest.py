@@ -133,6 +133,33 @@ class Probe:
         self.log.close()
 
 
+@pytest.fixture(scope="session")
+def exported_run(balancer: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of the balancer's run with its policy exported to ONNX and as a policy FMU."""
+    import shutil
+
+    from agents.export.onnx import export_onnx
+    from agents.export.policy_fmu import export_fmu
+
+    run = tmp_path_factory.mktemp("exported") / "ppo"
+    shutil.copytree(balancer, run)
+    export_onnx(run)
+    export_fmu(run, "2")
+    assert (run / "policy.onnx").is_file() and (run / "policy-fmi2.fmu").is_file()
+    return run
+
+
+def predicted_forces(run: Path, states: Any) -> list[float]:
+    """The in-process policy's force for each cart-pole state (x, x_dot, theta, theta_dot): PPO.predict."""
+    import numpy as np
+    from stable_baselines3 import PPO
+
+    best = run / "best_model.zip"
+    model = PPO.load(best if best.is_file() else run / "model.zip", device="cpu")
+    actions, _ = model.predict(np.asarray(states, dtype=np.float32), deterministic=True)
+    return [10.0 if int(a) == 1 else -10.0 for a in actions]  # the experiment's levels [-10, 10]
+
+
 @pytest.fixture
 def probe(ros_domain: int) -> Iterator[Probe]:
     p = Probe(dict(os.environ))

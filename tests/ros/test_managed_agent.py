@@ -3,12 +3,14 @@
 
 from __future__ import annotations
 
+import signal
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from tests.ros.conftest import Probe, command
+from tests.ros.conftest import Probe, command, predicted_forces
 
 pytestmark = [
     pytest.mark.ros,
@@ -79,3 +81,37 @@ def test_configure_fails_on_an_observation_mapping_that_lacks_a_joint(balancer: 
         assert answer == {"success": False}
         assert probe.ask("lifecycle_get", node="/cart_agent")["label"] == "unconfigured"
         probe.wait(lambda: "observation mapping" in agent.output and "theta_dot" in agent.output)
+
+
+def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: Path, probe: Probe) -> None:
+    """-p runtime:=fmu: the policy FMU acts as the in-process policy does; cleanup frees it and a
+    second configure loads it again; Ctrl-C while active ends the node within a second."""
+    args = [
+        "agent", "run", str(exported_run), "--transport", "rclpy", "--managed", "--node", "cart",
+        "--observation-topic", "/robot/joint_states", "--action-topic", "/robot/effort",
+        "--timeout", "30", "--ros-args", "-p", "runtime:=fmu", "--",
+    ]  # fmt: skip
+    states = np.random.default_rng(5).uniform(-0.15, 0.15, size=(12, 4))
+    expected = predicted_forces(exported_run, states)
+    probe.ask("subscribe", id="act", topic="/robot/effort", type=JOINT_STATE, keep_all=True)
+    with command(*args, ready="Ctrl-C stops it") as agent:
+        node = "/cart_agent"
+        for round_ in range(2):  # configure, act, clean up; then once more, left active
+            assert probe.ask("lifecycle_change", node=node, transition="configure") == {"success": True}
+            assert probe.ask("lifecycle_change", node=node, transition="activate") == {"success": True}
+            probe.wait(lambda: probe.ask("topic_info", topic="/robot/joint_states", kind="subscriptions"))
+            probe.ask("take", id="act")
+            for i, state in enumerate(states):
+                message = {"stamp_ns": 1_000_000 * (i + 1), "name": NAMES, "position": state.tolist()}
+                probe.ask("publish", topic="/robot/joint_states", type=JOINT_STATE, messages=[message])
+                actions = probe.ask("wait_count", id="act", count=i + 1)
+                assert isinstance(actions, list), agent.output
+            assert [a["position"][0] for a in actions] == expected
+            if round_ == 0:
+                assert probe.ask("lifecycle_change", node=node, transition="deactivate") == {"success": True}
+                assert probe.ask("lifecycle_change", node=node, transition="cleanup") == {"success": True}
+        assert " ".join(agent.output.split()).count("configured: fmu policy") == 2
+        elapsed = agent.stop(signal.SIGINT)
+        assert agent.process.returncode == 0 and elapsed < 1.0, (elapsed, agent.output)
+        assert "Traceback" not in agent.output, agent.output
+    assert len(set(expected)) == 2  # both levels: an agent stuck on one force would fail

@@ -1,19 +1,20 @@
-"""``fmu-bridge agent run --transport rclpy``: a trained PPO agent (torch, ONNX) closing the loop with
-an FMU node over DDS, and acting on a robot-like JointState publisher; checked from plain rclpy."""
+"""``fmu-bridge agent run --transport rclpy``: a trained PPO agent (torch, ONNX, policy FMU) closing the
+loop with an FMU node over DDS, and acting on a robot-like JointState publisher; checked from plain rclpy."""
 
 from __future__ import annotations
 
 import os
-import shutil
 import signal
+import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 
 from bridge.experiment.examples import example_experiment
 from tests.conftest import Loopback
-from tests.ros.conftest import Command, Probe, command
+from tests.ros.conftest import Command, Probe, command, predicted_forces
 
 pytestmark = [
     pytest.mark.ros,
@@ -26,27 +27,17 @@ JOINT_STATE = "sensor_msgs/msg/JointState"
 THETA_LIMIT = 0.20944
 
 
-@pytest.fixture(scope="module")
-def run_with_onnx(balancer: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A copy of the balancer's run with its policy exported to ONNX."""
-    from agents.export.onnx import export_onnx
-
-    run = tmp_path_factory.mktemp("onnx") / "ppo"
-    shutil.copytree(balancer, run)
-    export_onnx(run)
-    assert (run / "policy.onnx").is_file()
-    return run
-
-
 def other_domain(domain: int) -> str:
     return str(domain % 100 + 101)
 
 
 @pytest.mark.parametrize(
-    ("runtime", "sig"), [("torch", signal.SIGINT), ("onnx", signal.SIGTERM)], ids=["torch", "onnx"]
+    ("runtime", "sig"),
+    [("torch", signal.SIGINT), ("onnx", signal.SIGTERM), ("fmu", signal.SIGINT)],
+    ids=["torch", "onnx", "fmu"],
 )
 def test_agent_closes_the_loop_over_dds(  # noqa: PLR0917
-    run_with_onnx: Path, loopback: Loopback, probe: Probe, ros_domain: int, runtime: str, sig: int
+    exported_run: Path, loopback: Loopback, probe: Probe, ros_domain: int, runtime: str, sig: int
 ) -> None:
     """Node ``worker-1`` is served as ``/worker_1``; the agent finds it under the same name, in the
     domain given by --ros-domain (both processes' ROS_DOMAIN_ID says another), with no router."""
@@ -57,7 +48,7 @@ def test_agent_closes_the_loop_over_dds(  # noqa: PLR0917
         loopback.prefix, "--mode", "realtime", "--ros-backend", "rclpy", "--ros-domain", domain,
     ]  # fmt: skip
     agent_cmd = [
-        "agent", "run", str(run_with_onnx), "--transport", "rclpy", "--node", "worker-1",
+        "agent", "run", str(exported_run), "--transport", "rclpy", "--node", "worker-1",
         "--runtime", runtime, "--ros-domain", domain,
     ]  # fmt: skip
     probe.ask("subscribe", id="out", topic="/worker_1/outputs", type=JOINT_STATE, keep_all=True)
@@ -93,14 +84,14 @@ def test_agent_closes_the_loop_over_dds(  # noqa: PLR0917
         node.close()
 
 
-def test_agent_observes_a_robot_like_publisher(balancer: Path, probe: Probe) -> None:
+@pytest.mark.parametrize("runtime", ["torch", "onnx", "fmu"])
+def test_agent_observes_a_robot_like_publisher(exported_run: Path, probe: Probe, runtime: str) -> None:
     """--observation-topic: joint states from a robot (other joint order, extra joints, its own
-    stamps); each action answers one observation, stamped with it, equal to model.predict."""
-    from stable_baselines3 import PPO
-
+    stamps); each action answers one observation, stamped with it, equal to the in-process
+    policy's (model.predict), whichever runtime is deployed."""
     args = [
-        "agent", "run", str(balancer), "--transport", "rclpy", "--observation-topic", "/robot/joint_states",
-        "--action-topic", "/robot/effort", "--timeout", "30",
+        "agent", "run", str(exported_run), "--transport", "rclpy", "--observation-topic",
+        "/robot/joint_states", "--action-topic", "/robot/effort", "--timeout", "30", "--runtime", runtime,
     ]  # fmt: skip
     probe.ask("subscribe", id="act", topic="/robot/effort", type=JOINT_STATE, keep_all=True)
     rng = np.random.default_rng(3)
@@ -114,7 +105,7 @@ def test_agent_observes_a_robot_like_publisher(balancer: Path, probe: Probe) -> 
         }
         for i, s in enumerate(states)
     ]
-    with command(*args, ready="Ctrl-C stops it"):
+    with command(*args, ready="Ctrl-C stops it") as agent:
         probe.wait(
             lambda: probe.ask("topic_info", topic="/robot/joint_states", kind="subscriptions"),
             what="the agent's subscription",
@@ -123,14 +114,16 @@ def test_agent_observes_a_robot_like_publisher(balancer: Path, probe: Probe) -> 
             probe.ask("publish", topic="/robot/joint_states", type=JOINT_STATE, messages=[message])
             actions = probe.ask("wait_count", id="act", count=i + 1)
             assert isinstance(actions, list), actions
-    best = balancer / "best_model.zip"
-    model = PPO.load(best if best.is_file() else balancer / "model.zip", device="cpu")
+        said = " ".join(agent.output.split())  # rich wraps long lines
+        assert f"({runtime})" in said and ("policy FMU export" in said) == (runtime == "fmu"), said
+    expected = predicted_forces(exported_run, states)
     by_stamp = {a["stamp_ns"]: a for a in actions}
-    for message, state in zip(messages, states):
+    assert len(by_stamp) == len(messages)
+    for message, force in zip(messages, expected):
         action = by_stamp[message["stamp_ns"]]
-        expected, _ = model.predict(state.astype(np.float32), deterministic=True)
         assert action["name"] == ["force"]
-        assert action["position"] == [10.0 if int(expected) == 1 else -10.0]
+        assert action["position"] == [force]
+    assert len(set(expected)) == 2  # both levels: an agent stuck on one force would fail
 
 
 def test_launch_file_defaults_need_no_zenoh_router(balancer: Path, probe: Probe) -> None:
@@ -149,3 +142,41 @@ def test_launch_file_defaults_need_no_zenoh_router(balancer: Path, probe: Probe)
     with command(*node_line), command(*lines["fmu_agent"], ready="Ctrl-C stops it") as agent:
         actions = probe.ask("wait_count", id="act", count=50)
         assert isinstance(actions, list), agent.output
+
+
+def test_launch_file_with_the_zenoh_backend_closes_the_loop(
+    exported_run: Path, loopback: Loopback, ros_domain: int
+) -> None:
+    """The launch file's command lines with ``backend:=zenoh router:=... runtime:=fmu``: node and
+    agent on the rmw_zenoh wire through a router, the policy FMU acting; both stop within a second."""
+    import runpy
+
+    from rosbags.typesys import Stores, get_typestore
+
+    launch = Path(__file__).resolve().parents[2] / "launch_scripts" / "fmu_agent.launch.py"
+    lines = runpy.run_path(str(launch))["commands"](
+        str(exported_run), str(CARTPOLE), backend="zenoh", router=loopback.endpoint, runtime="fmu"
+    )
+    received: list[bytes] = []
+    session: Any = loopback.session
+    sub = session.declare_subscriber(  # the actions as any rmw_zenoh participant sees them
+        f"{ros_domain}/plant/actions/**", lambda sample: received.append(sample.payload.to_bytes())
+    )
+    try:
+        with (
+            command(*lines["fmu_node"]) as node,
+            command(*lines["fmu_agent"], ready="Ctrl-C stops it") as agent,
+        ):
+            deadline = time.monotonic() + 60
+            while len(received) < 50 and time.monotonic() < deadline:
+                time.sleep(0.05)
+            assert len(received) >= 50, agent.output
+            assert "policy FMU export" in " ".join(agent.output.split())
+            for process in (agent, node):
+                elapsed = process.stop(signal.SIGTERM)
+                assert process.process.returncode == 0 and elapsed < 1.0, (elapsed, process.output)
+    finally:
+        sub.undeclare()
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    actions = [jazzy.deserialize_cdr(payload, "sensor_msgs/msg/JointState") for payload in received]
+    assert all(list(a.name) == ["force"] and a.position.tolist() in ([-10.0], [10.0]) for a in actions)
