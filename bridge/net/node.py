@@ -90,9 +90,14 @@ class FmuNode:
         if not step_timeout_s > 0:
             raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
         self.experiment = exp = as_experiment(experiment)
-        self.name, self.mode, self.rate, self.step_timeout_s = name, mode, rate, step_timeout_s
+        self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
         self.plant = plant = fmu_plant(exp, isolate=isolate, timeout_s=step_timeout_s)
+        # isolated (by --isolate or model.isolation alike): the plant's own deadline bounds every
+        # call (model.isolation.timeout, else step_timeout_s) and kills the child at it
+        self.step_timeout_s = (
+            float(getattr(plant, "timeout_s", step_timeout_s)) if plant.isolated else step_timeout_s
+        )
         try:
             self.info = plant.info
             self.served = served or served_by(exp, plant.info, plant.timing)
@@ -108,7 +113,7 @@ class FmuNode:
         self._inputs = len(self.input_names)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
-        self.health = Health(name, step_timeout_s, self.counters)
+        self.health = Health(name, self.step_timeout_s, self.counters)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
@@ -119,7 +124,8 @@ class FmuNode:
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
-        self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
+        # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
+        self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
         try:
@@ -290,9 +296,8 @@ class FmuNode:
         self._pub.put(state.failed(action, detail, self._time_ns, isinstance(exc, StepTimeout)))
 
     def _on_hung(self, what: str, elapsed_s: float) -> None:
-        """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code)."""
-        if self.isolated:  # the plant kills its child at the deadline itself
-            return
+        """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code);
+        in-process plants only (an isolated plant kills its child at its own deadline)."""
         self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s)
         self._link.unhealthy()
         self._pub.put(self.lockstep.error(detail, self._time_ns, hung=True))  # t: where it hung
