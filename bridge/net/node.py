@@ -33,6 +33,7 @@ import numpy as np
 
 from bridge.errors import BridgeError, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.safe import check_safe_name
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import protocol as proto
@@ -83,12 +84,7 @@ class FmuNode:
         served: Served | None = None,
         pacing: Pacing | None = None,
     ) -> None:
-        if mode not in ("lockstep", "realtime"):
-            raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
-        if rate < 0:
-            raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
-        if not step_timeout_s > 0:
-            raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+        _check_arguments(name, mode, rate, step_timeout_s)
         self.experiment = exp = as_experiment(experiment)
         self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
@@ -391,3 +387,17 @@ class FmuNode:
     def describe(self) -> dict[str, Any]:
         """What ``fmu-bridge nodes`` and remote envs learn about this node."""
         return replies.describe(self)
+
+
+def _check_arguments(name: str, mode: str, rate: float, step_timeout_s: float) -> None:
+    """A BridgeError saying what is wrong with the node's arguments, before anything starts."""
+    if mode not in ("lockstep", "realtime"):
+        raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
+    if rate < 0:
+        raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
+    if not step_timeout_s > 0:
+        raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+    try:  # a part of every key (<prefix>/<name>/...): no '/', wildcard or '$' may widen it
+        check_safe_name(name)
+    except ValueError as exc:
+        raise BridgeError(f"the node name: {exc}; give --name or node.name a plain one") from None

@@ -20,7 +20,7 @@ import pytest
 
 from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import TransportError
+from bridge.errors import BridgeError, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
@@ -200,6 +200,16 @@ def test_a_second_node_with_the_same_name_refuses_to_start(loopback: Loopback) -
         pytest.raises(TransportError, match="a node named 'only' already serves"),
     ):
         FmuNode(CARTPOLE, name="only", options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("name", ["other/reset", "*", "**", "w$x", "a b", "..", "n" * 101, "bidi\u202e"])
+def test_a_node_name_that_would_widen_its_keys_is_refused_before_anything_starts(
+    loopback: Loopback, name: str
+) -> None:
+    """A node's name is a part of every key it declares: '/', wildcards or '$' would make it
+    answer for other nodes' keys."""
+    with pytest.raises(BridgeError, match=r"the node name: .*give --name or node\.name a plain one"):
+        FmuNode(CARTPOLE, name=name, options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
 
 
 def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
