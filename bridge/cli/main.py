@@ -550,9 +550,20 @@ def main() -> None:
         # Messages end with "[path]": escape them, or rich reads that as markup.
         err_console.print(f"[bold red]error:[/bold red] {escape(str(exc))}", highlight=False, soft_wrap=True)
         raise SystemExit(2) from None
+    except MemoryError:
+        pass  # leave the handler first: what the command held is freed with its frames
     except KeyboardInterrupt:
         err_console.print("interrupted")
         raise SystemExit(130) from None
+    else:
+        return
+    err_console.print(
+        "[bold red]error:[/bold red] the command ran out of memory: free memory, raise the process's "
+        "memory limit (ulimit -v), or give it less to do (a shorter recording, fewer envs)",
+        highlight=False,
+        soft_wrap=True,
+    )
+    raise SystemExit(2)
 
 
 if __name__ == "__main__":

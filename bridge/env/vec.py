@@ -203,7 +203,9 @@ class RemoteVecEnv(PlantVecEnv):
         nodes: node names, or a glob pattern (``"worker-*"``) matched against live nodes.
         n_envs: how many envs (default: every listed or matching node); extra matches are spares.
         replace_dead: replace a node that died or stopped answering by a spare (``nodes`` as a
-            pattern) or by the same name coming back, and truncate its episode, instead of raising.
+            pattern) or by the same name coming back, and truncate its episode, instead of raising;
+            the replacement goes on with the dead env's random generator (a seeded run draws the
+            same episodes as one without the replacement).
         replace_wait_s: with ``replace_dead``, how long to wait for a replacement when none is up;
             only then the error is raised (the healthy envs' results of that step are kept in
             ``partial_results``).
@@ -363,6 +365,9 @@ class RemoteVecEnv(PlantVecEnv):
             if replacement is not None:
                 new = replacement.node
                 _log.warning("replacing dead node %r by %r (env %d): %s", dead, new, index, error)
+                # the env's episodes go on from the dead env's generator: a seeded run draws the
+                # same episodes whether or not a node was replaced on the way
+                replacement.np_random = old.np_random
                 old.close()
                 self.envs[index] = replacement
                 return True
@@ -377,6 +382,24 @@ class RemoteVecEnv(PlantVecEnv):
                 detail=getattr(error, "detail", str(error)),
             ) from error
         raise error
+
+    def _reset_one(
+        self, index: int, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        if not self.replace_dead:
+            return super()._reset_one(index, seed, options)
+        # a reset that fails on a dead node has drawn its episode already: the replacement draws
+        # it again from the same state, so the episodes stay those of an undisturbed run
+        env = self.envs[index]
+        drawn_from = env.np_random.bit_generator.state
+        try:
+            return env.reset(seed=seed, options=options)
+        except PlantError as exc:
+            info = self._recover(index, exc)
+            env = self.envs[index]
+            env.np_random.bit_generator.state = drawn_from
+            obs, reset_info = env.reset(seed=seed, options=options)
+            return obs, {**reset_info, **info}
 
     def _live_replacement(self, dead: str) -> RemoteFmuEnv | None:
         in_use = set(self.node_names) - {dead}

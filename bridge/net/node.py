@@ -34,6 +34,7 @@ import numpy as np
 
 from bridge.errors import BridgeError, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.safe import check_safe_name
 from bridge.experiment.validate import with_elements
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
@@ -86,16 +87,16 @@ class FmuNode:
         served: Served | None = None,
         pacing: Pacing | None = None,
     ) -> None:
-        if mode not in ("lockstep", "realtime"):
-            raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
-        if rate < 0:
-            raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
-        if not step_timeout_s > 0:
-            raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+        _check_arguments(name, mode, rate, step_timeout_s)
         self.experiment = exp = as_experiment(experiment)
-        self.name, self.mode, self.rate, self.step_timeout_s = name, mode, rate, step_timeout_s
+        self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
         self.plant = plant = fmu_plant(exp, isolate=isolate, timeout_s=step_timeout_s)
+        # isolated (by --isolate or model.isolation alike): the plant's own deadline bounds every
+        # call (model.isolation.timeout, else step_timeout_s) and kills the child at it
+        self.step_timeout_s = (
+            float(getattr(plant, "timeout_s", step_timeout_s)) if plant.isolated else step_timeout_s
+        )
         try:
             self.info = plant.info
             self.served = served or served_by(exp, plant.info, plant.timing)
@@ -111,7 +112,7 @@ class FmuNode:
         self._inputs = len(self.input_names)
         self.saved = SavedState(plant, mode)
         self.counters: Counter[str] = Counter()
-        self.health = Health(name, step_timeout_s, self.counters)
+        self.health = Health(name, self.step_timeout_s, self.counters)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
@@ -123,7 +124,8 @@ class FmuNode:
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
-        self.watchdog = Watchdog(step_timeout_s, self._on_hung, name=name)
+        # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
+        self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
         try:
@@ -295,9 +297,8 @@ class FmuNode:
         self._pub.put(state.failed(action, detail, self._time_ns, isinstance(exc, StepTimeout)))
 
     def _on_hung(self, what: str, elapsed_s: float) -> None:
-        """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code)."""
-        if self.isolated:  # the plant kills its child at the deadline itself
-            return
+        """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code);
+        in-process plants only (an isolated plant kills its child at its own deadline)."""
         self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s)
         self._link.unhealthy()
         self._pub.put(self.lockstep.error(detail, self._time_ns, hung=True))  # t: where it hung
@@ -401,3 +402,17 @@ class FmuNode:
     def describe(self) -> dict[str, Any]:
         """What ``fmu-bridge nodes`` and remote envs learn about this node."""
         return replies.describe(self)
+
+
+def _check_arguments(name: str, mode: str, rate: float, step_timeout_s: float) -> None:
+    """A BridgeError saying what is wrong with the node's arguments, before anything starts."""
+    if mode not in ("lockstep", "realtime"):
+        raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
+    if rate < 0:
+        raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
+    if not step_timeout_s > 0:
+        raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+    try:  # a part of every key (<prefix>/<name>/...): no '/', wildcard or '$' may widen it
+        check_safe_name(name)
+    except ValueError as exc:
+        raise BridgeError(f"the node name: {exc}; give --name or node.name a plain one") from None

@@ -1,5 +1,7 @@
-"""A node's health: ``ok``, ``failed`` (the last episode ended by a plant error) or ``hung`` (a
-call into the FMU outlived the deadline and, in this process, cannot be interrupted)."""
+"""A node's health: ``ok``, ``failed`` (the last episode ended by a plant error), ``unusable``
+(the plant cannot step until the next reset: its FMU's initialisation failed, or its isolated
+process died or was killed; the next reset starts it afresh) or ``hung`` (a call into the FMU
+outlived the deadline and, in this process, cannot be interrupted)."""
 
 from __future__ import annotations
 
@@ -22,6 +24,14 @@ class Health:
     @property
     def is_hung(self) -> bool:
         return self.state == "hung"
+
+    def report(self, unusable: str | None) -> tuple[str, str]:
+        """``(health, health_detail)`` as ``info`` says them; ``unusable`` is the plant's own
+        ``Plant.unusable`` (read at each ``info``, so a child that died while idle shows too)."""
+        if self.state == "hung" or unusable is None:
+            return self.state, self.detail
+        detail = redact(unusable if not self.detail else f"{unusable} (after: {self.detail})")
+        return "unusable", detail
 
     def ok(self) -> None:
         self.state, self.detail = "ok", ""

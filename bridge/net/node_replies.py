@@ -90,6 +90,7 @@ def answer_info(node: FmuNode, query: Any) -> None:
 def describe(node: FmuNode) -> dict[str, Any]:
     """What ``fmu-bridge nodes`` and remote envs learn about ``node`` (its ``info`` reply)."""
     t, state, served = node.timing, node.lockstep, node.served
+    health, health_detail = node.health.report(node.plant.unusable)
     return {
         "node": node.name,
         "zid": node.zid,
@@ -109,8 +110,8 @@ def describe(node: FmuNode) -> dict[str, Any]:
         "episode": state.episode,
         "step": state.step,
         "time_s": node.plant.time_s,
-        "health": node.health.state,
-        "health_detail": node.health.detail,
+        "health": health,
+        "health_detail": health_detail,
         "holder": node.lease.describe(),
         "isolated": node.isolated,
         "can_save_state": node.saved.available,

@@ -20,14 +20,23 @@ _log = logging.getLogger(__name__)
 class Watchdog:
     """Calls ``on_hung(what, elapsed_s)`` once when a call marked by ``begin`` outlives ``deadline_s``."""
 
-    def __init__(self, deadline_s: float, on_hung: Callable[[str, float], None], *, name: str = "") -> None:
+    def __init__(
+        self, deadline_s: float, on_hung: Callable[[str, float], None], *, name: str = "", watch: bool = True
+    ) -> None:
         self.deadline_s = deadline_s
         self.fired = False
         self._on_hung = on_hung
         self._busy: tuple[str, tuple[object, ...], float] | None = None
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"watchdog-{name}", daemon=True)
-        self._thread.start()
+        self._thread: threading.Thread | None = None
+        if watch:  # False: the calls are bounded elsewhere (an isolated plant's own deadline)
+            self._thread = threading.Thread(target=self._run, name=f"watchdog-{name}", daemon=True)
+            self._thread.start()
+
+    @property
+    def watching(self) -> bool:
+        """Whether a thread looks for overdue calls (not for an isolated plant)."""
+        return self._thread is not None and self._thread.is_alive()
 
     def begin(self, what: str, *args: object) -> None:
         """A call starts; ``what % args`` names it in the report (formatted only if it is late)."""

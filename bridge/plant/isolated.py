@@ -169,6 +169,8 @@ class IsolatedFmuPlant(Plant):
         return self._time_s
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
+        if self._process is not None and self._broken is None and not self._process.is_alive():
+            self._broken = self._died(None)  # it ended between calls (killed, or its parent's group)
         if self._broken is not None or self._conn is None:
             if not self.restart and self._broken is not None:
                 raise self._broken
@@ -223,6 +225,12 @@ class IsolatedFmuPlant(Plant):
     def unusable(self) -> str | None:
         if self._broken is not None:
             return str(self._broken)
+        process = self._process
+        if process is not None and not process.is_alive():  # ended between calls: none noticed yet
+            code = process.exitcode or 0
+            how = f"was killed by {signal.Signals(-code).name}" if code < 0 else f"exited with code {code}"
+            then = "the next reset() starts a fresh one" if self.restart else "restart the node"
+            return f"{self.name}: its process {how}; {then}"
         return self._unusable
 
     _unusable: str | None = None  # the child's own model failed to initialise

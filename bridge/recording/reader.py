@@ -173,6 +173,14 @@ def read_recording(path: str | Path, limits: scan.Limits | None = None) -> Recor
         hint = f"; an unfinished recording exists: {unfinished}" if unfinished.is_file() else ""
         raise scan.RecordingError(f"no recording at {path}{hint}")
     reading = scan.Scan(path, limits)
+    try:
+        return _read(path, reading)
+    except MemoryError:
+        pass  # leave the handler first: what the read held is freed with its frames, then say so
+    raise reading.out_of_memory()
+
+
+def _read(path: Path, reading: scan.Scan) -> Recording:
     schemas: dict[int, str] = {}
     channels: dict[int, tuple[str, int]] = {}
     raw: dict[int, _Raw] = {}

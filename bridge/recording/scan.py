@@ -230,10 +230,18 @@ class Scan:
             try:
                 yield from self._body(stream, size)
             except MemoryError:
-                raise RecordingError(
-                    f"reading ran out of memory after {self._messages:,} messages and {self._inflated:,} "
-                    f"decompressed bytes; read a smaller recording or free memory [{self.path}]"
-                ) from None
+                pass  # leave the handler first: the chunk that did not fit is freed with its frame
+            else:
+                return
+        raise self.out_of_memory()
+
+    def out_of_memory(self) -> RecordingError:
+        """The error for a MemoryError met while reading (here or by whoever keeps the records)."""
+        return RecordingError(
+            f"reading ran out of memory after {self._messages:,} messages ({self._inflated:,} bytes "
+            "decompressed): the recording holds more than this process may allocate; free memory, "
+            f"raise the process's memory limit (ulimit -v), or read it on a larger machine [{self.path}]"
+        )
 
     def _body(self, stream: io.BufferedReader, size: int) -> Iterator[Record]:
         data_crc = zlib.crc32(rec.MAGIC)
@@ -411,9 +419,11 @@ def _decompress(compression: str, data: bytes, declared: int) -> bytes:
             out = lz4.frame.LZ4FrameDecompressor().decompress(data, max_length=declared + 1)
         else:
             raise _Corrupt(f"unknown compression {compression[:40]!r} (known: zstd, lz4, none)")
-    except _Corrupt:
+    except (_Corrupt, MemoryError):
         raise
     except Exception as exc:  # zstandard.ZstdError, lz4's RuntimeError: the data are corrupt
+        if "alloc" in str(exc).lower():  # the library's own allocation failed: memory, not the file
+            raise MemoryError(str(exc)) from None
         raise _Corrupt(f"{compression} data are corrupt ({type(exc).__name__}: {exc})") from exc
     if len(out) != declared:
         more = "+" if len(out) > declared else ""

@@ -72,13 +72,21 @@ def test_one_client_holds_a_node_until_another_takes_over_or_it_leaves(loopback:
             second.close()
 
 
-@pytest.mark.parametrize("isolate", [False, True], ids=["in_process", "isolated"])
+@pytest.mark.parametrize(
+    "isolation", ["", "flag", "file"], ids=["in_process", "isolated", "isolated_by_file"]
+)
 def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
-    loopback: Loopback, tmp_path: Path, isolate: bool
+    loopback: Loopback, tmp_path: Path, isolation: str
 ) -> None:
+    isolate = bool(isolation)
     experiment = tmp_path / "typed.yaml"
-    experiment.write_text(TYPED)
-    extra = ["--step-timeout", "1", *(["--isolate"] if isolate else [])]
+    by_file = ", isolation: {timeout: 1}}" if isolation == "file" else "}"
+    experiment.write_text(TYPED.replace("episode_duration: 5.0}", "episode_duration: 5.0" + by_file))
+    extra = [
+        "--step-timeout",
+        "1" if isolation != "file" else "30",
+        *(["--isolate"] if isolation == "flag" else []),
+    ]
     with node_process(experiment, "stuck", loopback, *extra) as process:
         env = RemoteFmuEnv(
             experiment, "stuck", session=loopback.session, prefix=loopback.prefix, timeout_s=30
@@ -92,7 +100,14 @@ def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
             assert time.monotonic() - start < 15  # the node's deadline, not the client's 30 s
             described = info(loopback, "stuck")
             if isolate:  # the child was killed; the next reset starts a fresh one
-                assert described["health"] == "failed" and described["counters"]["hung"] == 1
+                assert described["health"] == "unusable" and described["counters"]["hung"] == 1
+                assert "no answer within 1 s" in described["health_detail"]
+                assert "the next reset() starts a fresh process" in described["health_detail"]
+                assert not list(
+                    loopback.session.liveliness().get(  # type: ignore[attr-defined]
+                        proto.Keys(loopback.prefix, "stuck").unhealthy, timeout=1.0
+                    )
+                )
                 env.reset(seed=0, options={"scenario": "fine"})
                 for _ in range(3):
                     env.step(ZERO)

@@ -20,7 +20,7 @@ import pytest
 
 from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import TransportError
+from bridge.errors import BridgeError, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
@@ -202,6 +202,16 @@ def test_a_second_node_with_the_same_name_refuses_to_start(loopback: Loopback) -
         FmuNode(CARTPOLE, name="only", options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize("name", ["other/reset", "*", "**", "w$x", "a b", "..", "n" * 101, "bidi\u202e"])
+def test_a_node_name_that_would_widen_its_keys_is_refused_before_anything_starts(
+    loopback: Loopback, name: str
+) -> None:
+    """A node's name is a part of every key it declares: '/', wildcards or '$' would make it
+    answer for other nodes' keys."""
+    with pytest.raises(BridgeError, match=r"the node name: .*give --name or node\.name a plain one"):
+        FmuNode(CARTPOLE, name=name, options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
+
+
 def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
     peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
     keys = proto.Keys(loopback.prefix, "liar")
@@ -238,3 +248,67 @@ def test_an_outputs_frame_with_the_wrong_value_count_is_a_transport_error(tmp_pa
         with pytest.raises(TransportError, match="with 3 values; it serves 4 outputs"):
             answer(plant, three, 1, 1, outputs=4)
         assert answer(plant, three, 1, 1, outputs=3) is three
+
+
+def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
+    """A session posing as node ``faker`` (its info is a real node's, its own zid, a live token)
+    answers resets with short, garbled, unsigned, unkeyed or misdirected step-0 frames: each is a
+    TransportError naming the node and what was wrong, never an IndexError or a wrong observation."""
+    with FmuNode(CARTPOLE, name="model", options=loopback.options(), prefix=loopback.prefix) as real:  # type: ignore[arg-type]
+        described = real.describe()
+    peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+    keys = proto.Keys(loopback.prefix, "faker")
+    info = proto.encode_json({**described, "node": "faker", "zid": str(peer.zid())})
+    key = bytes(range(proto.KEY_SIZE))
+    replies: dict[str, Any] = {}
+
+    def on_reset(query: Any) -> None:
+        episode = json.loads(query.payload.to_bytes())["episode"]
+        payload, attachment = replies["make"](episode)
+        query.reply(keys.reset, payload, attachment=attachment)
+
+    entities = [
+        peer.declare_queryable(keys.info, lambda q: q.reply(keys.info, info), complete=True),
+        peer.declare_queryable(keys.reset, on_reset, complete=True),
+        peer.liveliness().declare_token(keys.alive),
+    ]
+    cases = {
+        "three values for four outputs": (
+            lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0, 1.0, 2.0], key=key), key),
+            "expected 4 values, got 3",
+        ),
+        "a cut frame": (lambda e: (b"\x01\x02\x03", key), "malformed"),
+        "no session key": (
+            lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4), None),
+            "0 bytes",
+        ),
+        "an unsigned frame": (
+            lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4), key),
+            "not signed with the session key",
+        ),
+        "another episode": (
+            lambda e: (proto.encode_values(proto.OUTPUTS, e + 5, 0, 0, [0.0] * 4, key=key), key),
+            "expected the outputs of step 0 of episode",
+        ),
+    }
+    try:
+        with RemoteFmuEnv(
+            CARTPOLE, "faker", session=loopback.session, prefix=loopback.prefix, timeout_s=5
+        ) as env:
+            for case, (make, says) in cases.items():
+                replies["make"] = make
+                with pytest.raises(TransportError) as caught:
+                    env.reset(seed=1)
+                message = str(caught.value)
+                assert "node 'faker'" in message and "the reset reply is malformed" in message, (
+                    case,
+                    message,
+                )
+                assert says in message, (case, message)
+            replies["make"] = lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4, key=key), key)
+            obs, _ = env.reset(seed=1)  # a well-formed reply is taken: the check is not a blanket refusal
+            assert obs.shape == (4,)
+    finally:
+        for entity in reversed(entities):
+            entity.undeclare()
+        peer.close()

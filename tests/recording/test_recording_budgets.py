@@ -102,3 +102,50 @@ def test_the_time_budget_ends_a_read_with_a_clear_error(tmp_path: Path) -> None:
     write_recording(path, 1, counting=True, per_chunk=1 << 20)
     with pytest.raises(RecordingError, match=r"took longer than 0 s to read"):
         read_recording(path, Limits(time_s=0.0))
+
+
+CAPPED = """
+import os, resource, sys
+from bridge.cli.main import main
+import bridge.cli.recording, bridge.recording.reader, numpy, zstandard  # loaded before the cap
+
+with open("/proc/self/statm") as statm:
+    size = int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+cap = size + (int(sys.argv[1]) << 20)
+resource.setrlimit(resource.RLIMIT_AS, (cap, resource.getrlimit(resource.RLIMIT_AS)[1]))
+sys.argv = ["fmu-bridge", *sys.argv[2:]]
+main()
+"""
+
+
+@pytest.fixture(scope="module")
+def three_chunks(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """15 MB of recording that declares 96 MiB: three chunks of 32 MiB of counting messages."""
+    path = tmp_path_factory.mktemp("memory") / "large.mcap"
+    write_recording(path, 3, counting=True)
+    return path
+
+
+@pytest.mark.parametrize("spare_mb", [16, 96, 160])
+@pytest.mark.parametrize("command", ["info", "export"])
+def test_a_read_that_runs_out_of_memory_is_a_clear_error(
+    tmp_path: Path, three_chunks: Path, command: str, spare_mb: int
+) -> None:
+    """A real MemoryError: the reader's process may take only ``spare_mb`` more address space
+    (RLIMIT_AS) than it holds after loading. 16 MiB cannot hold one declared 32 MiB chunk (the
+    decompression fails); 96 and 160 MiB run out while the messages are kept. Either way: the
+    project's error and exit code 2, never a traceback, and no chunk called corrupt."""
+    extra = ["--csv", str(tmp_path / "out")] if command == "export" else []
+    result = subprocess.run(
+        [sys.executable, "-c", CAPPED, str(spare_mb), command, str(three_chunks), *extra],
+        capture_output=True,
+        text=True,
+        env={**os.environ, "COLUMNS": "400"},
+        timeout=120,
+        check=False,
+    )
+    output = result.stdout + result.stderr
+    assert result.returncode == 2, output
+    assert "Traceback" not in output and "corrupt" not in output, output
+    assert "error: reading ran out of memory after" in output, output
+    assert "raise the process's memory limit (ulimit -v)" in output and str(three_chunks) in output
