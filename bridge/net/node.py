@@ -43,7 +43,7 @@ from bridge.net.node_state import SavedState
 from bridge.net.realtime import Pacing, RealtimeDriver
 from bridge.net.requests import Refused, RequestRules, redact
 from bridge.net.ros2.view import RosViewSettings
-from bridge.net.served import Served, served_by
+from bridge.net.served import Served, element_start, served_by
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.net.watchdog import Watchdog
 from bridge.plant.factory import fmu_plant
@@ -113,8 +113,7 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
-        starts = [self.info.variables[n].start for n in self.input_names]
-        self._held_inputs = [float(v) if isinstance(v, int | float) else 0.0 for v in starts]
+        self._held_inputs = [element_start(self.info, n) for n in self.input_names]  # u[2]: an element
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None

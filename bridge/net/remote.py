@@ -27,6 +27,7 @@ from bridge.net import protocol as proto
 from bridge.net.channel import ChannelWaiting, Waiting
 from bridge.net.client import NodeClient
 from bridge.net.discovery import describe_nodes, list_nodes, query_info
+from bridge.net.served import element_start
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
@@ -221,7 +222,7 @@ class RemotePlant(Plant):
         self.sample, self.terminated, self._flags = 0, False, 0
         merged = {**self._defaults, **values}
         for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
-            self._u[i] = float(merged.get(name, _start(self.info.variables[name].start)))
+            self._u[i] = float(merged.get(name, element_start(self.info, name)))
         if inputs is not None:
             self._u[self._in_index] = inputs
         self._held = held = self._u.tolist()
@@ -314,10 +315,3 @@ def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, wh
             f"{where}"
         )
     return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
-
-
-def _start(value: Any) -> float:
-    try:
-        return float(value) if value is not None else 0.0
-    except (TypeError, ValueError):
-        return 0.0
