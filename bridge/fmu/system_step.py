@@ -51,7 +51,8 @@ def library() -> Any:
         _log.warning("native system master unavailable, stepping in Python instead: %s", exc)
         return None
     function = library.master_sample
-    function.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_int]
+    # (Sample*, int count, int with_inputs), always called with a byref and two Python ints: without
+    # argtypes ctypes passes those as they are, which halves the call's cost (about 0.6 us)
     function.restype = ctypes.c_int
     return function
 
@@ -142,7 +143,7 @@ class NativeMaster:
     def sample(self, inputs: Sequence[float] | None, count: int) -> np.ndarray[Any, np.dtype[np.float64]]:
         """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
         return the observation (a new array): :meth:`run` with the task's ends, in one call."""
-        with_inputs = inputs is not None
+        with_inputs = 0 if inputs is None else 1
         if inputs is not None:
             try:
                 self._ext[: self._n_ext] = inputs
@@ -173,7 +174,7 @@ class NativeMaster:
         raises the component's own error (as the Python master)."""
         for m in self._models:
             if not m._steppable:
-                self._refused(False)
+                self._refused(0)
         failed = self._call(self._spec_ref, count, 0)
         self.done = done = self._spec.done
         if failed or self._spec.stopped:
@@ -183,7 +184,7 @@ class NativeMaster:
         for plant in self._plants:
             plant.sample += done
 
-    def _refused(self, with_inputs: bool) -> None:
+    def _refused(self, with_inputs: int) -> None:
         """The Python path raises the model's own refusal (terminated, failed, closed)."""
         if with_inputs:  # the task's inputs are where the Python path would have put them
             inputs = self.master.inputs
