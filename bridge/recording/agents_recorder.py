@@ -132,6 +132,15 @@ class RecordAgents:
 
     # -- the PettingZoo Parallel API, passed through ------------------------------------------------
     @property
+    def unwrapped(self) -> Any:
+        return self.env.unwrapped
+
+    def __getattr__(self, name: str) -> Any:  # the rest of the env's API (num_agents, state, ...)
+        if name.startswith("_") or name == "env":
+            raise AttributeError(name)
+        return getattr(self.env, name)
+
+    @property
     def possible_agents(self) -> list[str]:
         return list(self.env.possible_agents)
 

@@ -137,3 +137,15 @@ def test_only_a_parallel_env_over_a_system_with_agents_is_recorded(tmp_path: Pat
     with pytest.raises(ConfigError, match=r"system\.agents"):
         RecordAgents(object(), tmp_path / "x.mcap")
     assert not list(tmp_path.iterdir())
+
+
+def test_the_recording_env_passes_pettingzoos_api_test(tmp_path: Path) -> None:
+    from pettingzoo.test import parallel_api_test
+
+    env = RecordAgents(SystemParallelEnv(EXAMPLE), tmp_path / "api.mcap")
+    try:
+        parallel_api_test(env, num_cycles=60)
+    finally:
+        env.close()
+    recording = read_recording(tmp_path / "api.mcap")
+    assert recording.complete and len(recording.series[topic("drive", "reward")]) > 0
