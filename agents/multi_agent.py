@@ -8,7 +8,7 @@ no other learner's episode half done). Returns are measured with every agent
 deterministic over one episode, before training (the initial policies) and after each round, so
 ``improved`` compares an agent with its own untrained self on the same (deterministic) system.
 
-    python -m agents.multi_agent examples/motor_load_agents.yaml --timesteps 2048 --rounds 2
+    python -m agents.multi_agent examples/motor_load_agents.yaml --timesteps 2048 --rounds 2 [--record DIR]
 
 prints each agent's untrained and trained return and exits non-zero if an agent did not improve.
 """
@@ -71,6 +71,7 @@ class TrainResult:
 
     untrained: dict[str, float]
     rounds: list[dict[str, float]] = field(default_factory=list)
+    recording: Path | None = None  # the evaluation episodes, per agent (``record=``)
 
     @property
     def trained(self) -> dict[str, float]:
@@ -87,13 +88,21 @@ def train_agents(
     rounds: int = 2,
     seed: int = 0,
     save_dir: Path | None = None,
+    record: Path | None = None,
 ) -> TrainResult:
-    """Train every agent of ``experiment``'s ``system.agents`` with PPO, taking turns (module doc)."""
+    """Train every agent of ``experiment``'s ``system.agents`` with PPO, taking turns (module doc).
+
+    ``record``: a folder; the evaluation episodes (untrained: episode 0, after round ``r``: episode
+    ``r``) are recorded there per agent into one MCAP file (``fmu-bridge replay`` shows it)."""
     import torch
     from stable_baselines3 import PPO
 
     torch.set_num_threads(1)
-    env = SystemParallelEnv(experiment)  # for the returns
+    env: Any = SystemParallelEnv(experiment)  # for the returns
+    if record is not None:
+        from bridge.recording.agents_recorder import record_agents
+
+        env = record_agents(env, record, agent="independent PPO, taking turns", seed=seed)
     views: list[SystemParallelEnv] = []
     try:
         models: dict[str, Any] = {}
@@ -106,6 +115,8 @@ def train_agents(
             )
             policies[name] = _deterministic(models[name])
         result = TrainResult(untrained=episode_returns(env, policies, seed))
+        if record is not None:
+            result.recording = env.path
         for _ in range(rounds):
             for name in env.possible_agents:
                 models[name].learn(total_timesteps=timesteps, reset_num_timesteps=False)
@@ -131,13 +142,24 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rounds", type=int, default=2)
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--save-dir", type=Path, default=None, help="write each agent's PPO model here")
+    parser.add_argument(
+        "--record", type=Path, default=None, metavar="DIR",
+        help="record the evaluation episodes per agent into DIR (fmu-bridge replay FILE shows them)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     result = train_agents(
-        args.experiment, timesteps=args.timesteps, rounds=args.rounds, seed=args.seed, save_dir=args.save_dir
+        args.experiment,
+        timesteps=args.timesteps,
+        rounds=args.rounds,
+        seed=args.seed,
+        save_dir=args.save_dir,
+        record=args.record,
     )
     print(f"{'agent':<12} {'untrained':>12} {'trained':>12}")
     for name, before in result.untrained.items():
         print(f"{name:<12} {before:>12.3f} {result.trained[name]:>12.3f}")
+    if result.recording is not None:
+        print(f"recording: {result.recording} (episode 0 untrained, episode r after round r)")
     return 0 if all(result.improved().values()) else 1
 
 

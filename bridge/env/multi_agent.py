@@ -112,6 +112,7 @@ class SystemParallelEnv(ParallelEnv):  # type: ignore[misc]
             raise
         self.possible_agents = list(self._agents)
         self.agents: list[str] = []
+        self.applied_inputs: dict[str, FloatArray] = {}  # each agent's FMU input values of the last step
         self._samples = round(exp.model.episode_duration / plant.timing.sampling_time_s)
         self._sample = 0
 
@@ -158,7 +159,7 @@ class SystemParallelEnv(ParallelEnv):  # type: ignore[misc]
         terminated = bool(self.plant.terminated)
         truncated = self._sample >= self._samples and not terminated
         rewards = {n: self._reward(n, outputs, inputs[n], terminated) for n in self._agents}
-        self._previous = inputs
+        self._previous = self.applied_inputs = inputs
         observations = self._observe(outputs)
         agents = list(self.agents)
         infos = {n: {"time_s": self.plant.time_s} for n in agents}

@@ -131,7 +131,7 @@ class MasterComponent(ctypes.Structure):
         ("t0", ctypes.c_double),
         ("h", ctypes.c_double),
         ("steps", ctypes.c_int),
-        ("k", ctypes.c_longlong),
+        ("k", ctypes.c_void_p),  # long long*: the model's own clock
         ("nv_in", ctypes.c_int),  # values of u (arrays count every element); n_in counts value references
         ("nv_out", ctypes.c_int),
     ]
@@ -141,6 +141,30 @@ class MasterLink(ctypes.Structure):
     """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``."""
 
     _fields_ = [("source", ctypes.c_int), ("i", ctypes.c_int), ("target", ctypes.c_int), ("j", ctypes.c_int)]
+
+
+class MasterSample(ctypes.Structure):
+    """``master.c``'s ``Sample``: a system's components and links, the task's inputs scattered into
+    them and its observation gathered out of them, in one call (``master_sample``)."""
+
+    _fields_ = [
+        ("comps", ctypes.c_void_p),
+        ("n", ctypes.c_int),
+        ("links", ctypes.c_void_p),
+        ("n_links", ctypes.c_int),
+        ("gauss_seidel", ctypes.c_int),
+        ("status", ctypes.c_void_p),
+        ("n_ext", ctypes.c_int),
+        ("ext_comp", ctypes.c_void_p),
+        ("ext_j", ctypes.c_void_p),
+        ("ext", ctypes.c_void_p),
+        ("n_obs", ctypes.c_int),
+        ("obs_comp", ctypes.c_void_p),
+        ("obs_i", ctypes.c_void_p),
+        ("obs", ctypes.c_void_p),
+        ("done", ctypes.c_int),
+        ("stopped", ctypes.c_int),
+    ]
 
 
 Clock = ctypes.c_longlong

@@ -43,7 +43,7 @@ typedef struct {
     double t0;
     double h;
     int steps;
-    long long k;
+    long long* k;       /* the model's own step counter, advanced in place */
     int nv_in;          /* values of u (FMI 3.0 arrays count every element) */
     int nv_out;         /* values of y */
 } Component;
@@ -58,18 +58,18 @@ typedef struct {
 static int do_steps2(Component* c) {
     fmi2DoStepTYPE* do_step = (fmi2DoStepTYPE*)c->do_step;
     for (int s = 0; s < c->steps; s++) {
-        int st = do_step(c->component, c->t0 + (double)c->k * c->h, c->h, fmi2True);
+        int st = do_step(c->component, c->t0 + (double)*c->k * c->h, c->h, fmi2True);
         if (st > MASTER_WARNING) {
             fmi2Boolean stop = fmi2False;
             fmi2GetBooleanStatusTYPE* flag = (fmi2GetBooleanStatusTYPE*)c->bool_status;
             if (st == MASTER_DISCARD && flag != NULL &&
                 flag(c->component, fmi2Terminated, &stop) <= MASTER_WARNING && stop) {
-                c->k += 1;
+                *c->k += 1;
                 return MASTER_TERMINATED;
             }
             return st;
         }
-        c->k += 1;
+        *c->k += 1;
     }
     return MASTER_OK;
 }
@@ -79,9 +79,9 @@ static int do_steps3(Component* c) {
     for (int s = 0; s < c->steps; s++) {
         fmi3Boolean event = fmi3False, stop = fmi3False, early = fmi3False;
         fmi3Float64 last = 0.0;
-        int st = do_step(c->component, c->t0 + (double)c->k * c->h, c->h, fmi3True, &event, &stop, &early, &last);
+        int st = do_step(c->component, c->t0 + (double)*c->k * c->h, c->h, fmi3True, &event, &stop, &early, &last);
         if (st > MASTER_WARNING) return st;
-        c->k += 1;
+        *c->k += 1;
         if (stop) return MASTER_TERMINATED;
     }
     return MASTER_OK;
@@ -156,5 +156,41 @@ int master_run(Component* comps, int n, const Link* links, int n_links, int gaus
             if (status[c] == MASTER_TERMINATED) return 0;
         }
     }
+    return 0;
+}
+
+/* One sample of the system as its task sees it: the task's inputs set into the components'
+ * input arrays, `count` macro steps (master_run), the observed outputs gathered into `obs`.
+ * All arrays are the caller's and stay bound between calls, so a sample allocates nothing. */
+typedef struct {
+    Component* comps;
+    int n;
+    const Link* links;
+    int n_links;
+    int gauss_seidel;
+    int* status;
+    int n_ext;            /* the task's inputs: ext[e] -> comps[ext_comp[e]].u[ext_j[e]] */
+    const int* ext_comp;
+    const int* ext_j;
+    const double* ext;
+    int n_obs;            /* the observation: comps[obs_comp[o]].y[obs_i[o]] -> obs[o] */
+    const int* obs_comp;
+    const int* obs_i;
+    double* obs;
+    int done;             /* macro steps completed by the last call */
+    int stopped;          /* 1 if a component asked to stop in the last call */
+} Sample;
+
+int master_sample(Sample* s, int count, int with_inputs) {
+    if (with_inputs) {
+        for (int e = 0; e < s->n_ext; e++) s->comps[s->ext_comp[e]].u[s->ext_j[e]] = s->ext[e];
+    }
+    int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done);
+    s->stopped = 0;
+    for (int c = 0; c < s->n; c++) {
+        if (s->status[c] == MASTER_TERMINATED) s->stopped = 1;
+    }
+    if (failed) return failed;
+    for (int o = 0; o < s->n_obs; o++) s->obs[o] = s->comps[s->obs_comp[o]].y[s->obs_i[o]];
     return 0;
 }

@@ -12,14 +12,17 @@ bit (tests/plant/test_system_native_master.py). ctypes releases the GIL during t
 The library is built with gcc on first use and cached like the batch stepper's
 (``bridge.fmu.native``). Its inputs and outputs are the master's own arrays: the C code sets the
 FMU inputs from ``Master.inputs[name]`` and gets the outputs into ``Master.outputs[name]``.
-``bridge.plant.system.native_master`` decides where it applies; this module makes the calls.
-Each component's step counter travels in its C struct for the call and back into its model.
+The same call scatters the task's inputs into those arrays first and gathers the observed outputs
+into one observation buffer after, so a sample of the system is one call and no allocation but the
+observation's copy. ``bridge.plant.system.native_master`` decides where it applies; this module
+makes the calls. Each model's step counter is a cell of an array the C code advances in place.
 """
 
 from __future__ import annotations
 
 import ctypes
 import logging
+from collections.abc import Sequence
 from functools import lru_cache
 from typing import TYPE_CHECKING, Any
 
@@ -27,7 +30,7 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError
 from bridge.fmu import native as native_build
-from bridge.fmu.abi import NONFINITE, TERMINATED, MasterComponent, MasterLink
+from bridge.fmu.abi import NONFINITE, TERMINATED, Clock, MasterComponent, MasterLink, MasterSample
 from bridge.fmu.model import Model
 from bridge.fmu.signals import SignalGroup
 
@@ -41,15 +44,15 @@ _Component, _Link = MasterComponent, MasterLink
 
 @lru_cache(maxsize=1)
 def library() -> Any:
-    """``master_run`` of ``master.c``, built on first use; None where it cannot be built."""
+    """``master_sample`` of ``master.c``, built on first use; None where it cannot be built."""
     try:
         library = native_build.load("master")
     except BridgeError as exc:
         _log.warning("native system master unavailable, stepping in Python instead: %s", exc)
         return None
-    function = library.master_run
-    p, i = ctypes.c_void_p, ctypes.c_int
-    function.argtypes = [p, i, p, i, i, p, i, p]
+    function = library.master_sample
+    # (Sample*, int count, int with_inputs), always called with a byref and two Python ints: without
+    # argtypes ctypes passes those as they are, which halves the call's cost (about 0.6 us)
     function.restype = ctypes.c_int
     return function
 
@@ -63,13 +66,26 @@ def can_step_natively(model: Model) -> bool:
     return True
 
 
+def _ints(values: Sequence[int]) -> np.ndarray[Any, np.dtype[np.intc]]:
+    return np.ascontiguousarray(np.array(list(values) or [0], dtype=np.intc))
+
+
 class NativeMaster:
     """The macro step of ``master`` in one call; build with :func:`native_master` (None where it
     does not apply). Call :meth:`refresh` after every initialisation (instances and the master's
-    arrays may be new)."""
+    arrays may be new).
+
+    ``external`` and ``observed`` are the task's inputs and observed outputs as (component,
+    position) in the master's input and output arrays: :meth:`sample` sets the first and returns
+    the second."""
 
     def __init__(
-        self, master: Master, function: Any, groups: dict[str, tuple[SignalGroup | None, SignalGroup]]
+        self,
+        master: Master,
+        function: Any,
+        groups: dict[str, tuple[SignalGroup | None, SignalGroup]],
+        external: Sequence[tuple[str, int]] = (),
+        observed: Sequence[tuple[str, int]] = (),
     ) -> None:
         self.master, self._call, self._groups = master, function, groups
         self._names = list(master.order)
@@ -77,34 +93,44 @@ class NativeMaster:
         position = {n: p for p, n in enumerate(self._names)}
         links = [_Link(position[k.source], k.i, position[k.target], k.j) for k in master.links]
         self._links = (_Link * max(1, len(links)))(*links)
-        self._n_links = len(links)
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
         self._gauss_seidel = int(master.system.algorithm == "gauss_seidel")
-        self._accounts = [(p, p.model, c) for p, c in zip(self._plants, self._comps)]
+        self._clocks = np.zeros(len(self._names), dtype=np.int64)  # each model's k, advanced in C
+        self._models = [p.model for p in self._plants]
+        self._pairs = list(zip(self._plants, self._models))
+        self._ext_comp = _ints([position[n] for n, _ in external])
+        self._ext_j = _ints([j for _, j in external])
+        self._obs_comp = _ints([position[n] for n, _ in observed])
+        self._obs_i = _ints([i for _, i in observed])
+        self._ext = np.zeros(max(1, len(external)))
+        self._obs = np.zeros(len(observed))
+        self._obs_buffer = np.zeros(max(1, len(observed)))  # C writes here; :meth:`sample` copies
+        self._spec = spec = MasterSample()
         address = ctypes.addressof
-        self._args = (
-            ctypes.c_void_p(address(self._comps)),
-            len(self._names),
-            ctypes.c_void_p(address(self._links)),
-            self._n_links,
-            self._gauss_seidel,
-            ctypes.c_void_p(address(self._status)),
-        )
-        self._done = ctypes.c_int(0)
-        self._done_ref = ctypes.byref(self._done)
+        spec.comps, spec.n = address(self._comps), len(self._names)
+        spec.links, spec.n_links = address(self._links), len(links)
+        spec.gauss_seidel, spec.status = self._gauss_seidel, address(self._status)
+        spec.n_ext, spec.ext = len(external), self._ext.ctypes.data
+        spec.ext_comp, spec.ext_j = self._ext_comp.ctypes.data, self._ext_j.ctypes.data
+        spec.n_obs, spec.obs = len(observed), self._obs_buffer.ctypes.data
+        spec.obs_comp, spec.obs_i = self._obs_comp.ctypes.data, self._obs_i.ctypes.data
+        self._spec_ref = ctypes.byref(spec)
+        self._n_obs, self._n_ext = len(observed), len(external)
         self.done = 0  # macro steps the last call completed
+        self.stopped = False  # whether a component asked to stop in the last call
 
     def refresh(self) -> None:
         """Re-read the instances' addresses and the master's arrays (after a reset)."""
-        master = self.master
-        for c, (name, plant) in zip(self._comps, zip(self._names, self._plants)):
+        master, self.stopped = self.master, False
+        for position, (c, name, plant) in enumerate(zip(self._comps, self._names, self._plants)):
             model, (inputs, outputs) = plant.model, self._groups[name]
             h = model._native_handles()
             c.major, c.set_real, c.get_real = h["major"], h["set_real"], h["get_real"]
             c.do_step, c.bool_status, c.component = h["do_step"], h["bool_status"], h["component"]
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
-            c.k = model.step_index  # kept here from now on; each step hands it to the model
+            model._attach_clock(Clock.from_buffer(self._clocks.data, position * self._clocks.itemsize))
+            c.k = self._clocks.ctypes.data + position * self._clocks.itemsize
             c.n_in, c.nv_in, c.in_vr = 0, 0, None
             if inputs is not None:
                 vrs, c.n_in, c.nv_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0, 0)
@@ -114,34 +140,75 @@ class NativeMaster:
             c.u, c.y = u.ctypes.data, y.ctypes.data
             c.out_vr, c.n_out, c.nv_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0, 0)
 
+    def sample(self, inputs: Sequence[float] | None, count: int) -> np.ndarray[Any, np.dtype[np.float64]]:
+        """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
+        return the observation (a new array): :meth:`run` with the task's ends, in one call."""
+        with_inputs = 0 if inputs is None else 1
+        if inputs is not None:
+            try:
+                self._ext[: self._n_ext] = inputs
+            except ValueError:
+                raise BridgeError(
+                    f"the system's inputs: expected {self._n_ext} values, got {len(inputs)}; pass "
+                    f"one value per action input, in the order of actions.inputs"
+                ) from None
+        for plant, m in self._pairs:  # Model._steppable inlined, and the sample counted ahead
+            if not m._initialized or m.terminated or m._failed_status or m._closed:
+                for counted in self._plants[: self._plants.index(plant)]:
+                    counted.sample -= count
+                self._refused(with_inputs)
+            plant.sample += count
+        failed = self._call(self._spec_ref, count, with_inputs)
+        spec = self._spec
+        self.done = done = spec.done
+        if failed or spec.stopped:
+            self.stopped = bool(spec.stopped)
+            for plant in self._plants:
+                plant.sample -= count
+            self._finish(failed, done)
+        return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+
     def run(self, count: int) -> None:
         """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its
         ``terminated`` is set); :attr:`done` says how many completed, also when one fails, which
         raises the component's own error (as the Python master)."""
-        plants, comps, status = self._plants, self._comps, self._status
-        for name, plant in zip(self._names, plants):
-            if not plant.model._steppable:  # the Python path raises the model's own refusal
+        for m in self._models:
+            if not m._steppable:
+                self._refused(0)
+        failed = self._call(self._spec_ref, count, 0)
+        self.done = done = self._spec.done
+        if failed or self._spec.stopped:
+            self.stopped = bool(self._spec.stopped)
+            self._finish(failed, done)
+            return
+        for plant in self._plants:
+            plant.sample += done
+
+    def _refused(self, with_inputs: int) -> None:
+        """The Python path raises the model's own refusal (terminated, failed, closed)."""
+        if with_inputs:  # the task's inputs are where the Python path would have put them
+            inputs = self.master.inputs
+            for e in range(self._spec.n_ext):
+                name = self._names[int(self._ext_comp[e])]
+                inputs[name][int(self._ext_j[e])] = self._ext[e]
+        for name, plant in zip(self._names, self._plants):
+            if not plant.model._steppable:
                 self.done = 0
                 plant.step(self.master.inputs[name].tolist())
-        failed = self._call(*self._args, count, self._done_ref)
-        self.done = done = self._done.value
-        if not failed and not any(status):  # the hot path: every component stepped with OK
-            for plant, model, c in self._accounts:
-                model.step_index = c.k
-                plant.sample += done
-            return
-        stepped = len(comps)  # components that took part in the last macro step tried
+
+    def _finish(self, failed: int, done: int) -> None:
+        plants, status = self._plants, self._status
+        stepped = len(plants)  # components that took part in the last macro step tried
         if failed:
             stepped = failed - 1
             if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
-        for position, (plant, model, c) in enumerate(self._accounts):
-            model.step_index = c.k
+        for position, plant in enumerate(plants):
             plant.sample += done - (1 if not failed else 0)
             if position < stepped:
-                plant.native_done(c.k, status[position] == TERMINATED)
+                plant.native_done(int(self._clocks[position]), status[position] == TERMINATED)
         if failed:
-            self._fail(plants[failed - 1], status[failed - 1], comps[failed - 1].k)
+            self._fail(plants[failed - 1], status[failed - 1], int(self._clocks[failed - 1]))
 
     def _fail(self, plant: FmuComponent, status: int, k: int) -> None:
         name = self._names[self._plants.index(plant)]

@@ -35,7 +35,6 @@ import numpy as np
 from bridge.errors import BridgeError, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
 from bridge.experiment.safe import check_safe_name
-from bridge.experiment.validate import with_elements
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import node_start
@@ -47,7 +46,7 @@ from bridge.net.node_state import SavedState
 from bridge.net.realtime import Pacing, RealtimeDriver
 from bridge.net.requests import Refused, RequestRules, redact
 from bridge.net.ros2.view import RosViewSettings
-from bridge.net.served import Served, served_by
+from bridge.net.served import Served, element_start, served_by
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.net.watchdog import Watchdog
 from bridge.plant.factory import fmu_plant
@@ -117,9 +116,7 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
-        variables = with_elements(self.info.variables)  # inputs may be array elements, u[2]
-        starts = [variables[n].start for n in self.input_names]
-        self._held_inputs = [float(v) if isinstance(v, int | float) else 0.0 for v in starts]
+        self._held_inputs = [element_start(self.info, n) for n in self.input_names]  # u[2]: an element
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None

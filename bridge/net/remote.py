@@ -21,13 +21,14 @@ import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError, StepTimeout, TransportError
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, check_experiment, resolve_state_file, timing, with_elements
+from bridge.experiment.validate import Timing, check_experiment, resolve_state_file, timing
 from bridge.fmu import state_file
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
 from bridge.net.channel import ChannelWaiting, Waiting
 from bridge.net.client import NodeClient
 from bridge.net.discovery import describe_nodes, list_nodes, query_info
+from bridge.net.served import element_start
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
@@ -161,8 +162,6 @@ class RemotePlant(Plant):
         self._node_outputs: list[str] = list(d["output_names"])
         self._defaults = dict(role.component.parameters) if role is not None else {}
         self._u = np.zeros(len(self._node_inputs))
-        elements = with_elements(self.info.variables)  # the node's inputs may be array elements, u[2]
-        self._starts = {name: _start(elements[name].start) for name in self._node_inputs}
         self._held: Sequence[float] = []
         self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
 
@@ -231,7 +230,7 @@ class RemotePlant(Plant):
         self.sample, self.terminated, self._flags = 0, False, 0
         merged = {**self._defaults, **values}
         for i, name in enumerate(self._node_inputs):  # inputs nobody binds: their start values
-            self._u[i] = float(merged.get(name, self._starts[name]))
+            self._u[i] = float(merged.get(name, element_start(self.info, name)))
         if inputs is not None:
             self._u[self._in_index] = inputs
         self._held = held = self._u.tolist()
@@ -324,13 +323,6 @@ def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, wh
             f"{where}"
         )
     return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
-
-
-def _start(value: Any) -> float:
-    try:
-        return float(value) if value is not None else 0.0
-    except (TypeError, ValueError):
-        return 0.0
 
 
 def _send_state_file(client: NodeClient, experiment: Experiment) -> None:

@@ -104,6 +104,18 @@ def input_ranges(
     return low, high
 
 
+def element_start(info: ModelInfo, name: str) -> float:
+    """The start value of a variable, or of one element ``u[2]`` of an FMI 3.0 array (0 without one)."""
+    var, index = info.element(name)
+    start = var.start
+    if index is not None:
+        start = start[index] if isinstance(start, list | tuple) and index < len(start) else None
+    try:
+        return float(start) if start is not None else 0.0
+    except (TypeError, ValueError):
+        return 0.0
+
+
 def declared_ranges(
     variables: Mapping[str, Variable], names: Sequence[str]
 ) -> tuple[list[float], list[float]]:

@@ -4,9 +4,10 @@ A component with ``node: NAME`` runs in an :class:`bridge.net.node.FmuNode` of t
 by ``fmu-bridge system serve SYSTEM.yaml``. What the node serves is read from the system, with
 no experiment of its own (:func:`component_served`, a :class:`~bridge.net.served.Served`): the
 inputs are the component's connected inputs and the task inputs on it (in that order), the
-outputs every numeric output of the FMU and then any other variable of it the task reads (a
-String output is not served: the wire carries numbers), the range of an input is the FMU's
-declared min/max, a reset may set the component's parameters and what the system's experiment
+outputs every numeric output of the FMU (an FMI 3.0 array by its elements ``y[1,1]``, ``y[1,2]``,
+...) and then any other variable of it the task reads (String and Binary outputs are not served:
+the wire carries numbers), the range of an input is the FMU's declared min/max (an element
+``u[2]``: its array's), a reset may set the component's parameters and what the system's experiment
 sets on it, and a sample is one macro step. The node's plant comes from the plant factory like
 every FMU plant, from the component's model only (:func:`component_model`: FMU, interface, step
 size, parameters). Both sides read the same system file, so they agree on the names; the client
@@ -57,7 +58,7 @@ def _signals(
     task = task_signal_names(experiment, _known_names(experiment, system, name, info))
     ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
     ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
-    # FMI 3.0 arrays are served element by element (y[1,1], y[1,2], ...): the names a system binds
+    # every numeric output by element (an FMI 3.0 array: y[1,1], y[1,2], ...), as the client binds them
     outs = [e for v in info.by_causality("output") if v.is_numeric for e in v.element_names()]
     outs += [c.source.variable for c in system.connections if c.source.component == name]
     outs += [e.variable for e in _ends(task.outputs, system, "observations") if e.component == name]
@@ -87,7 +88,6 @@ def _check_here(system: SystemDescription, name: str) -> None:
 def _known_names(experiment: Experiment, system: SystemDescription, name: str, info: ModelInfo) -> set[str]:
     """The variables of component ``name`` (``name.variable``, array elements included), and the
     names the reward expression spells on other components, whose FMUs need not be here."""
-    from bridge.experiment.validate import with_elements
     from bridge.plant.system.plant import system_info, system_timing
     from bridge.task.expr import expression_names
 
@@ -124,7 +124,7 @@ def component_served(experiment: Experiment, system: SystemDescription, name: st
             f"system.components.{name}.node: a component served by a node needs at least one input "
             f"(connected or driven by the task); {name!r} has none: run it in this process{system.where}"
         )
-    low, high = declared_ranges(with_elements(info.variables), ins)
+    low, high = declared_ranges({n: info.element(n)[0] for n in ins}, ins)  # u[2]: u's declared range
     prefix = f"{name}."  # what the system's experiment sets on this component, by its own names
     on_component = {prefix + k: v for k, v in info.variables.items()}
     settable = {n[len(prefix) :] for n in declared_names(experiment, on_component)}

@@ -17,7 +17,9 @@ topic              type                          content
 
 A system of FMUs adds ``/components/<component>/outputs`` (``sensor_msgs/msg/JointState``) per
 component: every output of that component (and any other variable of it the task reads), by
-its own name, stamped like ``/outputs``.
+its own name, stamped like ``/outputs``. Several agents in one system record each agent's
+``/observations``, ``/actions``, ``/agent_action`` and ``/reward`` under ``/agents/<agent>``
+(:mod:`bridge.recording.agents_recorder`).
 
 Recording clock: MCAP log and publish times (ns) are simulation time shifted per episode:
 episode ``e`` starts one sampling period after episode ``e-1`` ended, so several episodes
@@ -58,6 +60,7 @@ TOPIC_TYPES = {
     EVENTS: cdr.STRING,
 }
 COMPONENTS = "/components/"
+AGENTS = "/agents/"  # several agents in one system: /agents/<agent>/<observations|actions|...>
 
 
 def component_topic(component: str) -> str:
@@ -71,6 +74,8 @@ def component_names(plant: Plant) -> dict[str, list[str]]:
 
 
 def topic_type(topic: str) -> str:
+    if topic.startswith(AGENTS):  # /agents/<agent>/<kind>: the single agent's type of that kind
+        return TOPIC_TYPES["/" + topic.rsplit("/", 1)[-1]]
     return cdr.JOINT_STATE if topic.startswith(COMPONENTS) else TOPIC_TYPES[topic]
 
 

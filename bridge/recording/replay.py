@@ -177,6 +177,7 @@ def _blueprint(rrb: Any, recording: Recording) -> Any:
         rrb.TimeSeriesView(origin=meta.OBSERVATIONS, name="observations (scaled)"),
         rrb.TimeSeriesView(origin=meta.REWARD, name="reward"),
         *_component_views(rrb, recording),
+        *_agent_views(rrb, recording),
     ]
     top = [
         rrb.TextDocumentView(origin="/scenario", name="scenario"),
@@ -207,20 +208,34 @@ def _component_views(rrb: Any, recording: Recording) -> list[Any]:
     return views
 
 
+def agent_topics(recording: Recording) -> list[str]:
+    """The per-agent topics of a recording of several agents in one system (``/agents/NAME/...``)."""
+    return [t for t in recording.series if t.startswith(meta.AGENTS)]
+
+
+def _agent_views(rrb: Any, recording: Recording) -> list[Any]:
+    """One plot per agent: its observations, FMU inputs, raw action and reward."""
+    agents = dict.fromkeys(t.removeprefix(meta.AGENTS).rsplit("/", 1)[0] for t in agent_topics(recording))
+    return [rrb.TimeSeriesView(origin=f"{meta.AGENTS}{name}", name=f"agent {name}") for name in agents]
+
+
 def _log_recording(rr: Any, stream: Any, recording: Recording, episode: int | None) -> None:
     stream.log("/about", rr.TextDocument(_about(recording), media_type=rr.MediaType.MARKDOWN), static=True)
     unit_of = sig.units(recording)
-    for group in (*GROUPS, *component_topics(recording)):
+    for group in (*GROUPS, *component_topics(recording), *agent_topics(recording)):
         series = recording.series.get(group)
         if series is None or not len(series):
             continue
         names = series.names if series.values.ndim == 2 else ["reward"]
         values = series.values if series.values.ndim == 2 else series.values[:, None]
         rows = _rows(recording, series, episode)
+        kind = "/" + group.rsplit("/", 1)[-1] if group.startswith(meta.AGENTS) else group  # an agent's stream
         for i, name in enumerate(names):
-            entity = f"{group}/{name}" if group != meta.REWARD else group
-            text = sig.label(group, name, unit_of)
-            style = rr.SeriesLines(colors=[series_colour(group, i)], names=text, widths=2.0)
+            entity = f"{group}/{name}" if series.values.ndim == 2 else group
+            text = sig.label(kind, name, unit_of)
+            if kind != group:
+                text = f"{group.removeprefix(meta.AGENTS).rsplit('/', 1)[0]}: {text}"
+            style = rr.SeriesLines(colors=[series_colour(kind, i)], names=text, widths=2.0)
             stream.log(entity, style, static=True)
             _send(rr, stream, entity, rows, lambda r, i=i, v=values: rr.Scalars.columns(scalars=v[r, i]))
     _log_tracking(rr, stream, recording, episode, unit_of)

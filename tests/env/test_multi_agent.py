@@ -90,12 +90,17 @@ def test_a_bad_agent_reward_names_its_key(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_two_agents_trained_together_improve_on_their_untrained_return() -> None:
-    """The README recipe, short: PPO for each agent in turn; the same numbers on every run."""
+def test_two_agents_trained_together_improve_on_their_untrained_return(tmp_path: Path) -> None:
+    """The README recipe, short: PPO for each agent in turn; the same numbers on every run. The
+    evaluation episodes recorded per agent hold the returns it reports (read back by our reader)."""
     pytest.importorskip("stable_baselines3")
     from agents.multi_agent import train_agents
+    from bridge.recording.reader import read_recording
 
-    result = train_agents(EXAMPLE, timesteps=1024, rounds=1, seed=0)
+    result = train_agents(EXAMPLE, timesteps=1024, rounds=1, seed=0, record=tmp_path)
     assert all(result.improved().values()), result
     gains = {n: result.trained[n] - result.untrained[n] for n in result.untrained}
     assert gains["drive"] > 5.0 and gains["assist"] > 2.0, result  # measured: 17.1 and 5.7
+    assert result.recording is not None and result.recording.parent == tmp_path
+    ends = [e for e in read_recording(result.recording).events if e.get("event") == "episode_end"]
+    assert [e["returns"] for e in ends] == [result.untrained, result.trained]

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
+from bridge.errors import BridgeError
 from bridge.experiment.config import parse_experiment
 from bridge.plant.system.plant import SystemPlant
 
@@ -107,3 +108,53 @@ def test_a_non_finite_input_is_refused_as_in_python(tmp_path: Path, monkeypatch:
     native = fail()
     monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
     assert native == fail() and "nan" in native.lower()
+
+
+def episodes(exp: Any) -> tuple[list[Any], bool]:
+    """Two episodes, a sample with no new inputs (the last held), the clocks and sample counts of
+    each component after each, and what stepping a terminated system says."""
+    seen: list[Any] = []
+    with SystemPlant(exp) as plant:
+        plant.bind(["gain.u"], ["cart.x", "cart.theta"])
+        for force in (3.0, -4.0):
+            seen.append(plant.reset({}, [force]))
+            seen += [plant.step([force]), plant.step(None), plant.step(np.array([force / 2]))]
+            seen.append([(n, p.sample, p.model.step_index, p.model.time_s) for n, p in plant.plants.items()])  # type: ignore[attr-defined]
+            seen.append((plant.sample, plant.time_s))
+        while not plant.terminated:
+            plant.step([10.0])
+        with pytest.raises(Exception) as info:
+            plant.step([10.0])
+        seen.append(f"{type(info.value).__name__}: {info.value}")
+        used = plant.master.native is not None
+    return seen, used
+
+
+@pytest.mark.parametrize("sampling_s", [0.02, 0.06])
+def test_the_native_sample_counts_and_resets_as_the_python_master(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, sampling_s: float
+) -> None:
+    """The task's inputs set and the observation gathered in the native call: the same values,
+    per-component step counters and sample counts, over a reset, and the same refusal after the
+    system terminated."""
+    native, used = episodes(cartpole(tmp_path, sampling_s))
+    assert used
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    python, used = episodes(cartpole(tmp_path, sampling_s))
+    assert not used
+    assert len(native) == len(python)
+    for ours, reference in zip(native, python):
+        if isinstance(ours, np.ndarray):
+            np.testing.assert_array_equal(ours, reference)
+        else:
+            assert ours == reference
+    assert "terminat" in native[-1].lower()
+
+
+def test_the_native_sample_refuses_inputs_of_the_wrong_length(tmp_path: Path) -> None:
+    with SystemPlant(cartpole(tmp_path)) as plant:
+        plant.bind(["gain.u"], ["cart.x"])
+        plant.reset({}, [0.0])
+        assert plant.master.native is not None
+        with pytest.raises(BridgeError, match="expected 1 values, got 2"):
+            plant.step([1.0, 2.0])

@@ -80,6 +80,10 @@ class Master:
         self.unconverged_steps = 0
         self.init_converged = True
         self.native: NativeMaster | None = None
+        # the task's inputs and observed outputs, (component, position): the native sample sets
+        # and gathers them in its call (set by the owner before the first initialisation)
+        self.external: list[tuple[str, int]] = []
+        self.observed: list[tuple[str, int]] = []
         self._native_checked = False
 
     def _gather(self, name: str, ready: set[str] | None = None) -> FloatArray:

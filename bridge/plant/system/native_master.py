@@ -47,4 +47,6 @@ def native_master(master: Master) -> NativeMaster | None:
             return None
         groups[name] = (inputs, outputs)
     function = library()
-    return NativeMaster(master, function, groups) if function is not None else None
+    if function is None:
+        return None
+    return NativeMaster(master, function, groups, master.external, master.observed)

@@ -32,7 +32,6 @@ from bridge.plant.system.description import (
 )
 from bridge.plant.system.graph import find_loop, gauss_seidel_order, has_feedthrough, init_order, loop_error
 from bridge.plant.system.master import Link, Master
-from bridge.plant.system.native_master import NativeMaster
 from bridge.plant.system.transform import Convert
 
 
@@ -166,6 +165,8 @@ class SystemPlant(Plant):
         self.master = Master(
             system, self.plants, self.links, order, init_order(system, self.feedthrough), settle=through
         )
+        self.master.external, self.master.observed = self._external, self._observed
+        self._steps = self.timing.steps_per_sample
 
     # -- the plant interface -----------------------------------------------------------------------
     @property
@@ -203,11 +204,23 @@ class SystemPlant(Plant):
         return self.step(self._pending)
 
     def step(self, inputs: Sequence[float] | None) -> FloatArray:
-        self._write(self.master.inputs, inputs)
-        master, plants = self.master, self._plant_list
-        if master.native is not None:  # the sample's macro steps in one native call
-            self._native_sample(master.native)
-            return self._read()
+        master = self.master
+        native = master.native
+        if native is not None:  # inputs, the sample's macro steps and the observation in one native call
+            try:
+                observation = native.sample(inputs, self._steps)
+            except PlantError as exc:
+                self._macro += native.done
+                self.terminated = True
+                raise self._component_failed(exc) from exc
+            done = native.done
+            self._macro += done
+            self.sample += 1
+            if done < self._steps or native.stopped:
+                self.terminated = True
+            return observation
+        self._write(master.inputs, inputs)
+        plants = self._plant_list
         for _ in range(self.timing.steps_per_sample):
             try:
                 master.step()
@@ -220,18 +233,6 @@ class SystemPlant(Plant):
                 break
         self.sample += 1
         return self._read()
-
-    def _native_sample(self, native: NativeMaster) -> None:
-        try:
-            native.run(self.timing.steps_per_sample)
-        except PlantError as exc:
-            self._macro += native.done
-            self.terminated = True
-            raise self._component_failed(exc) from exc
-        self._macro += native.done
-        if native.done < self.timing.steps_per_sample or any([p.terminated for p in self._plant_list]):
-            self.terminated = True
-        self.sample += 1
 
     def _component_failed(self, exc: PlantError, **fields: Any) -> PlantError:
         """The component's error as the system's, same kind, naming the component."""
