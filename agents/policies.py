@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import importlib
-import json
 import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -20,6 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from agents.run_state import read_run
 from bridge.errors import ConfigError
 from bridge.task.core import Task
 
@@ -239,10 +239,10 @@ class Sb3Policy:
     def __init__(self, path: Path, name: str | None = None) -> None:
         self.path = path
         run_dir = path if path.is_dir() else path.parent
+        self.run = read_run(run_dir)
+        _check_status(self.run, run_dir, has_model=not path.is_dir() or _has_model(path))
         model_file = _model_file(path)
         self.name = name or (run_dir.name if path.is_dir() else path.stem)
-        self.run = _run_info(run_dir)
-        _check_status(self.run, run_dir)
         algo = self.run.get("algo")
         self.model = load_model(model_file, algo)
         self._obs_rms = None
@@ -292,8 +292,13 @@ def _model_file(path: Path) -> Path:
     )
 
 
-def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
-    """Refuse a run whose training failed; say so for one interrupted or never finished."""
+def _has_model(run_dir: Path) -> bool:
+    return any((run_dir / name).is_file() for name in ("best_model.zip", "model.zip"))
+
+
+def _check_status(run: Mapping[str, Any], run_dir: Path, *, has_model: bool = True) -> None:
+    """Refuse a run whose training failed, or that ended before it saved a model; say so for one
+    interrupted (stopped, or its process killed) or still training."""
     status = run.get("status")
     if status == "failed":
         raise ConfigError(
@@ -301,23 +306,24 @@ def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
             "its model is not a trained agent; fix the cause and train again, or continue it with "
             f"`fmu-bridge train --resume` [{run_dir}]"
         )
+    how = run.get("status_detail", "it was stopped")
+    if status == "interrupted" and not has_model:
+        raise ConfigError(
+            f"run {run_dir.name} was interrupted before it saved a model ({how}); continue it from "
+            f"its newest checkpoint with `fmu-bridge train --resume`, or train again [{run_dir}]"
+        )
     if status == "interrupted":
         _log.warning(
-            "run %s was interrupted after %s timesteps: its model is only partly trained",
+            "run %s was interrupted after %s timesteps (%s): its model is only partly trained",
             run_dir.name,
             run.get("timesteps", "?"),
+            how,
         )
     elif status == "running":
         _log.warning(
-            "run %s says its training is still running (or its process was killed): the model may be "
-            "untrained or partly trained",
+            "run %s is still training (its process is alive): the model may be untrained or partly trained",
             run_dir.name,
         )
-
-
-def _run_info(run_dir: Path) -> dict[str, Any]:
-    file = run_dir / "run.json"
-    return json.loads(file.read_text()) if file.is_file() else {}
 
 
 def load_model(path: Path, algo: str | None) -> Any:
