@@ -12,7 +12,7 @@ import copy
 import importlib
 import logging
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -22,6 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from agents.run_state import read_run
 from bridge.errors import ConfigError
 from bridge.task.core import Task
+from bridge.task.fixed import physical_action, zero_values
 
 _log = logging.getLogger(__name__)
 
@@ -184,19 +185,37 @@ def discrete_levels(task: Task) -> dict[str, list[float]] | None:
 
 @dataclass
 class FixedPolicy:
-    """``zero`` (zero physical input on every action input) / ``constant:V`` (the physical value V)
-    / ``random`` (seeded samples of the action space).
+    """``zero`` (no change: 0 on every FMU input, the start value on every tunable parameter) /
+    ``constant:V`` (the physical value V) / ``random`` (seeded samples of the action space).
 
-    On a discrete space the value must be one of the levels: ``zero`` on a push-left/push-right
-    cart-pole would otherwise push at the nearest level every step while being called zero.
+    On a continuous space the physical values reach the FMU exactly (float64, not through the
+    agent's float32 action), clipped to an input's bounds with one warning
+    (:mod:`bridge.task.fixed`). On a discrete space the value must be one of the levels: ``zero``
+    on a push-left/push-right cart-pole would otherwise push at the nearest level every step while
+    being called zero. A model without actions takes only ``zero``.
     """
 
     name: str
     value: float | None = None
+    zero: bool = False
+    _built_for: Task | None = field(default=None, init=False, repr=False, compare=False)
 
     def reset(self, task: Task, seed: int | None) -> None:
+        if self.value is not None and task is self._built_for:
+            return  # the same action for every episode (and its warning once)
         self._task = task
+        if not task.action_inputs and not self.zero:
+            raise ConfigError(
+                f"agent {self.name!r}: the experiment has no actions (actions.inputs is empty), so "
+                "there is nothing to apply it to; evaluate zero instead, or add an FMU input or "
+                "tunable parameter to actions.inputs"
+            )
         if self.value is not None:
+            if task.action_mapping.kind == "continuous" and task.action_inputs:
+                values = zero_values(task) if self.zero else [self.value] * len(task.action_inputs)
+                self._action = physical_action(task, values, f"agent {self.name!r}")
+                self._built_for = task
+                return
             self._check_level(task, self.value)
             self._action = task.action_for_inputs([self.value] * len(task.action_inputs))
         else:  # its own copy: policies sharing the task's space must not share its generator
@@ -346,7 +365,7 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
     if spec in experiment_baselines:
         return baseline(spec, experiment_baselines[spec])
     if spec == "zero":
-        return FixedPolicy(name or "zero", 0.0)
+        return FixedPolicy(name or "zero", 0.0, zero=True)
     if spec == "random":
         return FixedPolicy(name or "random")
     if spec.startswith("constant:"):
