@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from agents.run_state import read_run
 from bridge.errors import ConfigError
 
 
@@ -27,7 +27,7 @@ def compare_runs(runs: list[Path]) -> tuple[list[dict[str, Any]], dict[str, tupl
         info_file = run / "run.json"
         if not info_file.is_file():
             raise ConfigError(f"{run} is not a run directory (no run.json); `fmu-bridge train` writes them")
-        info = json.loads(info_file.read_text())
+        info = read_run(run)  # a run whose training process is gone is "interrupted"
         steps, returns = load_evaluations(run)
         curves[run.name] = (steps, returns)
         wall = float(info.get("wall_time_s", math.nan))

@@ -18,6 +18,7 @@ from agents.metrics import Trace, compute
 from agents.policies import Policy, Sb3Policy, make_policy
 from bridge.env.batch import BatchEnv
 from bridge.experiment.config import Experiment, load_experiment
+from bridge.task.core import ExactAction
 
 CHUNK = 1024  # episodes per batch
 
@@ -112,7 +113,25 @@ def _act(
     chosen = list(previous) if previous is not None else [None] * len(active)
     for i in np.flatnonzero(active).tolist():
         chosen[i] = policies[i].act(obs[i], dict(zip(names, signals[i].tolist())))
-    return np.array(chosen)
+    return _exact(chosen)
+
+
+def _exact(chosen: list[Any]) -> Any:
+    """The envs' actions as one array; an ExactAction carrying every env's physical values when
+    each env's action carries its own (fixed policies), so that they reach the FMUs exactly."""
+    rows = np.array(chosen)
+    if rows.ndim != 2:
+        return rows
+    width, physical = rows.shape[1], []
+    for i, action in enumerate(chosen):
+        own = action.physical if type(action) is ExactAction else None
+        if own is not None and len(own) == width:
+            physical += own
+        elif own is not None and len(own) == len(chosen) * width:  # an ended env's row of the last batch
+            physical += own[i * width : (i + 1) * width]
+        else:
+            return rows
+    return ExactAction(rows, physical)
 
 
 def _traces(

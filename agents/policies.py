@@ -10,18 +10,19 @@ from __future__ import annotations
 
 import copy
 import importlib
-import json
 import logging
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from agents.run_state import read_run
 from bridge.errors import ConfigError
 from bridge.task.core import Task
+from bridge.task.fixed import physical_action, zero_values
 
 _log = logging.getLogger(__name__)
 
@@ -184,19 +185,37 @@ def discrete_levels(task: Task) -> dict[str, list[float]] | None:
 
 @dataclass
 class FixedPolicy:
-    """``zero`` (zero physical input on every action input) / ``constant:V`` (the physical value V)
-    / ``random`` (seeded samples of the action space).
+    """``zero`` (no change: 0 on every FMU input, the start value on every tunable parameter) /
+    ``constant:V`` (the physical value V) / ``random`` (seeded samples of the action space).
 
-    On a discrete space the value must be one of the levels: ``zero`` on a push-left/push-right
-    cart-pole would otherwise push at the nearest level every step while being called zero.
+    On a continuous space the physical values reach the FMU exactly (float64, not through the
+    agent's float32 action), clipped to an input's bounds with one warning
+    (:mod:`bridge.task.fixed`). On a discrete space the value must be one of the levels: ``zero``
+    on a push-left/push-right cart-pole would otherwise push at the nearest level every step while
+    being called zero. A model without actions takes only ``zero``.
     """
 
     name: str
     value: float | None = None
+    zero: bool = False
+    _built_for: Task | None = field(default=None, init=False, repr=False, compare=False)
 
     def reset(self, task: Task, seed: int | None) -> None:
+        if self.value is not None and task is self._built_for:
+            return  # the same action for every episode (and its warning once)
         self._task = task
+        if not task.action_inputs and not self.zero:
+            raise ConfigError(
+                f"agent {self.name!r}: the experiment has no actions (actions.inputs is empty), so "
+                "there is nothing to apply it to; evaluate zero instead, or add an FMU input or "
+                "tunable parameter to actions.inputs"
+            )
         if self.value is not None:
+            if task.action_mapping.kind == "continuous" and task.action_inputs:
+                values = zero_values(task) if self.zero else [self.value] * len(task.action_inputs)
+                self._action = physical_action(task, values, f"agent {self.name!r}")
+                self._built_for = task
+                return
             self._check_level(task, self.value)
             self._action = task.action_for_inputs([self.value] * len(task.action_inputs))
         else:  # its own copy: policies sharing the task's space must not share its generator
@@ -239,10 +258,10 @@ class Sb3Policy:
     def __init__(self, path: Path, name: str | None = None) -> None:
         self.path = path
         run_dir = path if path.is_dir() else path.parent
+        self.run = read_run(run_dir)
+        _check_status(self.run, run_dir, has_model=not path.is_dir() or _has_model(path))
         model_file = _model_file(path)
         self.name = name or (run_dir.name if path.is_dir() else path.stem)
-        self.run = _run_info(run_dir)
-        _check_status(self.run, run_dir)
         algo = self.run.get("algo")
         self.model = load_model(model_file, algo)
         self._obs_rms = None
@@ -303,8 +322,13 @@ def _model_file(path: Path) -> Path:
     )
 
 
-def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
-    """Refuse a run whose training failed; say so for one interrupted or never finished."""
+def _has_model(run_dir: Path) -> bool:
+    return any((run_dir / name).is_file() for name in ("best_model.zip", "model.zip"))
+
+
+def _check_status(run: Mapping[str, Any], run_dir: Path, *, has_model: bool = True) -> None:
+    """Refuse a run whose training failed, or that ended before it saved a model; say so for one
+    interrupted (stopped, or its process killed) or still training."""
     status = run.get("status")
     if status == "failed":
         raise ConfigError(
@@ -312,23 +336,24 @@ def _check_status(run: Mapping[str, Any], run_dir: Path) -> None:
             "its model is not a trained agent; fix the cause and train again, or continue it with "
             f"`fmu-bridge train --resume` [{run_dir}]"
         )
+    how = run.get("status_detail", "it was stopped")
+    if status == "interrupted" and not has_model:
+        raise ConfigError(
+            f"run {run_dir.name} was interrupted before it saved a model ({how}); continue it from "
+            f"its newest checkpoint with `fmu-bridge train --resume`, or train again [{run_dir}]"
+        )
     if status == "interrupted":
         _log.warning(
-            "run %s was interrupted after %s timesteps: its model is only partly trained",
+            "run %s was interrupted after %s timesteps (%s): its model is only partly trained",
             run_dir.name,
             run.get("timesteps", "?"),
+            how,
         )
     elif status == "running":
         _log.warning(
-            "run %s says its training is still running (or its process was killed): the model may be "
-            "untrained or partly trained",
+            "run %s is still training (its process is alive): the model may be untrained or partly trained",
             run_dir.name,
         )
-
-
-def _run_info(run_dir: Path) -> dict[str, Any]:
-    file = run_dir / "run.json"
-    return json.loads(file.read_text()) if file.is_file() else {}
 
 
 def load_model(path: Path, algo: str | None) -> Any:
@@ -351,7 +376,7 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
     if spec in experiment_baselines:
         return baseline(spec, experiment_baselines[spec])
     if spec == "zero":
-        return FixedPolicy(name or "zero", 0.0)
+        return FixedPolicy(name or "zero", 0.0, zero=True)
     if spec == "random":
         return FixedPolicy(name or "random")
     if spec.startswith("constant:"):

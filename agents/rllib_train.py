@@ -58,6 +58,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from agents.run_state import training_lock
 from agents.settings import TrainingSettings
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
@@ -276,31 +277,34 @@ def train_rllib(
         "seed": settings.seed,
         "status": "running",
     }
-    (run_dir / "run.json").write_text(json.dumps(info, indent=2))
-    algo = config.build_algo()
-    start = time.perf_counter()
-    steps, iterations = 0, 0
-    try:
-        while steps < settings.timesteps:
-            result = algo.train()
-            iterations += 1
-            steps = int(result["env_runners"]["num_env_steps_sampled_lifetime"])
-            algo.save_to_path(str((run_dir / "checkpoints" / f"iter_{iterations}").resolve()))
-            if on_iteration is not None:
-                on_iteration(algo, result)
-        checkpoint = (run_dir / "checkpoint").resolve()
-        algo.save_to_path(str(checkpoint))
-    except BaseException as exc:
-        info["status"] = "failed" if isinstance(exc, Exception) else "interrupted"
-        info["error"] = f"{type(exc).__name__}: {exc}"
-        raise
-    finally:
-        info.update(timesteps=steps, iterations=iterations, wall_time_s=time.perf_counter() - start)
+    with training_lock(run_dir):  # held while it trains: a killed run is found interrupted
         (run_dir / "run.json").write_text(json.dumps(info, indent=2))
-        algo.stop()
-    onnx = export_policy(run_dir, info["algo"])
-    info["status"] = "done"
-    (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        algo = config.build_algo()
+        start = time.perf_counter()
+        steps, iterations = 0, 0
+        try:
+            while steps < settings.timesteps:
+                result = algo.train()
+                iterations += 1
+                steps = int(result["env_runners"]["num_env_steps_sampled_lifetime"])
+                algo.save_to_path(str((run_dir / "checkpoints" / f"iter_{iterations}").resolve()))
+                if on_iteration is not None:
+                    on_iteration(algo, result)
+            checkpoint = (run_dir / "checkpoint").resolve()
+            algo.save_to_path(str(checkpoint))
+        except KeyboardInterrupt:
+            info["status"] = "interrupted"
+            raise
+        except BaseException as exc:
+            info["status"], info["error"] = "failed", f"{type(exc).__name__}: {exc}"
+            raise
+        finally:
+            info.update(timesteps=steps, iterations=iterations, wall_time_s=time.perf_counter() - start)
+            (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+            algo.stop()
+        onnx = export_policy(run_dir, info["algo"])
+        info["status"] = "done"
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
     return RllibResult(run_dir, steps, iterations, info["wall_time_s"], checkpoint, onnx)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
+import re
 import shutil
 import time
 from collections.abc import Iterator
@@ -21,6 +22,7 @@ from typing import Any
 import gymnasium as gym
 from pydantic import ValidationError
 
+from agents.run_state import GONE, training_lock
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
 from bridge.env.fmu_env import FmuEnv
 from bridge.env.plants import model_fingerprint, model_info_for
@@ -280,8 +282,8 @@ def train(
     residual = _residual(experiment, settings)
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir, fmu=fmu)
     info = _run_info(settings, experiment, residual)
-    (run_dir / "run.json").write_text(json.dumps(info, indent=2))
-    with _marked(run_dir, info):
+    with training_lock(run_dir), _marked(run_dir, info):
+        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
         return _train_in(
             run_dir,
             info,
@@ -473,17 +475,23 @@ def _run_info(
 
 
 def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainResult:
+    info_file = run_dir / "run.json"
+    if not info_file.is_file():
+        raise ConfigError(
+            f"--resume {run_dir}: not a run directory (expected run.json from `fmu-bridge train`)"
+        )
+    with training_lock(run_dir):
+        return _resume_held(run_dir, json.loads(info_file.read_text()), overrides, progress)
+
+
+def _resume_held(
+    run_dir: Path, info: dict[str, Any], overrides: dict[str, Any], progress: bool
+) -> TrainResult:
     from stable_baselines3.common.vec_env import VecNormalize
 
     from agents.policies import load_model
 
-    info_file = run_dir / "run.json"
-    if not info_file.is_file() or not (run_dir / "model.zip").is_file():
-        raise ConfigError(
-            f"--resume {run_dir}: not a run directory (expected run.json and model.zip from "
-            "`fmu-bridge train`)"
-        )
-    info = json.loads(info_file.read_text())
+    model_file, stats_file = _resume_from(run_dir, info)
     experiment_path = run_dir / "experiment.yaml"
     experiment = load_experiment(experiment_path, version=info["version"])
     given = {k: v for k, v in overrides.items() if v is not None}  # unset options keep the run's values
@@ -494,12 +502,12 @@ def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainRe
     residual = info.get("residual")
     env = build_vec_env(settings, experiment, experiment_path, residual, settings.seed + 1)
     eval_env = build_eval_env(env, settings, experiment, experiment_path, residual)
-    if (run_dir / "vecnormalize.pkl").is_file():
-        env = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), env)
+    if stats_file is not None:
+        env = VecNormalize.load(str(stats_file), env)
         eval_env = VecNormalize(  # its statistics follow the training env's at each evaluation
             eval_env, training=False, norm_reward=False, **settings.normalize_kwargs(eval_env=True)
         )
-    model = load_model(run_dir / "model.zip", info["algo"])
+    model = load_model(model_file, info["algo"])
     model.set_env(env)
     from stable_baselines3.common.logger import configure
 
@@ -507,3 +515,31 @@ def _resume(run_dir: Path, overrides: dict[str, Any], progress: bool) -> TrainRe
     info.setdefault("resumed", []).append({"at": int(model.num_timesteps), "timesteps": settings.timesteps})
     callbacks = _callbacks(settings, eval_env, run_dir)
     return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=False)
+
+
+def _resume_from(run_dir: Path, info: dict[str, Any]) -> tuple[Path, Path | None]:
+    """The model (and VecNormalize statistics) a resumed run continues from: ``model.zip``, or,
+    when the training ended before saving it (killed or crashed), the newest checkpoint."""
+    if info.get("status") == "running":  # no live process holds the lock: we do now
+        info["status"] = "interrupted"
+        _log.warning("run %s was interrupted: %s; resuming it", run_dir.name, GONE)
+    stats = run_dir / "vecnormalize.pkl"
+    if (run_dir / "model.zip").is_file():
+        return run_dir / "model.zip", stats if stats.is_file() else None
+    saved = sorted(
+        ((int(m.group(1)), p) for p in (run_dir / "checkpoints").glob("*_steps.zip")
+         if (m := re.search(r"_(\d+)_steps\.zip$", p.name)) and "vecnormalize" not in p.name),
+    )  # fmt: skip
+    if not saved:
+        raise ConfigError(
+            f"--resume {run_dir}: the run has no model.zip and no checkpoint to continue from "
+            f"(its training ended before the first checkpoint); train it again"
+        )
+    steps, newest = saved[-1]
+    _log.warning(
+        "run %s has no model.zip: resuming from its checkpoint at %s steps", run_dir.name, f"{steps:,}"
+    )
+    checkpoint_stats = newest.with_name(
+        newest.name.replace(f"_{steps}_steps.zip", f"_vecnormalize_{steps}_steps.pkl")
+    )
+    return newest, checkpoint_stats if checkpoint_stats.is_file() else None

@@ -9,7 +9,7 @@ import tarfile
 import time
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
@@ -290,6 +290,34 @@ def _wait_for_node(net: Loopback, name: str, timeout_s: float) -> None:
             return
         time.sleep(0.05)
     pytest.fail(f"node {name!r} did not appear under {net.prefix}/ within {timeout_s} s")
+
+
+def recorder_counts(net: Loopback, node: str) -> dict[str, Any] | None:
+    """The counts of the ``fmu-bridge record --node`` recorder of ``node`` (None while none answers)."""
+    import json
+
+    for reply in net.session.get(f"{net.prefix}/{node}/recorders/*", timeout=2.0):  # type: ignore[attr-defined]
+        if reply.ok is not None:
+            counts: dict[str, Any] = json.loads(reply.ok.payload.to_bytes())
+            return counts
+    return None
+
+
+def wait_for_recorder(net: Loopback, node: str, timeout_s: float = 60.0) -> None:
+    """Until the recorder of ``node`` answers. It declares its subscriptions before its queryable,
+    and every later query to the node (a remote env's info and reset) follows those declarations
+    on the same links, so the node routes its frames to the recorder from then on."""
+    wait_until(lambda: recorder_counts(net, node) is not None, timeout_s, "the recorder starting")
+
+
+def wait_for_recorded(net: Loopback, node: str, frames: dict[str, int], timeout_s: float = 60.0) -> None:
+    """Until the recorder of ``node`` has taken in at least ``frames[topic]`` frames per topic."""
+
+    def done() -> bool:
+        counts = recorder_counts(net, node)
+        return counts is not None and all(counts["frames"].get(t, 0) >= n for t, n in frames.items())
+
+    wait_until(done, timeout_s, f"the recorder taking in {frames} frames")
 
 
 @pytest.fixture(scope="session")

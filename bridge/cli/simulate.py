@@ -22,8 +22,8 @@ import gymnasium as gym
 import numpy as np
 
 from bridge.errors import ConfigError
-from bridge.experiment.validate import action_bounds
-from bridge.task.core import ExactAction, Task
+from bridge.task.core import Task
+from bridge.task.fixed import physical_action, zero_values
 
 Policy = Callable[[Any], Any]
 _log = logging.getLogger(__name__)
@@ -40,54 +40,6 @@ class EpisodeResult:
     final_outputs: dict[str, float] = field(default_factory=dict)
 
 
-def zero_values(task: Task) -> list[float]:
-    """``zero``: 0 on each FMU input, the start value on each tunable parameter (no change)."""
-    values = []
-    for name in task.action_inputs:
-        var = task.variables[name]
-        start = var.start if isinstance(var.start, int | float) else 0.0
-        values.append(float(start) if var.causality == "parameter" else 0.0)
-    return values
-
-
-def physical_action(task: Task, values: list[float], policy: str = "constant") -> Any:
-    """The action that applies the physical ``values`` (one per action input) exactly; a value the
-    action space cannot apply is changed to the nearest one it can, with one warning per input."""
-    mapping = task.action_mapping
-    names = task.action_inputs
-    if mapping.kind == "continuous":
-        applied = []
-        for i, (name, value) in enumerate(zip(names, values)):
-            low, high = action_bounds(task.experiment, task.variables[name])
-            low = mapping.centre[i] - mapping.half[i] if low is None else float(low)
-            high = mapping.centre[i] + mapping.half[i] if high is None else float(high)
-            target = min(max(value, low), high)
-            if target != value:
-                bound = "maximum" if value > high else "minimum"
-                _warn(policy, name, value, f"outside its bounds [{low:g}, {high:g}]: its {bound} {target:g}")
-            applied.append(target)
-        return ExactAction(task.action_for_inputs(applied), applied)
-    if mapping.kind == "discrete":
-        rows = np.asarray(mapping.table, dtype=np.float64)
-        index = int(np.argmin(np.abs(rows - np.asarray(values)).sum(axis=1)))
-        for j, name in enumerate(names):
-            if rows[index, j] != values[j]:
-                column = sorted(set(rows[:, j].tolist()))
-                _warn(policy, name, values[j], f"not one of its levels {column}: {rows[index, j]:g}")
-        return index
-    picks = []
-    for name, value, levels in zip(names, values, mapping.levels):
-        k = int(np.argmin(np.abs(levels - value)))
-        if levels[k] != value:
-            _warn(policy, name, value, f"not one of its levels {levels.tolist()}: {levels[k]:g}")
-        picks.append(k)
-    return np.array(picks)
-
-
-def _warn(policy: str, name: str, value: float, what: str) -> None:
-    _log.warning("--policy %s: %g on %s is %s is applied instead", policy, value, name, what)
-
-
 def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
     """A fixed policy from its name: ``zero``, ``random`` or ``constant:V``."""
     if spec not in ("zero", "random") and not spec.startswith("constant:"):
@@ -102,7 +54,7 @@ def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
         nothing = task.action_for_inputs([])
         return lambda obs: nothing
     if spec == "zero":
-        action = physical_action(task, zero_values(task), "zero")
+        action = physical_action(task, zero_values(task), "--policy zero")
         return lambda obs: action
     if spec == "random":
         space = task.action_space
@@ -114,7 +66,7 @@ def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
         raise ConfigError(f"--policy {spec!r}: expected constant:NUMBER, e.g. constant:2.5") from None
     if not math.isfinite(value):
         raise ConfigError(f"--policy {spec!r}: expected a finite number, e.g. constant:2.5")
-    action = physical_action(task, [value] * len(task.action_inputs), spec)
+    action = physical_action(task, [value] * len(task.action_inputs), f"--policy {spec}")
     return lambda obs: action
 
 

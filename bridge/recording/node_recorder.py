@@ -19,6 +19,10 @@ frames are written in the order they first arrived, so a recording without repea
 writing every frame at once would give; they are written when a frame two steps later arrives
 (one step of slack for frames of the two topics arriving out of order), before a frame of
 another episode or an ERROR/REJECT frame, when more than 64 are held, and by ``close()``.
+
+While it records, the recorder holds a liveliness token ``<prefix>/<node>/recorders/<id>`` and
+answers a query on that key with its counts so far (:meth:`NodeRecorder.counts`, as JSON): how many
+frames it has taken in per topic, so that a caller can tell when a run's last frame has arrived.
 """
 
 from __future__ import annotations
@@ -112,7 +116,23 @@ class NodeRecorder:
             session.declare_subscriber(getattr(self.keys, t), self._callback(t)) for t in topics
         ]
         token = f"{self.keys.base}/recorders/{uuid.uuid4().hex[:8]}"
+        self._declared.append(session.declare_queryable(token, self._on_counts, complete=True))
         self._declared.append(session.liveliness().declare_token(token))
+
+    def counts(self) -> dict[str, Any]:
+        """What the recorder has taken in so far: frames per topic, malformed, unplaced and
+        repeated frames, episodes."""
+        stats = self.stats
+        return {
+            "frames": dict(stats.frames),
+            "malformed": stats.malformed,
+            "unplaced": stats.unplaced,
+            "repeated": stats.repeated,
+            "episodes": stats.episodes,
+        }
+
+    def _on_counts(self, query: Any) -> None:
+        query.reply(query.key_expr, meta.to_json(self.counts()))
 
     def _run_info(self) -> dict[str, Any]:
         info = self.description

@@ -1,6 +1,6 @@
 """A run folder is self-contained: its experiment names the user's FMU by absolute path (or holds a
-copy of it), so ``--resume`` and ``evaluate`` work from any folder, and with a copy even after the
-original FMU is gone."""
+copy of it), so ``--resume``, ``evaluate`` and ``agent run`` work from any folder, and with a copy
+even after the original FMU is gone."""
 
 from __future__ import annotations
 
@@ -13,10 +13,12 @@ from pathlib import Path
 
 import pytest
 
+from agents.deploy import deployment_experiment
 from agents.evaluate import evaluate
 from agents.train import train
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.experiment.validate import resolve_fmu
 from bridge.models import example_fmu
 
 SMALL = {
@@ -55,6 +57,9 @@ def test_resume_and_evaluate_work_from_any_folder(tmp_path: Path, monkeypatch: p
     assert second.timesteps > first.timesteps
     rows = evaluate([str(run)], copy, episodes=1).rows
     assert rows and rows[0]["length"] >= 1
+    experiment, used = deployment_experiment(run, None)  # what `agent run RUN` deploys with
+    assert used == run / "experiment.yaml"
+    assert resolve_fmu(experiment) == (tmp_path / "project" / "ball.fmu").resolve()
 
 
 def test_a_run_with_a_copy_of_the_fmu_outlives_the_original(tmp_path: Path) -> None:

@@ -16,7 +16,7 @@ from bridge.errors import PlantDied, StepTimeout, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_until
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -62,9 +62,7 @@ def test_one_client_holds_a_node_until_another_takes_over_or_it_leaves(loopback:
                 for _ in range(5):
                     np.testing.assert_array_equal(taker.step(ZERO)[0], local.step(ZERO)[0])
             taker.close()  # its token goes: the lease ends, the second client may reset without asking
-            deadline = time.monotonic() + 10
-            while info(loopback, "shared")["holder"] is not None and time.monotonic() < deadline:
-                time.sleep(0.1)
+            wait_until(lambda: info(loopback, "shared")["holder"] is None, 30, "the lease ending")
             second.reset(seed=2)
             assert info(loopback, "shared")["holder"]["client"] == f"{second.plant.client.client_id:016x}"  # type: ignore[attr-defined]
         finally:
@@ -165,7 +163,8 @@ def test_a_dead_node_is_reported_while_a_stopped_one_still_times_out(loopback: L
             stopped.send_signal(signal.SIGSTOP)
             dead.send_signal(signal.SIGKILL)
             dead.wait(timeout=10)
-            time.sleep(0.5)
+            client = vec.envs[1].plant.client  # type: ignore[attr-defined]
+            wait_until(lambda: not client.alive, 30, "v-1's liveliness token gone")
             start = time.monotonic()
             with pytest.raises(PlantDied, match="node 'v-1'"):
                 vec.step(np.zeros((2, 1), dtype=np.float32))

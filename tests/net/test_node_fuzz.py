@@ -30,7 +30,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
-from tests.conftest import Loopback, _wait_for_node
+from tests.conftest import Loopback, _wait_for_node, wait_until
 from tests.reliability_table import counts_dir
 
 pytestmark = pytest.mark.integration
@@ -258,9 +258,22 @@ def test_malformed_requests_on_every_key_get_clear_answers_and_nodes_keep_servin
         for name in ("lock", "rt"):
             fuzz_node(loopback, name, rng, counts)
         elapsed = time.monotonic() - start
-        time.sleep(1.0)  # the last puts are still on their way
-        described = describe_nodes(loopback.session, ["lock", "rt"], prefix=loopback.prefix)
-        infos = {e["node"]: e for e in described}
+        sent_actions = counts["actions_sent"]
+
+        def described() -> dict[str, Any]:
+            return {
+                e["node"]: e for e in describe_nodes(loopback.session, ["lock", "rt"], prefix=loopback.prefix)
+            }
+
+        def all_counted() -> bool:  # the last puts may still be on their way
+            infos.update(described())
+            return (
+                accounted(infos["lock"]["counters"], False) + accounted(infos["rt"]["counters"], True)
+                >= sent_actions
+            )
+
+        infos: dict[str, Any] = {}
+        wait_until(all_counted, 60, "every fuzzed action counted by the nodes")
         growth = {p.pid: rss_mb(p.pid) - rss_before[p.pid] for p in (lock, rt)}
         env = RemoteFmuEnv(CARTPOLE, "lock", session=loopback.session, prefix=loopback.prefix, take_over=True)
         try:
@@ -269,12 +282,15 @@ def test_malformed_requests_on_every_key_get_clear_answers_and_nodes_keep_servin
         finally:
             env.close()
         rt_steps = infos["rt"]["counters"]["steps"]
-        time.sleep(0.5)
-        after = describe_nodes(loopback.session, ["rt"], prefix=loopback.prefix)[0]
-        assert after["counters"]["steps"] > rt_steps  # the real-time node still advances
+
+        def rt_now() -> int:
+            return int(
+                describe_nodes(loopback.session, ["rt"], prefix=loopback.prefix)[0]["counters"]["steps"]
+            )
+
+        wait_until(lambda: rt_now() > rt_steps, 30, "the real-time node advancing")
         assert lock.poll() is None and rt.poll() is None
     tracebacks = sum("Traceback" in line for line in lock_log + rt_log)
-    sent_actions = counts["actions_sent"]
     counted = accounted(infos["lock"]["counters"], False) + accounted(infos["rt"]["counters"], True)
     assert counted == sent_actions, (counted, sent_actions, [infos[n]["counters"] for n in infos])
     assert all(infos[n]["health"] == "ok" for n in infos), infos

@@ -13,7 +13,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 import uuid
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -32,7 +31,14 @@ from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.init import starting_config
 from bridge.recording.env_recorder import RecordMcap
-from tests.conftest import Loopback, example_fmu, free_port, node_process
+from tests.conftest import (
+    Loopback,
+    example_fmu,
+    free_port,
+    node_process,
+    wait_for_recorded,
+    wait_for_recorder,
+)
 
 pytestmark = pytest.mark.integration
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
@@ -48,17 +54,6 @@ class Run:
     env_file: Path  # RecordMcap around the remote env
     outputs: list[np.ndarray]  # what the remote env received: the reset reply, then every step
     rewards: list[float]
-
-
-def _wait_for_recorder(net: Loopback, node: str, timeout_s: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        replies = net.session.liveliness().get(f"{net.prefix}/{node}/recorders/*", timeout=0.5)  # type: ignore[attr-defined]
-        if any(r.ok is not None for r in replies):
-            time.sleep(0.2)  # the token follows the subscribers: give the routes a moment
-            return
-        time.sleep(0.05)
-    pytest.fail("the recorder did not start")
 
 
 def _drive(env: Any, outputs: list[np.ndarray], rewards: list[float]) -> None:
@@ -103,11 +98,11 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
             )  # fmt: skip
             try:
-                _wait_for_recorder(net, "ball")
+                wait_for_recorder(net, "ball")
                 remote = RemoteFmuEnv(experiment, "ball", session=session, prefix=net.prefix)
                 with RecordMcap(remote, result.env_file, agent="zero") as env:
                     _drive(env, result.outputs, result.rewards)
-                time.sleep(0.3)  # the last reply reaches the recorder too
+                wait_for_recorded(net, "ball", {"outputs": STEPS + 1})  # the reset's step 0 too
             finally:
                 out = _stop(recorder)
         assert "wrote" in out

@@ -5,7 +5,6 @@ from __future__ import annotations
 import os
 import re
 import signal
-import threading
 import time
 import warnings
 from pathlib import Path
@@ -23,7 +22,7 @@ from bridge.experiment.config import parse_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes, list_nodes
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_until
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -55,42 +54,31 @@ def test_remote_env_equals_in_process_env_and_passes_both_checkers(loopback: Loo
             remote.close()
 
 
-def _raw_client(net: Loopback, node: str) -> tuple[Any, list[proto.Frame], threading.Event]:
-    frames: list[proto.Frame] = []
-    event = threading.Event()
+class _RawClient:
+    """A subscriber to a node's outputs that sends raw action frames, one at a time: the node
+    answers every action frame with exactly one frame, in order, so answer ``n`` is the ``n``-th
+    frame after those already expected (no quiet period to guess)."""
 
-    def on_frame(sample: Any) -> None:
-        frames.append(proto.decode(sample.payload.to_bytes()))
-        event.set()
+    def __init__(self, net: Loopback, node: str) -> None:
+        self.net, self.keys = net, proto.Keys(net.prefix, node)
+        self.frames: list[proto.Frame] = []
+        self.expected = 0  # frames that answer what was sent so far
+        self.sub = net.session.declare_subscriber(  # type: ignore[attr-defined]
+            self.keys.outputs, lambda s: self.frames.append(proto.decode(s.payload.to_bytes()))
+        )
 
-    keys = proto.Keys(net.prefix, node)
-    sub = net.session.declare_subscriber(keys.outputs, on_frame)  # type: ignore[attr-defined]
-    return sub, frames, event
+    def wait_for(self, count: int, what: str) -> None:
+        wait_until(lambda: len(self.frames) >= count, 30, what)
+        self.expected = count
 
-
-def _send(
-    net: Loopback, node: str, payload: bytes, frames: list[proto.Frame], event: threading.Event
-) -> proto.Frame:
-    """Send a raw action frame; return the node's answer for that action's (episode, step)."""
-    sent = proto.decode(payload)
-    # Replies to earlier frames may still be on their way (same episode and step): let them land
-    # first, so that the answer taken is this frame's (bounded: at most 3 s of quiet-waiting).
-    settle = time.monotonic() + 3
-    while time.monotonic() < settle:
-        before = len(frames)
-        time.sleep(0.3)
-        if len(frames) == before:
-            break
-    count = len(frames)
-    net.session.put(proto.Keys(net.prefix, node).actions, payload)  # type: ignore[attr-defined]
-    deadline = time.monotonic() + 5
-    while time.monotonic() < deadline:
-        for frame in frames[count:]:
-            if (frame.episode, frame.step) == (sent.episode, sent.step):
-                return frame
-        event.clear()
-        event.wait(0.1)
-    raise AssertionError(f"no answer to {sent}")
+    def send(self, payload: bytes) -> proto.Frame:
+        """Send a raw action frame; return the node's answer to it."""
+        sent = proto.decode(payload)
+        self.net.session.put(self.keys.actions, payload)  # type: ignore[attr-defined]
+        self.wait_for(self.expected + 1, f"the answer to {sent}")
+        answer = self.frames[self.expected - 1]
+        assert (answer.episode, answer.step) == (sent.episode, sent.step), (answer, sent)
+        return answer
 
 
 def _info(net: Loopback, node: str) -> dict[str, Any]:
@@ -100,18 +88,20 @@ def _info(net: Loopback, node: str) -> dict[str, Any]:
 def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(loopback: Loopback) -> None:
     with node_process(CARTPOLE, "cp", loopback):
         env = RemoteFmuEnv(CARTPOLE, "cp", session=loopback.session, prefix=loopback.prefix)
-        sub, frames, event = _raw_client(loopback, "cp")
+        raw = _RawClient(loopback, "cp")
         try:
             env.reset(seed=0)
             env.step(np.zeros(1, dtype=np.float32))  # now at step 1 of episode 1
+            # the outputs of step 1 (step 0's may come first) are the last frame before the raw ones
+            wait_until(lambda: any(f.step == 1 for f in raw.frames), 30, "the outputs of step 1")
+            raw.expected = len(raw.frames)
             action, me = [0.0], env.plant.client.client_id  # type: ignore[attr-defined]
 
             key = env.plant.client.key  # type: ignore[attr-defined]  # the session of the lease
 
             def send(episode: int, step: int, values: list[float], client: int = me) -> proto.Frame:
                 signed = key if client == me else None
-                payload = proto.encode_values(proto.ACTION, episode, step, client, values, key=signed)
-                return _send(loopback, "cp", payload, frames, event)
+                return raw.send(proto.encode_values(proto.ACTION, episode, step, client, values, key=signed))
 
             dup = send(1, 1, action)
             assert (dup.kind, dup.step) == (proto.OUTPUTS, 1)  # the same answer again, not a second step
@@ -126,18 +116,17 @@ def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(lo
             assert f"{me:016x}" in stranger.message
             far = send(1, 2, [1e308])
             assert far.kind == proto.REJECT and "outside its declared range [-10, 10]" in far.message
-            # These frames were sent under the env's own client id, so the env's subscriber sees
-            # their replies too: let them arrive before the env waits for its own step 2.
-            time.sleep(1.0)
-            _, _, _, _, info = env.step(np.zeros(1, dtype=np.float32))
-            assert info["step"] == 2  # the node stepped exactly twice
+            # Step 2 through the same raw path (the env's own waiting would also accept the
+            # rejects for step 2 above, which carry its client id).
+            second = send(1, 2, action)
+            assert (second.kind, second.step) == (proto.OUTPUTS, 2)
             counters = _info(loopback, "cp")["counters"]
-            assert counters["steps"] == 2 and counters["duplicate"] == 1
+            assert counters["steps"] == 2 and counters["duplicate"] == 1  # the node stepped exactly twice
             assert counters["rejected_conflict"] == 1
             assert counters["rejected_out_of_order"] == 1 and counters["rejected_stale"] == 1
             assert counters["rejected_not_holder"] == 1 and counters["rejected_out_of_range"] == 1
         finally:
-            sub.undeclare()
+            raw.sub.undeclare()
             env.close()
 
 
@@ -149,7 +138,8 @@ def test_random_bytes_are_counted_and_the_node_keeps_serving(loopback: Loopback)
             loopback.session.put(keys.actions, rng.bytes(size))  # type: ignore[attr-defined]
         loopback.session.put(keys.actions, proto.encode_values(proto.OUTPUTS, 0, 1, 0, [1.0]))  # type: ignore[attr-defined]
         loopback.session.put(keys.actions, b"\x01\x02" + bytes(22) + b"\xff\xff\xff\xff")  # type: ignore[attr-defined]
-        time.sleep(0.5)
+        malformed = lambda: _info(loopback, "cp")["counters"].get("malformed", 0)  # noqa: E731
+        wait_until(lambda: malformed() >= 45, 30, "the node counting the malformed frames")
         env = RemoteFmuEnv(CARTPOLE, "cp", session=loopback.session, prefix=loopback.prefix)
         try:
             with FmuEnv(CARTPOLE) as local:
@@ -278,7 +268,8 @@ def test_dead_node_is_replaced_by_a_spare_and_its_episode_truncated(loopback: Lo
             vec.step(np.zeros((2, 1), dtype=np.float32))
             first.send_signal(signal.SIGKILL)
             first.wait(timeout=10)
-            time.sleep(0.3)
+            dead = vec.envs[0].plant.client  # type: ignore[attr-defined]
+            wait_until(lambda: not dead.alive, 30, "pool-0's liveliness token gone")
             _, _, dones, infos = vec.step(np.zeros((2, 1), dtype=np.float32))
             assert dones[0] and infos[0]["TimeLimit.truncated"]
             assert (

@@ -66,7 +66,9 @@ def test_outputs_as_joint_states_stamped_with_simulation_time(loopback: Loopback
             }
         )
         assert any(token.endswith("/NN/%/%/sim") for token in tokens)  # node /sim, root namespace and enclave
-        time.sleep(0.5)
+        # No pause for the subscription: the env's info query and reset reach the node after the
+        # subscriber's declaration (one link from this session through the router, in order), and
+        # the node publishes the joint states from the session that answers them.
         env = RemoteFmuEnv(CARTPOLE, "sim", session=session, prefix=loopback.prefix)
         try:
             _, info = env.reset(seed=0)
@@ -117,9 +119,11 @@ def test_reset_service_and_actions_in_real_time(loopback: Loopback) -> None:
                     bytes(JAZZY.serialize_cdr(push, "sensor_msgs/msg/JointState")),
                     attachment=struct.pack("<qqB16s", seq, time.time_ns(), 16, gid),
                 )
-            time.sleep(0.5)
-            x_dot = JAZZY.deserialize_cdr(outputs[-1][0], "sensor_msgs/msg/JointState").position[1]
-            assert x_dot > 1.0  # the held +10 N push accelerates the cart
+
+            def x_dot() -> float:
+                return float(JAZZY.deserialize_cdr(outputs[-1][0], "sensor_msgs/msg/JointState").position[1])
+
+            assert wait_for(lambda: x_dot() > 1.0, 10.0)  # the held +10 N push accelerates the cart
             request = bytes.fromhex("0001000000")  # std_srvs/srv/Trigger request: CDR header + one pad byte
             replies = list(
                 session.get(

@@ -26,7 +26,7 @@ from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
 from bridge.net.remote import answer, describe_nodes
 from bridge.net.transport import ZenohOptions, open_session
-from tests.conftest import Loopback, _wait_for_line, node_process, stop_process
+from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_until
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -220,7 +220,11 @@ def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: L
         keys.info, lambda q: q.reply(keys.info, replies["liar"]), complete=True
     )
     try:
-        time.sleep(0.5)
+        wait_until(
+            lambda: any(r.ok for r in loopback.session.get(keys.info, timeout=2.0)),  # type: ignore[attr-defined]
+            30,
+            "the liar's info queryable reachable",
+        )
         with pytest.raises(TransportError, match=r"node 'liar' sent an info reply .*input_names"):
             RemoteFmuEnv(CARTPOLE, "liar", session=loopback.session, prefix=loopback.prefix, timeout_s=5)
         replies["liar"] = b"[1, 2"

@@ -37,7 +37,7 @@ from bridge.recording.env_recorder import RecordMcap, record_env
 from bridge.recording.export import columns, export_csv, export_parquet
 from bridge.recording.reader import read_recording, recover
 from bridge.recording.writer import FixedMessage, McapWriter, StepBlock
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_for_recorded, wait_for_recorder
 
 CONTINUOUS = example_experiment("cartpole_continuous")
 DISCRETE = example_experiment("cartpole_balance")
@@ -383,7 +383,7 @@ def test_record_node_gives_the_outputs_a_remote_env_received(loopback: Loopback,
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV,
         )  # fmt: skip
         try:
-            _wait_for_recorder(loopback, "cp")
+            wait_for_recorder(loopback, "cp")
             remote = RemoteFmuEnv(CONTINUOUS, "cp", session=loopback.session, prefix=loopback.prefix)
             env = RecordMcap(remote, env_file, agent="sine")
             received, sent, first, every = [], [], [], []
@@ -400,7 +400,7 @@ def test_record_node_gives_the_outputs_a_remote_env_received(loopback: Loopback,
                         break
             description = remote.plant.client.description
             env.close()
-            time.sleep(0.3)
+            wait_for_recorded(loopback, "cp", {"outputs": len(every), "actions": len(sent)})
         finally:
             recorder.send_signal(signal.SIGINT)
             try:
@@ -443,17 +443,6 @@ def test_observation_names_follow_the_history_layout() -> None:
     assert observation_names(task, 2) == ["x", "theta"]
     assert observation_names(task, 6) == ["x[t-2]", "theta[t-2]", "x[t-1]", "theta[t-1]", "x", "theta"]
     assert observation_names(task, 3) == ["obs[0]", "obs[1]", "obs[2]"]  # a wrapper changed the size
-
-
-def _wait_for_recorder(net: Loopback, node: str, timeout_s: float = 30.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        replies = list(net.session.liveliness().get(f"{net.prefix}/{node}/recorders/*", timeout=0.5))  # type: ignore[attr-defined]
-        if any(r.ok is not None for r in replies):
-            time.sleep(0.2)  # the token follows the subscribers: give the routes a moment
-            return
-        time.sleep(0.05)
-    pytest.fail("the recorder did not start")
 
 
 @pytest.mark.integration

@@ -97,7 +97,8 @@ def test_latched_publisher_serves_a_late_subscriber(
         publisher = ros.create_node("sim").create_publisher("/description", "std_msgs/msg/String", LATCHED)
         for text in ("old", "model: cartpole"):
             publisher.publish(interfaces.encode("std_msgs/msg/String", data=text))
-        time.sleep(0.3)
+        # no pause: the cache holds the sample once publish returns, and the late subscriber
+        # queries every publisher it detects, also one whose declaration reaches it after it starts
         late.create_node("viewer").create_subscription(
             "/description",
             "std_msgs/msg/String",

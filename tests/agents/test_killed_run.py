@@ -1,0 +1,101 @@
+"""A training process killed with SIGKILL says nothing; its run is still found ``interrupted``.
+
+A real ``fmu-bridge train`` runs as a subprocess; the test waits (on conditions, never a sleep)
+for run.json to say ``running`` and for a checkpoint, kills the process, then asks what a user
+would: ``compare``, ``evaluate``, ``agent run``-style loading and ``train --resume``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from agents.compare import compare_runs
+from agents.run_state import read_run, training_alive
+from bridge.experiment.examples import example_experiment
+from tests.conftest import stop_process, wait_until
+
+CARTPOLE = example_experiment("cartpole_balance")
+ENV = {**os.environ, "PYTHONUNBUFFERED": "1"}
+EVALUATE = ("--episodes", "1", "--no-record", "--out", "evaluation")  # under the test's folder
+
+
+def _experiment(tmp_path: Path) -> Path:
+    data = yaml.safe_load(CARTPOLE.read_text())
+    data.pop("versions")
+    data["training"] |= {
+        "timesteps": 10_000_000,  # far more than the test lets it run
+        "n_envs": 1,
+        "checkpoint_every": 256,
+        "eval_every": 10_000_000,
+        "hyperparams": {"n_steps": 64, "batch_size": 64, "n_epochs": 1},
+    }
+    path = tmp_path / "experiment.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def _cli(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "bridge.cli", *args],
+        capture_output=True, text=True, env=ENV, cwd=cwd, timeout=600, check=False,
+    )  # fmt: skip
+
+
+def _status(run: Path) -> str:
+    file = run / "run.json"
+    return str(json.loads(file.read_text()).get("status")) if file.is_file() else ""
+
+
+@pytest.mark.slow
+def test_a_killed_training_is_reported_interrupted_and_resumes_from_its_checkpoint(tmp_path: Path) -> None:
+    experiment, run = _experiment(tmp_path), tmp_path / "run"
+    log = (tmp_path / "train.log").open("w")
+    command = ["train", str(experiment), "--run-dir", str(run), "--no-progress"]
+    trainer = subprocess.Popen(
+        [sys.executable, "-m", "bridge.cli", *command],
+        stdout=log, stderr=subprocess.STDOUT, text=True, env=ENV, cwd=tmp_path,
+    )  # fmt: skip
+    try:
+        wait_until(
+            lambda: _status(run) == "running" and any((run / "checkpoints").glob("*_steps.zip")),
+            300,
+            "the training running with a checkpoint saved",
+        )
+        assert training_alive(run) and read_run(run)["status"] == "running"
+        refused = _cli(tmp_path, "train", "--resume", str(run), "--no-progress")
+        assert refused.returncode == 2, refused.stderr[-2000:]
+        assert "is being trained by another process (pid" in " ".join(refused.stderr.split())
+        trainer.send_signal(signal.SIGKILL)
+        trainer.wait(timeout=60)
+    finally:
+        stop_process(trainer, timeout_s=10)
+        log.close()
+    assert trainer.returncode == -signal.SIGKILL, (tmp_path / "train.log").read_text()[-3000:]
+    assert _status(run) == "running"  # what the killed process left in run.json
+    assert not (run / "model.zip").exists()  # it never got to save its final model
+
+    assert not training_alive(run)
+    info = read_run(run)
+    assert info["status"] == "interrupted" and "killed or crashed" in info["status_detail"]
+    assert compare_runs([run])[0][0]["status"] == "interrupted"
+    shown = _cli(tmp_path, "evaluate", str(run), "--config", str(experiment), *EVALUATE)
+    assert shown.returncode == 2, shown.stderr[-2000:]
+    message = " ".join(shown.stderr.split())
+    assert "run run was interrupted before it saved a model" in message
+    assert "killed or crashed" in message and "train --resume" in message
+
+    resumed = _cli(tmp_path, "train", "--resume", str(run), "--timesteps", "128", "--no-progress")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "resuming from its checkpoint at" in " ".join(resumed.stderr.split())
+    assert _status(run) == "done" and (run / "model.zip").is_file()
+    after = _cli(tmp_path, "evaluate", str(run), "--config", str(experiment), *EVALUATE)
+    assert after.returncode == 0, after.stderr[-2000:]
+    assert "interrupted" not in after.stderr
