@@ -301,7 +301,7 @@ class Sb3Policy:
 
 def rllib_run(run_dir: Path) -> bool:
     """True for a run folder written by ``train --engine rllib``."""
-    return _run_info(run_dir).get("engine") == "rllib" if run_dir.is_dir() else False
+    return read_run(run_dir).get("engine") == "rllib" if run_dir.is_dir() else False
 
 
 def _model_file(path: Path) -> Path:
