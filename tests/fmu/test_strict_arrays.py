@@ -375,6 +375,12 @@ def test_structural_parameters_refused_where_they_do_not_belong(fmu: Path, tmp_p
     ):
         model.initialize({"n": 5})  # not in initialisation mode, where the model would refuse it
     data = sized_experiment(fmu, tmp_path, 5)
+    data["model"]["parameters"] = {"n": 5}
+    with pytest.raises(
+        ConfigError, match=r"model.parameters: 'n' is a structural parameter.*model.structural_parameters"
+    ):
+        FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
+    data["model"]["parameters"] = {}
     data["model"]["structural_parameters"] = {}  # u[5] does not exist at the default size 3
     with pytest.raises(ConfigError, match=r"u\[4\]"):
         FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
