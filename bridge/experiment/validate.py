@@ -217,6 +217,12 @@ def _check_values(exp: Experiment, variables: Mapping[str, Variable], where: str
     for key, names in sections:
         for var_name in names:
             var = _need(key, var_name, variables, where)
+            if var.causality == "structuralParameter":
+                raise ConfigError(
+                    f"{key}: {var_name!r} is a structural parameter (an array size): it is set in FMI 3.0 "
+                    f"configuration mode once per instance, not per episode; give it under "
+                    f"model.structural_parameters{where}"
+                )
             if not var.settable_at_init:
                 raise ConfigError(
                     f"{key}: {var_name!r} is a {var.variability} {var.causality} and cannot be set; "

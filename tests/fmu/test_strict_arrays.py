@@ -198,6 +198,7 @@ def test_system_of_two_array_models_equals_closed_form(
     np.testing.assert_allclose(np.asarray(rows)[1:], system_closed_form()[1:], rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.integration
 def test_node_over_loopback_zenoh_equals_the_single_env(fmu: Path, tmp_path: Path, loopback: Any) -> None:
     from bridge.env import RemoteFmuEnv
     from tests.conftest import node_process
@@ -239,6 +240,7 @@ def test_some_elements_of_an_input_array_keep_the_others(fmu: Path) -> None:
             model.set({"u": [1.0, 2.0]})
 
 
+@pytest.mark.integration
 def test_system_with_an_array_component_in_a_node_equals_closed_form(
     fmu: Path, tmp_path: Path, loopback: Any
 ) -> None:
@@ -339,6 +341,7 @@ def test_structural_parameters_from_the_experiment_on_the_env(
     np.testing.assert_allclose(rows[0, :5], expected[0, :5], rtol=1e-7)
 
 
+@pytest.mark.integration
 def test_structural_parameters_on_the_batch_env_and_a_node(fmu: Path, tmp_path: Path, loopback: Any) -> None:
     from bridge.env import RemoteFmuEnv
     from tests.conftest import node_process
@@ -375,11 +378,18 @@ def test_structural_parameters_refused_where_they_do_not_belong(fmu: Path, tmp_p
     ):
         model.initialize({"n": 5})  # not in initialisation mode, where the model would refuse it
     data = sized_experiment(fmu, tmp_path, 5)
+    data["model"]["parameters"] = {"n": 5}
+    with pytest.raises(
+        ConfigError, match=r"model.parameters: 'n' is a structural parameter.*model.structural_parameters"
+    ):
+        FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
+    data["model"]["parameters"] = {}
     data["model"]["structural_parameters"] = {}  # u[5] does not exist at the default size 3
     with pytest.raises(ConfigError, match=r"u\[4\]"):
         FmuEnv(parse_experiment(data, source=tmp_path / "x.yaml"))
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("node", [False, True], ids=["in-process", "node"])
 def test_structural_parameters_of_a_system_component(
     fmu: Path, tmp_path: Path, loopback: Any, node: bool

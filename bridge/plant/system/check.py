@@ -58,9 +58,14 @@ def check_system(
                 Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system
             )
             if not var.settable_at_init:
+                hint = (
+                    f"; give it under system.components.{name}.structural_parameters"
+                    if var.causality == "structuralParameter"
+                    else ""
+                )
                 raise ConfigError(
                     f"system.components.{name}.parameters: {var_name!r} is a {var.variability} "
-                    f"{var.causality} of {infos[name].model_name} and cannot be set{system.where}"
+                    f"{var.causality} of {infos[name].model_name} and cannot be set{hint}{system.where}"
                 )
     for text in warnings:
         _log.warning("%s", text)
