@@ -159,3 +159,25 @@ def test_randomised_start_values_with_a_state_file_are_refused(tmp_path: Path) -
         pytest.raises(StateFileError, match="state file fixes every"),
     ):
         env.reset(seed=0)
+
+
+def test_batch_env_from_a_state_file_equals_the_single_env(tmp_path: Path) -> None:
+    """The batch plant's instances (stepped natively together) start from the state as FmuEnv does."""
+    import numpy as np
+
+    from bridge.env.batch import BatchEnv
+
+    exp = _experiment(tmp_path / "exp.yaml")
+    runner.invoke(app, ["state", "save", str(exp), "--until", "1.5", "-o", str(tmp_path / "s.state")])
+    use = _experiment(tmp_path / "use.yaml", reset_policy={"state_file": "s.state"})
+    actions = np.array([[0.5], [-0.25]], dtype=np.float32)
+    batch = BatchEnv(use, 2)
+    try:
+        rows = [batch.reset_all([1, 2])[0].copy()]
+        rows += [batch.step(actions)[0].copy() for _ in range(6)]
+    finally:
+        batch.close()
+    for i in range(2):
+        with FmuEnv(use) as env:
+            single = [env.reset(seed=i + 1)[0]] + [env.step(actions[i])[0] for _ in range(6)]
+        np.testing.assert_array_equal(np.array(rows)[:, i, :], np.array(single))
