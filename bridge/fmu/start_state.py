@@ -63,10 +63,10 @@ def to_file(model: Model, state: ModelState | None, max_bytes: int) -> StateFile
         terminated=saved.terminated,
         next_event_s=saved.next_event_s,
         size=len(payload),
-        sha256=state_file.digest(payload),
+        sha256="",
         start_values={name: _jsonable(value) for name, value in model._init_values.items()},
     )
-    return StateFile(header, payload)
+    return state_file.seal(header, payload)
 
 
 def prepare(model: Model, file: StateFile, source: str) -> StartState:
