@@ -33,6 +33,7 @@ class StartState:
     source: str
     start_time_s: float
     step_index: int
+    own_start_time_s: float  # the model's t0 without the state (a clear goes back to it)
     handle: ctypes.c_void_p | None = None
     component: Any = None
 
@@ -77,8 +78,8 @@ def prepare(model: Model, file: StateFile, source: str) -> StartState:
     if not math.isfinite(header.time_s):
         raise StateFileError(f"the state's time {header.time_s!r} is not finite [{source}]")
     if header.step_size_s == model.step_size_s:
-        return StartState(file, source, header.start_time_s, header.step_index)
-    return StartState(file, source, header.time_s, 0)
+        return StartState(file, source, header.start_time_s, header.step_index, model.start_time_s)
+    return StartState(file, source, header.time_s, 0, model.start_time_s)
 
 
 def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
