@@ -3,10 +3,11 @@ the state of a model as a state file (``Model.state_file``).
 
 A state file's state is deserialised into the instance once and restored at every reset, so a
 reset costs one ``SetFMUstate``; the first one needs no initialisation at all where the FMU accepts
-a state straight after instantiation (FMI 2.0 and 3.0 allow it; an FMU that refuses is initialised
-first). Where the file was saved on this model's step size, the step index goes on from the saved
-one, so the episode's time grid ``t0 + k * h`` is the one the state was saved on, bit for bit;
-otherwise the episode starts at the saved time with ``k = 0``.
+a state straight after instantiation (FMI 2.0 and 3.0 allow it; an FMU that refuses to
+deserialise or set it then is initialised first, with the saving run's start values). Where the
+file was saved on this model's step size, the step index goes on from the saved one, so the
+episode's time grid ``t0 + k * h`` is the one the state was saved on, bit for bit; otherwise the
+episode starts at the saved time with ``k = 0``.
 """
 
 from __future__ import annotations
@@ -92,22 +93,27 @@ def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
     if backend.component is None:
         backend.instantiate()
         start.handle = None
-    if start.handle is None or start.component is not backend.component:
-        start.handle, start.component = serial.deserialize(backend, start.file.payload), backend.component
     try:
-        backend.set_state(start.handle)
+        _set(backend, start)
     except FmuError:
         if model._initialized:
             raise
-        # An FMU that takes a state only once initialised (the standard allows it earlier).
-        model._initialize({})
-        backend.set_state(start.handle)
+        # An FMU that reads or sets a state only once initialised (the standard allows both
+        # straight after instantiation): initialised with the saving run's start values, then set.
+        model._initialize(model._check_init_values(start.file.header.start_values))
+        _set(backend, start)
     header = start.file.header
     model.start_time_s = start.start_time_s
     model.step_index, model.terminated = start.step_index, header.terminated
     model._initialized, model._init_failed, model._failed_status = True, False, 0
     if model.interface == "me":
         model._resume_me(header.next_event_s)
+
+
+def _set(backend: Any, start: StartState) -> None:
+    if start.handle is None or start.component is not backend.component:
+        start.handle, start.component = serial.deserialize(backend, start.file.payload), backend.component
+    backend.set_state(start.handle)
 
 
 def free(model: Model, start: StartState) -> None:
