@@ -26,7 +26,12 @@ def save(  # noqa: PLR0917 (typer options)
         float | None, typer.Option("--until", help="Run to this simulation time (s), then save.")
     ] = None,
     steady: Annotated[
-        bool, typer.Option("--steady", help="Run until the outputs settle (see --tol, --window), then save.")
+        bool,
+        typer.Option(
+            "--steady",
+            help="Run until the outputs and the state derivatives the FMU offers settle "
+            "(see --tol, --window), then save.",
+        ),
     ] = False,
     tol: Annotated[float, typer.Option(help="--steady: largest relative change over a window.")] = 1e-6,
     window: Annotated[float, typer.Option(help="--steady: window (s) of the change.")] = 1.0,
@@ -47,9 +52,19 @@ def save(  # noqa: PLR0917 (typer options)
         max_time_s=max_time,
     )
     if as_json:
-        console.print_json(json.dumps({**_header(run.header), "path": str(run.path), "change": run.change}))
+        console.print_json(
+            json.dumps(
+                {
+                    **_header(run.header),
+                    "path": str(run.path),
+                    "change": run.change,
+                    "derivatives": run.derivatives,
+                }
+            )
+        )
         return
-    settled = f", settled (change {run.change:.3g})" if run.change is not None else ""
+    watched = f"; outputs and {run.derivatives}" if run.derivatives else "; outputs only"
+    settled = f", settled (change {run.change:.3g}{watched})" if run.change is not None else ""
     console.print(
         f"saved the state of {run.header.model_name} at t = {run.header.time_s:g} s{settled} "
         f"({run.header.size} bytes): {run.path}",

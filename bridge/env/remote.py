@@ -48,3 +48,23 @@ class RemoteFmuEnv(FmuEnv):
         )
         super().__init__(exp, render_mode=render_mode, plant=plant)
         self.node = node
+        self._remote = plant
+
+    def start_from(self, state: str | Path | bytes) -> dict[str, Any]:
+        """Hand the node a state file (a path here, or its bytes): from the next reset on, its
+        episodes start from that state (``bridge.net.node_start``); the node's answer."""
+        data = state if isinstance(state, bytes) else _read_state(Path(state))
+        return self._remote.start_from(data)
+
+    def clear_start(self) -> dict[str, Any]:
+        """Drop the state sent to the node: from the next reset on, its episodes start as the
+        node's own experiment says (its state file, else initialisation)."""
+        return self._remote.clear_start()
+
+
+def _read_state(path: Path) -> bytes:
+    """A state file's bytes, checked here first (sizes, checksum)."""
+    from bridge.fmu import state_file
+
+    saved = state_file.read(path)
+    return state_file.encode(saved.header, saved.payload)

@@ -173,7 +173,8 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
         f"  sampling_time: {sampling!r}      # one agent sample; a whole multiple of step_size",
         f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
         *([f"  start_time: {start!r}"] if start else []),
-        "  reset_policy: auto          # restore | reset | reinstantiate | auto",
+        "  reset_policy: auto          # restore | reset | reinstantiate | auto | {state_file: PATH}"
+        "  (a state saved by `fmu-bridge state save`)",
     ]
 
 

@@ -618,14 +618,23 @@ class Model:
         and the time grid (``bridge.fmu.state_file``); :class:`StateFileError` where it cannot."""
         return start_state.to_file(self, state, max_bytes)
 
-    def start_from(self, file: StateFile, source: str = "the state") -> None:
-        """Start every episode from now on at ``file``'s state instead of initialising.
+    def start_from(self, file: StateFile | None, source: str = "the state") -> None:
+        """Start every episode from now on at ``file``'s state instead of initialising (None:
+        initialise again, on the model's own time grid).
 
         Raises:
             StateFileError: the state was saved by another FMU, or this FMU cannot deserialise.
         """
+        if file is None:
+            if self._start is not None:
+                start_state.free(self, self._start)
+                self.start_time_s = self._start.own_start_time_s
+                self._start = None
+                self._drop_snapshots()
+            return
         start = start_state.prepare(self, file, source)
         if self._start is not None:
+            start.own_start_time_s = self._start.own_start_time_s
             start_state.free(self, self._start)
         self._drop_snapshots()
         self._start = start

@@ -3,10 +3,11 @@ the state of a model as a state file (``Model.state_file``).
 
 A state file's state is deserialised into the instance once and restored at every reset, so a
 reset costs one ``SetFMUstate``; the first one needs no initialisation at all where the FMU accepts
-a state straight after instantiation (FMI 2.0 and 3.0 allow it; an FMU that refuses is initialised
-first). Where the file was saved on this model's step size, the step index goes on from the saved
-one, so the episode's time grid ``t0 + k * h`` is the one the state was saved on, bit for bit;
-otherwise the episode starts at the saved time with ``k = 0``.
+a state straight after instantiation (FMI 2.0 and 3.0 allow it; an FMU that refuses to
+deserialise or set it then is initialised first, with the saving run's start values). Where the
+file was saved on this model's step size, the step index goes on from the saved one, so the
+episode's time grid ``t0 + k * h`` is the one the state was saved on, bit for bit; otherwise the
+episode starts at the saved time with ``k = 0``.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ class StartState:
     source: str
     start_time_s: float
     step_index: int
+    own_start_time_s: float  # the model's t0 without the state (a clear goes back to it)
     handle: ctypes.c_void_p | None = None
     component: Any = None
 
@@ -63,10 +65,10 @@ def to_file(model: Model, state: ModelState | None, max_bytes: int) -> StateFile
         terminated=saved.terminated,
         next_event_s=saved.next_event_s,
         size=len(payload),
-        sha256=state_file.digest(payload),
+        sha256="",
         start_values={name: _jsonable(value) for name, value in model._init_values.items()},
     )
-    return StateFile(header, payload)
+    return state_file.seal(header, payload)
 
 
 def prepare(model: Model, file: StateFile, source: str) -> StartState:
@@ -77,8 +79,8 @@ def prepare(model: Model, file: StateFile, source: str) -> StartState:
     if not math.isfinite(header.time_s):
         raise StateFileError(f"the state's time {header.time_s!r} is not finite [{source}]")
     if header.step_size_s == model.step_size_s:
-        return StartState(file, source, header.start_time_s, header.step_index)
-    return StartState(file, source, header.time_s, 0)
+        return StartState(file, source, header.start_time_s, header.step_index, model.start_time_s)
+    return StartState(file, source, header.time_s, 0, model.start_time_s)
 
 
 def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
@@ -91,22 +93,27 @@ def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
     if backend.component is None:
         backend.instantiate()
         start.handle = None
-    if start.handle is None or start.component is not backend.component:
-        start.handle, start.component = serial.deserialize(backend, start.file.payload), backend.component
     try:
-        backend.set_state(start.handle)
+        _set(backend, start)
     except FmuError:
         if model._initialized:
             raise
-        # An FMU that takes a state only once initialised (the standard allows it earlier).
-        model._initialize({})
-        backend.set_state(start.handle)
+        # An FMU that reads or sets a state only once initialised (the standard allows both
+        # straight after instantiation): initialised with the saving run's start values, then set.
+        model._initialize(model._check_init_values(start.file.header.start_values))
+        _set(backend, start)
     header = start.file.header
     model.start_time_s = start.start_time_s
     model.step_index, model.terminated = start.step_index, header.terminated
     model._initialized, model._init_failed, model._failed_status = True, False, 0
     if model.interface == "me":
         model._resume_me(header.next_event_s)
+
+
+def _set(backend: Any, start: StartState) -> None:
+    if start.handle is None or start.component is not backend.component:
+        start.handle, start.component = serial.deserialize(backend, start.file.payload), backend.component
+    backend.set_state(start.handle)
 
 
 def free(model: Model, start: StartState) -> None:

@@ -7,7 +7,11 @@ Layout (all integers little-endian)::
     4 bytes   length L of the header (at most 64 KiB)
     L bytes   the header: UTF-8 JSON (fields of :class:`StateHeader`)
     N bytes   the FMU's own serialised state (fmi2SerializeFMUstate / fmi3SerializeFMUState);
-              N is the header's ``size`` and SHA-256 of these bytes its ``sha256``
+              N is the header's ``size``
+
+The header's ``sha256`` covers the header's values (its JSON with keys sorted, compact, and
+``sha256`` empty) followed by the state, so a changed time or step index is caught as surely as a
+changed state byte.
 
 A reader never trusts a length it has not checked: the header length and the state's size are
 weighed against a budget before anything is read, the file must end exactly after the state, and
@@ -24,7 +28,7 @@ import json
 import os
 import struct
 import tempfile
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, Final
 
@@ -72,28 +76,43 @@ class StateFile:
     payload: bytes = field(repr=False)
 
 
+def seal(header: StateHeader, payload: bytes) -> StateFile:
+    """``header`` with the ``size`` and ``sha256`` of ``payload`` filled in, and the payload."""
+    sized = replace(header, size=len(payload), sha256="")
+    return StateFile(replace(sized, sha256=_digest(sized, payload)), payload)
+
+
 def encode(header: StateHeader, payload: bytes) -> bytes:
-    """The bytes of a state file (``header.size`` and ``sha256`` must describe ``payload``)."""
+    """The bytes of a state file (``header`` as :func:`seal` made it for ``payload``)."""
     text = json.dumps(asdict(header), sort_keys=True, allow_nan=False).encode()
     if len(text) > MAX_HEADER_BYTES:
         raise StateFileError(f"the state header is {len(text)} bytes; at most {MAX_HEADER_BYTES} are allowed")
     return _PREFIX.pack(MAGIC, FORMAT_VERSION, len(text)) + text + payload
 
 
-def digest(payload: bytes) -> str:
-    return hashlib.sha256(payload).hexdigest()
+def _digest(header: StateHeader, payload: bytes) -> str:
+    values = asdict(replace(header, sha256=""))
+    text = json.dumps(values, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode() + payload).hexdigest()
+
+
+def _verified(header: StateHeader, payload: bytes, source: str) -> StateFile:
+    try:
+        intact = _digest(header, payload) == header.sha256
+    except ValueError:  # a value JSON cannot hold (NaN, infinity): not a header we wrote
+        intact = False
+    if not intact:
+        raise StateFileError(
+            f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{source}]"
+        )
+    return StateFile(header, payload)
 
 
 def decode(data: bytes, *, source: str = "the state", max_bytes: int = MAX_STATE_BYTES) -> StateFile:
     """A state file from its bytes (a file's content, or a message's); :class:`StateFileError`
     when it is cut, padded, corrupted, too large or not a state file."""
     header, start = _header(data[: _PREFIX.size + MAX_HEADER_BYTES], len(data), source, max_bytes)
-    payload = data[start:]
-    if digest(payload) != header.sha256:
-        raise StateFileError(
-            f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{source}]"
-        )
-    return StateFile(header, payload)
+    return _verified(header, data[start:], source)
 
 
 def read(path: Path, *, max_bytes: int = MAX_STATE_BYTES) -> StateFile:
@@ -104,11 +123,7 @@ def read(path: Path, *, max_bytes: int = MAX_STATE_BYTES) -> StateFile:
         header, start = _header(head, total, str(path), max_bytes)
         f.seek(start)
         payload = f.read(header.size + 1)
-    if digest(payload) != header.sha256:
-        raise StateFileError(
-            f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{path}]"
-        )
-    return StateFile(header, payload)
+    return _verified(header, payload, str(path))
 
 
 def read_header(path: Path, *, max_bytes: int = MAX_STATE_BYTES) -> StateHeader:

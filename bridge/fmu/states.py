@@ -20,3 +20,16 @@ def state_names(model: Model) -> list[str]:
             f"but declares {model.info.number_of_states} continuous states"
         )
     return names
+
+
+def derivative_pairs(model: Model) -> list[tuple[str, str]]:
+    """(derivative, state) variable names of the model description's ``<Derivatives>``, in state
+    vector order; empty where it lists none (optional in co-simulation)."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(model.info.path))
+    return [
+        (u.variable.name, u.variable.derivative.name)
+        for u in md.derivatives
+        if u.variable.derivative is not None
+    ]

@@ -49,6 +49,7 @@ def c_header(spec: Spec, fmi_version: str, interface: str, token: str) -> str:
         f"#define MODEL_NZ_ALLOC {max(nz, 1)}",
         f"#define MODEL_N_VARS {len(spec.variables)}",
         f"#define MODEL_CAN_SERIALIZE {int(spec.can_serialize)}",
+        f"#define MODEL_STATE_AFTER_INIT {int(spec.state_after_init)}",
         "",
         "/* value references */",
         *(f"#define VR_{v.c_name} {v.vr}" for v in spec.variables),
@@ -124,7 +125,7 @@ def _c_row(spec: Spec, v: Variable, fmi_version: str, interface: str) -> str:
         f".type = T_{v.type.upper()}",
         f".causality = {causality}",
         f".variability = V_{v.variability.upper()}",
-        f".exposed = {str(v.present_in(fmi_version, interface)).lower()}",
+        f".exposed = {str(spec.exposes(v, fmi_version, interface)).lower()}",
         f".offset = {offset}",
     ]
     if v.dimensions:

@@ -221,7 +221,7 @@ def _initial_unknowns(spec: Spec, variables: list[Variable], interface: str) -> 
         for v in variables
         if v.causality == "calculatedParameter" or (v.causality == "output" and v.initial in computed)
     }
-    if interface == "me":
+    if interface == "me" or spec.cs_derivatives:
         for state, derivative in spec.states():
             unknowns |= {v.vr: v for v in (state, derivative) if v.initial in computed}
     return [unknowns[vr] for vr in sorted(unknowns)]
@@ -231,7 +231,9 @@ def _model_structure(spec: Spec, variables: list[Variable], fmi_version: str, in
     me = interface == "me"
     groups = {  # (FMI 2.0 list element, FMI 3.0 element): members
         ("Outputs", "Output"): [v for v in variables if v.causality == "output"],
-        ("Derivatives", "ContinuousStateDerivative"): [d for _, d in spec.states()] if me else [],
+        ("Derivatives", "ContinuousStateDerivative"): (
+            [d for _, d in spec.states()] if me or spec.cs_derivatives else []
+        ),
         ("InitialUnknowns", "InitialUnknown"): _initial_unknowns(spec, variables, interface),
         ("", "EventIndicator"): [spec.variable(n) for n in spec.event_indicators] if me else [],
     }

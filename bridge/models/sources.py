@@ -38,7 +38,8 @@ _C_KEYWORD_TEXT: Final = """
 _C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
-    | {"type_definitions", "variables", "once_per_process", "can_serialize"}
+    | {"type_definitions", "variables", "once_per_process", "can_serialize", "state_after_initialization"}
+    | {"derivatives_in_cs"}
 )
 
 
@@ -101,6 +102,8 @@ def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> Spec:
         variables=(TIME, *(_parse_variable(vr, item) for vr, item in enumerate(raw["variables"], start=1))),
         once_per_process=bool(raw.get("once_per_process", False)),
         can_serialize=bool(raw.get("can_serialize", False)),
+        state_after_init=bool(raw.get("state_after_initialization", False)),
+        cs_derivatives=bool(raw.get("derivatives_in_cs", False)),
     )
     _check_spec(spec)
     return spec

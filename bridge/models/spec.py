@@ -134,6 +134,8 @@ class Spec:
     variables: tuple[Variable, ...]
     once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (and no FMU state): globals
     can_serialize: bool = False  # canSerializeFMUstate: the state as bytes (no String/Binary variables)
+    state_after_init: bool = False  # a state is set or deserialised only once initialised
+    cs_derivatives: bool = False  # co-simulation lists the state derivatives too (<Derivatives>)
 
     def variable(self, name: str) -> Variable:
         return next(v for v in self.variables if v.name == name)
@@ -143,4 +145,11 @@ class Spec:
         return [(self.variable(d.derivative), d) for d in self.variables if d.derivative is not None]
 
     def variant_variables(self, fmi_version: str, interface: str) -> list[Variable]:
-        return [v for v in self.variables if v.present_in(fmi_version, interface)]
+        return [v for v in self.variables if self.exposes(v, fmi_version, interface)]
+
+    def exposes(self, v: Variable, fmi_version: str, interface: str) -> bool:
+        """Whether ``v`` is in this variant's modelDescription.xml: derivatives are model
+        exchange's, and co-simulation's too where ``derivatives_in_cs`` says so."""
+        if v.derivative is not None and interface == "cs" and self.cs_derivatives:
+            return fmi_version in v.fmi_versions
+        return v.present_in(fmi_version, interface)

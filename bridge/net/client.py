@@ -200,7 +200,15 @@ class NodeClient:
         on (``bridge.net.node_start``); the node's JSON answer, or TransportError saying why not."""
         from bridge.net.node_start import encode_request
 
-        payload = encode_request(self.client_id, self.key, data)
+        return self._state_request(encode_request(self.client_id, self.key, data), "the state file")
+
+    def clear_state(self) -> dict[str, Any]:
+        """Drop the state sent to the node: its episodes start as its own experiment says again."""
+        from bridge.net.node_start import encode_clear
+
+        return self._state_request(encode_clear(self.client_id, self.key), "clearing its state")
+
+    def _state_request(self, payload: bytes, what: str) -> dict[str, Any]:
         key, limit = self.keys.state, proto.MAX_REQUEST_BYTES
         replies = self.session.get(key, payload=payload, target=query_target(), timeout=self.timeout_s)
         for reply in replies:
@@ -209,7 +217,7 @@ class NodeClient:
             if reply.ok is not None:
                 return proto.decode_json(reply.ok.payload.to_bytes(), "state reply", limit=limit)
             message = reply.err.payload.to_bytes().decode(errors="replace")
-            raise TransportError(f"node {self.name!r} refused the state file: {message} [{key}]")
+            raise TransportError(f"node {self.name!r} refused {what}: {message} [{key}]")
         raise TransportError(f"node {self.name!r} did not answer the state request [{key}]")
 
     def _session(self, plant: Plant, sample: Any, episode: int) -> proto.Frame:

@@ -140,6 +140,7 @@ class RemotePlant(Plant):
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._time_s = 0.0
+        self._pending_state: bytes | None = None  # sent after the first reset (take_over)
         try:
             self.client = NodeClient(
                 self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over, waiting=waiting
@@ -153,7 +154,13 @@ class RemotePlant(Plant):
                 check_experiment(experiment, self.info)
                 self.timing = timing(experiment, self.info)
             if experiment is not None:
-                _send_state_file(self.client, experiment)
+                data = _state_file_bytes(experiment)
+                if data is not None and take_over:
+                    # a node held by another client refuses a state from anyone but its holder:
+                    # the first reset takes the node over, then the state goes as its holder
+                    self._pending_state = data
+                elif data is not None:
+                    self.client.send_state(data)
         except BaseException:
             self.close()
             raise
@@ -168,7 +175,14 @@ class RemotePlant(Plant):
     def start_from(self, data: bytes) -> dict[str, Any]:
         """Hand the node a state file's bytes: its episodes start from that state from the next
         reset on (``bridge.net.node_start``)."""
+        self._pending_state = None
         return self.client.send_state(data)
+
+    def clear_start(self) -> dict[str, Any]:
+        """Drop the state sent to the node: from the next reset on its episodes start as its own
+        experiment says (its state file, else initialisation)."""
+        self._pending_state = None
+        return self.client.clear_state()
 
     @property
     def component(self) -> Component | None:
@@ -234,6 +248,10 @@ class RemotePlant(Plant):
         if inputs is not None:
             self._u[self._in_index] = inputs
         self._held = held = self._u.tolist()
+        if self._pending_state is not None:
+            self.client.reset(self, merged, held)  # takes the node over
+            self.client.send_state(self._pending_state)
+            self._pending_state = None
         frame = self.client.reset(self, merged, held)
         self._time_s = frame.sim_time_ns / 1e9
         return frame.values if self._all_outputs else frame.values[self._out_index]
@@ -325,10 +343,11 @@ def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, wh
     return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
 
 
-def _send_state_file(client: NodeClient, experiment: Experiment) -> None:
-    """``model.reset_policy: {state_file: ...}`` of a remote env's experiment: the node gets the
-    file from here, so the FMU's machine need not have it."""
+def _state_file_bytes(experiment: Experiment) -> bytes | None:
+    """``model.reset_policy: {state_file: ...}`` of a remote env's experiment, checked here first
+    (sizes, checksum): the node gets the file from here, so the FMU's machine need not have it."""
     path = resolve_state_file(experiment)
-    if path is not None:
-        saved = state_file.read(path)  # checked here first: sizes, checksum
-        client.send_state(state_file.encode(saved.header, saved.payload))
+    if path is None:
+        return None
+    saved = state_file.read(path)
+    return state_file.encode(saved.header, saved.payload)

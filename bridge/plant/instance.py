@@ -133,8 +133,9 @@ class FmuInstancePlant(Plant):
         detail = exc.detail if isinstance(exc, StepError) else str(exc)
         return self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, log=exc.log, **fields)
 
-    def start_from(self, file: StateFile, source: str) -> None:
-        """Start every episode from the next reset on at ``file``'s saved state (``Model.start_from``)."""
+    def start_from(self, file: StateFile | None, source: str) -> None:
+        """Start every episode from the next reset on at ``file``'s saved state (``Model.start_from``;
+        None: initialise again)."""
         self.model.start_from(file, source)
 
     def set_values(self, values: Mapping[str, Any]) -> None:

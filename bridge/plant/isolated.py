@@ -40,6 +40,7 @@ from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepE
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, check_experiment, resolve_fmu, timing
 from bridge.fmu import read_model_info
+from bridge.fmu.state_file import StateFile
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
 
 if TYPE_CHECKING:
@@ -105,6 +106,7 @@ class IsolatedFmuPlant(Plant):
         self._process: Any = None
         self._conn: Connection | None = None
         self._broken: PlantError | None = None
+        self._start_file: tuple[StateFile | None, str] | None = None  # given to every child
 
     # -- child life cycle ------------------------------------------------------------------------------
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
@@ -147,6 +149,8 @@ class IsolatedFmuPlant(Plant):
                 detail=exc.detail,
             ) from None
         self._rss_start = _rss_bytes(process.pid or 0)
+        if self._start_file is not None:  # a fresh child starts from the state it was given too
+            self._call(("start", *self._start_file), step=None)
 
     def _stop(self) -> None:
         process, conn = self._process, self._conn
@@ -220,6 +224,13 @@ class IsolatedFmuPlant(Plant):
 
     def set_values(self, values: Mapping[str, Any]) -> None:
         self._call(("set", dict(values)), step=self.sample)
+
+    def start_from(self, file: StateFile | None, source: str) -> None:
+        """The child starts every episode from the next reset on at ``file``'s saved state (None:
+        as the experiment says); a restarted child is given it again."""
+        if self._conn is not None and self._broken is None:
+            self._call(("start", file, source), step=None)
+        self._start_file = (file, source) if file is not None else None
 
     @property
     def unusable(self) -> str | None:
@@ -378,6 +389,9 @@ def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
         outputs = plant.reset(args[0], args[1])
     elif op == "set":
         plant.set_values(args[0])
+        outputs = np.zeros(0)
+    elif op == "start":
+        plant.start_from(args[0], args[1])
         outputs = np.zeros(0)
     else:  # "hello"
         outputs = np.zeros(0)

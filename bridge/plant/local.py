@@ -9,9 +9,10 @@ outputs, in one native call where the FMU allows it (``bridge.fmu.sample``), els
 from __future__ import annotations
 
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
-from bridge.fmu import read_model_info
+from bridge.experiment.validate import check_experiment, resolve_fmu, resolve_state_file, timing
+from bridge.fmu import read_model_info, state_file
 from bridge.fmu.exit_guard import guard_native_exit
+from bridge.fmu.state_file import StateFile
 from bridge.plant.experiment_model import experiment_model
 from bridge.plant.instance import FmuInstancePlant
 
@@ -32,6 +33,15 @@ class LocalFmuPlant(FmuInstancePlant):
         self.name = f"FMU {self.fmu_path.name} (in-process)"
         self.model = experiment_model(exp, self.fmu_path, t)
         guard_native_exit()  # an exit() inside the FMU ends the process with code 70, saying so
+
+    def start_from(self, file: StateFile | None, source: str) -> None:
+        """Start every episode from the next reset on at ``file``'s saved state; None: as the
+        experiment says (its ``reset_policy: {state_file: ...}``, else initialisation)."""
+        if file is None:
+            own = resolve_state_file(self.experiment)
+            if own is not None:
+                file, source = state_file.read(own), str(own)
+        self.model.start_from(file, source)
 
     def current_inputs(self) -> list[float]:
         """The input values the FMU holds now (in ``input_names`` order)."""

@@ -4,7 +4,13 @@ every episode from.
 
 The run is open loop: the experiment's parameters and start values, inputs held at their start
 values. "Settled" means that over the last ``window_s`` seconds no numeric output moved by more than
-``tol * max(1, |y|)``; the run gives up at ``max_time_s`` with an error saying how far it got.
+``tol * max(1, |y|)``, and that no continuous state would move by more than ``tol * max(1, |x|)``
+over a window at its derivative now: ``|dx/dt| * window_s <= tol * max(1, |x|)``. The derivatives
+are those the FMU offers: in model exchange every state's, from ``getDerivatives``
+(``getContinuousStateDerivatives`` in FMI 3.0) beside ``getContinuousStates``; in co-simulation
+(which has no such call) the derivative variables the model description's ``<Derivatives>`` lists,
+read by value reference with their states; where it lists none (or the FMU refuses to read them),
+the outputs alone. The run gives up at ``max_time_s`` with an error saying how far it got.
 """
 
 from __future__ import annotations
@@ -15,11 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bridge.errors import ConfigError, StateFileError
+from bridge.errors import BridgeError, ConfigError, StateFileError
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import Model, read_model_info, state_file
 from bridge.fmu.state_file import StateHeader
+from bridge.fmu.states import derivative_pairs
 from bridge.plant.experiment_model import experiment_model
 
 
@@ -32,6 +39,7 @@ class SavedRun:
     header: StateHeader
     outputs: dict[str, float]
     change: float | None = None
+    derivatives: str = ""  # what --steady watched besides the outputs ("" for --until)
 
 
 def save_state(
@@ -58,17 +66,19 @@ def save_state(
         m = experiment.model
         model.initialize({**m.parameters, **m.start_values})
         names = _outputs(model)
-        change = None
+        change, watched = None, ""
         if until_s is not None:
             steps = _steps_to(model, until_s)
             if steps > 0:
                 model.advance(steps)
         else:
-            change = _run_to_steady(model, names, tol, window_s, max_time_s)
+            slopes = _Derivatives(model)
+            watched = slopes.what
+            change = _run_to_steady(model, names, slopes, tol=tol, window_s=window_s, max_time_s=max_time_s)
         saved = model.state_file()
         state_file.write(output, saved)
         values = {n: float(v) for n, v in model.get(names).items()}
-    return SavedRun(Path(output), saved.header, values, change)
+    return SavedRun(Path(output), saved.header, values, change, watched)
 
 
 def _outputs(model: Model) -> list[str]:
@@ -91,9 +101,45 @@ def _steps_to(model: Model, until_s: float) -> int:
     return k
 
 
-def _run_to_steady(model: Model, names: list[str], tol: float, window_s: float, max_time_s: float) -> float:
-    if not names:
-        raise ConfigError(f"--steady: {model.info.model_name} has no numeric outputs to watch; use --until")
+class _Derivatives:
+    """The continuous states' derivatives the FMU offers (see the module's text), as the relative
+    move ``|dx/dt| * window / max(1, |x|)`` they would make over a window."""
+
+    def __init__(self, model: Model) -> None:
+        self.model, self.pairs = model, []
+        if model.interface == "me":
+            n = model.info.number_of_states
+            self.what = f"{n} state derivatives (model exchange)" if n else ""
+            return
+        try:
+            pairs = derivative_pairs(model)
+            if pairs:
+                model.get([name for pair in pairs for name in pair])  # readable at all?
+        except BridgeError:
+            pairs = []
+        self.pairs = pairs
+        self.what = ", ".join(d for d, _ in pairs)
+
+    def move(self, window_s: float) -> float:
+        if not self.what:
+            return 0.0
+        if self.model.interface == "me":
+            dx, x = self.model.derivatives(), self.model.continuous_states()
+        else:
+            values = self.model.get([name for pair in self.pairs for name in pair])
+            dx = np.array([float(values[d]) for d, _ in self.pairs])
+            x = np.array([float(values[s]) for _, s in self.pairs])
+        return float(np.max(np.abs(dx) * window_s / np.maximum(1.0, np.abs(x))))
+
+
+def _run_to_steady(
+    model: Model, names: list[str], slopes: _Derivatives, *, tol: float, window_s: float, max_time_s: float
+) -> float:
+    if not names and not slopes.what:
+        raise ConfigError(
+            f"--steady: {model.info.model_name} has no numeric outputs or state derivatives to watch; "
+            "use --until"
+        )
     window = max(1, round(window_s / model.step_size_s))
     limit = math.ceil(max_time_s / model.step_size_s)
     before = _values(model, names)
@@ -101,7 +147,8 @@ def _run_to_steady(model: Model, names: list[str], tol: float, window_s: float, 
     while model.step_index + window <= limit:
         stopped = model.advance(window)
         now = _values(model, names)
-        change = float(np.max(np.abs(now - before) / np.maximum(1.0, np.abs(now))))
+        moved = float(np.max(np.abs(now - before) / np.maximum(1.0, np.abs(now)))) if names else 0.0
+        change = max(moved, slopes.move(model.step_size_s * window))
         if change <= tol:
             return change
         if stopped:
@@ -109,7 +156,7 @@ def _run_to_steady(model: Model, names: list[str], tol: float, window_s: float, 
         before = now
     raise StateFileError(
         f"{model.info.model_name} did not settle by t = {model.time_s:g} s (--max-time {max_time_s:g}): "
-        f"the outputs still moved by "
+        f"the outputs moved (or the states would move at their derivatives) by "
         f"{change:.3g} (relative) over the last {window_s:g} s, more than --tol {tol:g}; raise "
         f"--max-time or --tol, or save at a time with --until"
     )

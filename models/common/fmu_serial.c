@@ -47,6 +47,10 @@ FmuStatus fmu_serialize(FmuInstance* inst, const char* fn, const FmuSnapshot* sn
 
 FmuStatus fmu_deserialize(FmuInstance* inst, const char* fn, const uint8_t* in, size_t size, FmuSnapshot** snap) {
     if (!serializable(inst, fn)) return FMU_ERROR;
+    if (MODEL_STATE_AFTER_INIT && inst->s.mode == MODE_INSTANTIATED) {
+        fmu_log_error(inst, "%s: this model reads a state only once initialised", fn);
+        return FMU_ERROR;
+    }
     SerialHeader header = {0, 0};
     if (in != NULL && size >= sizeof header) memcpy(&header, in, sizeof header);
     if (in == NULL || size != SERIAL_SIZE || header.magic != SERIAL_MAGIC ||

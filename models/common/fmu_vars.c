@@ -291,6 +291,10 @@ FmuStatus fmu_snapshot_restore(FmuInstance* inst, const char* fn, const FmuSnaps
         fmu_log_error(inst, "%s: the FMU state is NULL; pass a state returned by the get function", fn);
         return FMU_ERROR;
     }
+    if (MODEL_STATE_AFTER_INIT && inst->s.mode == MODE_INSTANTIATED) {
+        fmu_log_error(inst, "%s: this model takes a state only once initialised", fn);
+        return FMU_ERROR;
+    }
     fmu_free_owned(&inst->s.d);
     inst->s = *snap;
     inst->dirty = true;

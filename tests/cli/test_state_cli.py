@@ -17,7 +17,8 @@ from bridge.cli.main import _load_plugins, app
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError, StateFileError
 from bridge.experiment.config import load_experiment
-from bridge.fmu import state_file
+from bridge.fmu import Model, state_file
+from tests.conftest import example_fmu
 
 runner = CliRunner()
 _load_plugins()
@@ -159,3 +160,62 @@ def test_randomised_start_values_with_a_state_file_are_refused(tmp_path: Path) -
         pytest.raises(StateFileError, match="state file fixes every"),
     ):
         env.reset(seed=0)
+
+
+def test_batch_env_from_a_state_file_equals_the_single_env(tmp_path: Path) -> None:
+    """The batch plant's instances (stepped natively together) start from the state as FmuEnv does."""
+    import numpy as np
+
+    from bridge.env.batch import BatchEnv
+
+    exp = _experiment(tmp_path / "exp.yaml")
+    runner.invoke(app, ["state", "save", str(exp), "--until", "1.5", "-o", str(tmp_path / "s.state")])
+    use = _experiment(tmp_path / "use.yaml", reset_policy={"state_file": "s.state"})
+    actions = np.array([[0.5], [-0.25]], dtype=np.float32)
+    batch = BatchEnv(use, 2)
+    try:
+        rows = [batch.reset_all([1, 2])[0].copy()]
+        rows += [batch.step(actions)[0].copy() for _ in range(6)]
+    finally:
+        batch.close()
+    for i in range(2):
+        with FmuEnv(use) as env:
+            single = [env.reset(seed=i + 1)[0]] + [env.step(actions[i])[0] for _ in range(6)]
+        np.testing.assert_array_equal(np.array(rows)[:, i, :], np.array(single))
+
+
+ME_SLOPES = "1 state derivatives (model exchange)"
+
+
+@pytest.mark.parametrize(
+    ("model", "version", "interface", "watched"),
+    [
+        ("slow_init", "2.0", "me", ME_SLOPES),
+        ("slow_init", "3.0", "me", ME_SLOPES),
+        ("slow_init_late", "2.0", "cs", "der(T)"),  # co-simulation that lists <Derivatives>
+        ("slow_init", "3.0", "cs", ""),  # co-simulation without them: the outputs alone
+    ],
+)
+def test_steady_watches_the_state_derivatives_the_fmu_offers(
+    model: str, version: str, interface: str, watched: str, tmp_path: Path
+) -> None:
+    """Model exchange: every state's derivative (getDerivatives / getContinuousStateDerivatives);
+    co-simulation: the <Derivatives> variables read by value reference, where listed. The saved
+    state is the closed-form equilibrium, and its derivative is below the tolerance over a window."""
+    exp = _experiment(tmp_path / "exp.yaml", fmu=f"example:{model}:{version}:{interface}")
+    out = tmp_path / "steady.state"
+    args = ["state", "save", str(exp), "--steady", "--tol", "1e-9", "--window", "0.5", "-o", str(out)]
+    result = runner.invoke(app, [*args, "--json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["derivatives"] == watched
+    with Model(example_fmu(model, version, interface), step_size_s=0.05) as m:
+        m.start_from(state_file.read(out))
+        m.reset({"warmup_steps": 0})
+        T = m.get(["T"])["T"]
+        offered = m.derivatives()[0] if interface == "me" else m.get([watched])[watched] if watched else None
+    dT = T - 293.15
+    slope = (50.0 - dT - 0.001 * dT**3) / 20.0  # C dT/dt at the saved state, closed form
+    assert dT + 0.001 * dT**3 == pytest.approx(50.0, rel=1e-6)
+    assert abs(slope) * 0.5 <= 1e-9 * T
+    if offered is not None:
+        assert offered == pytest.approx(slope, abs=1e-12)

@@ -65,6 +65,8 @@ def test_typed_inputs_become_levels_inside_their_ranges_and_check_passes(
     """Before: every Int/Boolean input was a continuous action in [-1, 1] and the first step failed."""
     config = tmp_path / "e.yaml"
     config.write_text(starting_config(typed_fmu3, relative_to=tmp_path))
+    (policy_line,) = [line for line in config.read_text().splitlines() if "reset_policy:" in line]
+    assert "{state_file: PATH}" in policy_line  # the comment names every policy
     exp = load_experiment(config)
     info = check_experiment(exp, read_model_info(typed_fmu3))
     with FmuEnv(config) as env:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bridge.errors import FmuError, StateFileError
-from bridge.fmu import Model, state_file
+from bridge.fmu import Model, serial, state_file
 from tests.conftest import example_fmu
 
 VARIANTS = [("2.0", "cs"), ("2.0", "me"), ("3.0", "cs"), ("3.0", "me")]
@@ -197,8 +197,57 @@ def test_fmu_refuses_bytes_that_are_not_its_state(good: Path) -> None:
     """Bytes with a valid header and checksum that the FMU's own deserialiser refuses."""
     saved = state_file.read(good)
     payload = saved.payload[:-8]
-    header = dataclasses.replace(saved.header, size=len(payload), sha256=state_file.digest(payload))
     with Model(example_fmu("slow_init", "3.0", "cs"), step_size_s=0.05) as m:
-        m.start_from(state_file.StateFile(header, payload))
+        m.start_from(state_file.seal(saved.header, payload))
         with pytest.raises(FmuError, match="not a serialised state of slow_init"):
             m.reset()
+
+
+def test_mutated_files_are_refused_or_read_unchanged(good: Path) -> None:
+    """Random byte changes, cuts and insertions anywhere: every outcome is a StateFileError, or (a
+    change the format does not cover, such as JSON whitespace) the same header and state."""
+    data = good.read_bytes()
+    original = state_file.decode(data)
+    rng = np.random.default_rng(27)
+    refused = 0
+    for _ in range(2000):
+        mutated = bytearray(data)
+        at = int(rng.integers(0, len(data)))
+        kind = rng.integers(0, 3)
+        if kind == 0:
+            mutated[at] ^= 1 << int(rng.integers(0, 8))
+        elif kind == 1:
+            del mutated[at:]
+        else:
+            mutated[at:at] = bytes(rng.integers(0, 256, int(rng.integers(1, 9)), dtype=np.uint8))
+        try:
+            decoded = state_file.decode(bytes(mutated))
+        except StateFileError:
+            refused += 1
+            continue
+        assert decoded == original
+    assert refused > 1900
+
+
+@pytest.mark.parametrize(("version", "interface"), [("2.0", "cs"), ("3.0", "me")])
+def test_fmu_that_takes_a_state_only_once_initialised_is_initialised_first(
+    version: str, interface: str
+) -> None:
+    """slow_init_late refuses to deserialise or set a state before initialisation: the first reset
+    initialises it with the saving run's start values, then sets the state; the episodes still
+    equal the in-memory snapshot's bit for bit."""
+    fmu = example_fmu("slow_init_late", version, interface)
+    restored, continued, saved = _saved(fmu)
+    with Model(fmu, step_size_s=0.05) as m, pytest.raises(FmuError, match=r"(?i)deserializeFMUstate failed"):
+        serial.deserialize(m._backend, saved.payload)  # the refusal the fallback exists for
+    with Model(fmu, step_size_s=0.05) as m:
+        m.start_from(saved)
+        episodes = []
+        for _ in range(3):
+            m.reset(FAST)
+            assert m.time_s == saved.header.time_s
+            episodes.append(_episode(m, _powers(25)))
+        assert m._init_values == FAST  # initialised once, with the saved start values
+    for episode in episodes:
+        assert np.array_equal(episode, restored)
+    assert np.array_equal(restored, continued) and restored[-1, 1] != restored[0, 1]

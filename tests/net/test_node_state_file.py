@@ -15,7 +15,7 @@ import yaml
 
 from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import TransportError
+from bridge.errors import PlantDied, TransportError
 from bridge.experiment.config import load_experiment
 from bridge.fmu import Model
 from bridge.net import node_start
@@ -153,3 +153,108 @@ def test_node_refuses_foreign_cut_and_unauthenticated_states(
         with pytest.raises(BadRequest, match="JSON part claims"):
             node_start.take_state(node, b"\xff\xff\xff\xff{}")
         assert node.counters["states_taken"] == 1
+
+
+def _initialised_episode(tmp_path: Path) -> np.ndarray:
+    """The episode without a state: initialisation at t0 = 0 (the experiment's own start)."""
+    env = FmuEnv(_experiment(tmp_path, "init_reference"))
+    try:
+        return _env_episode(env)
+    finally:
+        env.close()
+
+
+def test_a_take_over_sends_its_state_as_the_new_holder(
+    loopback: Loopback, tmp_path: Path, saved: Path
+) -> None:
+    """A node held by another client refuses a state from anyone but its holder: an env opened
+    with take_over=True takes the node over first, then sends its state, then starts from it."""
+    served = _experiment(tmp_path, "held")
+    wanted = _experiment(tmp_path, "taker", reset_policy={"state_file": "s.state"})
+    with (
+        FmuNode(served, name="held", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
+        RemoteFmuEnv(served, "held", session=loopback.session, prefix=loopback.prefix, timeout_s=20) as first,
+    ):
+        first.reset(seed=0)  # the first env holds the node
+        with pytest.raises(TransportError, match="busy"):  # without take_over the node stays the first's
+            RemoteFmuEnv(wanted, "held", session=loopback.session, prefix=loopback.prefix, timeout_s=20)
+        assert node.counters["states_taken"] == 0
+        with RemoteFmuEnv(
+            wanted, "held", session=loopback.session, prefix=loopback.prefix, timeout_s=20, take_over=True
+        ) as taker:
+            for _ in range(2):
+                np.testing.assert_array_equal(_env_episode(taker), _snapshot_episode())
+        assert node.counters["states_taken"] == 1
+        assert node.lease.takeovers >= 1
+
+
+def test_an_isolated_node_takes_a_state_over_the_wire_and_clears_it(
+    loopback: Loopback, tmp_path: Path, saved: Path
+) -> None:
+    """The isolated node's child process gets the state: its episodes equal the in-memory
+    snapshot's bit for bit, also after the child is restarted; a clear goes back to initialisation."""
+    served = _experiment(tmp_path, "plain_isolated")
+    with (
+        FmuNode(served, name="iso", options=loopback.options(), prefix=loopback.prefix, isolate=True) as node,  # type: ignore[arg-type]
+        RemoteFmuEnv(served, "iso", session=loopback.session, prefix=loopback.prefix, timeout_s=60) as remote,
+    ):
+        assert node.isolated
+        answer = remote.start_from(saved)
+        assert answer["time_s"] == SAVED_AT and node.counters["states_taken"] == 1
+        reference = _snapshot_episode()
+        np.testing.assert_array_equal(_env_episode(remote), reference)
+        plant: Any = node.plant
+        plant._kill()  # the child dies (as a crashed FMU's would); the next reset starts a fresh one
+        plant._broken = PlantDied("killed by the test")
+        np.testing.assert_array_equal(_env_episode(remote), reference)
+        assert plant.restarts == 1
+        assert remote.clear_start() == {"cleared": True}
+        np.testing.assert_array_equal(_env_episode(remote), _initialised_episode(tmp_path))
+        assert node.counters["states_cleared"] == 1
+
+
+def test_clearing_a_sent_state_goes_back_to_the_experiments_own_start(
+    loopback: Loopback, tmp_path: Path, saved: Path
+) -> None:
+    other = save_state(
+        load_experiment(_experiment(tmp_path, "other_time")), tmp_path / "o.state", until_s=0.5
+    ).path
+    options: Any = loopback.options()
+    with (
+        FmuNode(_experiment(tmp_path, "p"), name="clr", options=options, prefix=loopback.prefix) as plain,
+        FmuNode(
+            _experiment(tmp_path, "own", reset_policy={"state_file": str(saved)}),
+            name="own_clr",
+            options=options,
+            prefix=loopback.prefix,
+        ),
+        RemoteFmuEnv(
+            _experiment(tmp_path, "c1"), "clr", session=loopback.session, prefix=loopback.prefix
+        ) as env,
+        RemoteFmuEnv(
+            _experiment(tmp_path, "c2"), "own_clr", session=loopback.session, prefix=loopback.prefix
+        ) as own,
+    ):
+        initialised = _initialised_episode(tmp_path)
+        env.start_from(saved.read_bytes())
+        np.testing.assert_array_equal(_env_episode(env), _snapshot_episode())
+        # held now: a clear must come from the holder's session
+        client: Any = env._remote.client
+        with pytest.raises(Refused, match="only the holder's session"):
+            node_start.take_state(plain, node_start.encode_clear(0, None))
+        with pytest.raises(Refused, match="only the holder's session"):
+            node_start.take_state(plain, node_start.encode_clear(client.client_id, b"\0" * proto.KEY_SIZE))
+        with pytest.raises(BadRequest, match="carries no state"):
+            node_start.take_state(plain, node_start.encode_clear(client.client_id, client.key) + b"x")
+        assert env.clear_start() == {"cleared": True}
+        for _ in range(2):
+            np.testing.assert_array_equal(_env_episode(env), initialised)
+        assert env.clear_start() == {"cleared": True}  # nothing to clear: still fine
+        np.testing.assert_array_equal(_env_episode(env), initialised)
+
+        # a node whose own experiment names a state file: a clear goes back to that one
+        own.start_from(other)
+        episode = _env_episode(own)
+        assert episode[0, 0] == 0.5
+        own.clear_start()
+        np.testing.assert_array_equal(_env_episode(own), _snapshot_episode())
