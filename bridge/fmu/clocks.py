@@ -60,11 +60,12 @@ class Timing:
 
 
 def clock_driver_needed(info: ModelInfo, interface: str) -> bool:
-    """Whether the instance runs its clocks: scheduled execution, or co-simulation in event mode
-    with at least one input clock."""
+    """Whether the instance runs its clocks: scheduled execution, or FMI 3.0 model exchange or
+    co-simulation in event mode with at least one input clock."""
     if interface == "se":
         return True
-    return interface == "cs" and info.has_event_mode and any(v.causality == "input" for v in info.clocks)
+    inputs = any(v.causality == "input" for v in info.clocks)
+    return inputs and (interface == "me" or (interface == "cs" and info.has_event_mode))
 
 
 class ClockDriver:
@@ -84,6 +85,11 @@ class ClockDriver:
         schedule: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self._backend, self.info, self.scheduled = backend, info, interface == "se"
+        self.me = interface == "me"
+        # model exchange: the model integrates [t0, t1] (True: termination) and restarts its
+        # integrator after an event at t with the FMU's next time event
+        self.integrate: Callable[[float, float], bool] | None = None
+        self.after_event: Callable[[float, float | None], None] | None = None
         self.inputs = sorted((v for v in info.clocks if v.causality == "input"), key=_priority)
         self.outputs = [v for v in info.clocks if v.causality == "output"]
         self._by_name = {v.name: v for v in self.inputs}
@@ -155,9 +161,10 @@ class ClockDriver:
         self.ticks.clear()
         if self.scheduled:
             self._tick(start_s, self._due(start_s))
-        else:
+        else:  # model exchange stays in event mode: the model's own start iterates and leaves it
             self._in_event = True
-            self._event(start_s, self._due(start_s))
+            self._event(start_s, self._due(start_s), leave=not self.me)
+            self._in_event = False  # model exchange: left by the model's start, right after this
         self._start_ticks = list(self.ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
         self._start_positions = dict(self._schedule_pos)
@@ -195,9 +202,17 @@ class ClockDriver:
             write()
             self._update_discrete_states()
         self._read_intervals(t, activated=set())
-        if not self.scheduled and not self.terminated:
-            self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        if self.scheduled or self.terminated:
+            return
+        if self.me:
+            self._call("fmi3EnterContinuousTimeMode", lambda: fmu.fmi3EnterContinuousTimeMode(component))
             self._in_event = False
+            next_event, self._fmu_event_s = self._fmu_event_s, None
+            if self.after_event is not None:
+                self.after_event(t, next_event)
+            return
+        self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        self._in_event = False
 
     # -- activation from outside ------------------------------------------------------------------
     def activate(self, name: str) -> None:
@@ -243,7 +258,13 @@ class ClockDriver:
         return DISCARD if self.terminated else OK
 
     def _do_step(self, t: float, h: float) -> int:
-        """``fmi3DoStep`` over ``[t, t + h]``; an event the FMU asks for at its end is handled there."""
+        """``fmi3DoStep`` over ``[t, t + h]``; an event the FMU asks for at its end is handled there.
+        Model exchange: the model's integrator over ``[t, t + h]``."""
+        if self.integrate is not None:
+            if self.integrate(t, t + h):
+                self.terminated = True
+                return DISCARD
+            return OK
         status: int = self._backend.do_step(t, h)
         if status <= WARNING and self._backend.event_handling_needed():
             self._time = t + h
@@ -295,7 +316,7 @@ class ClockDriver:
         return sorted(names, key=order.__getitem__)
 
     # -- co-simulation: event mode ----------------------------------------------------------------
-    def _event(self, t: float, names: list[str]) -> None:
+    def _event(self, t: float, names: list[str], *, leave: bool = True) -> None:
         fmu, component = self._backend.fmu, self._backend.component
         if not self._in_event:
             self._call("fmi3EnterEventMode", lambda: fmu.fmi3EnterEventMode(component))
@@ -309,9 +330,17 @@ class ClockDriver:
         self._advance(names)
         self._read_outputs(t)
         self._read_intervals(t, activated=set(names))
-        if not self.terminated:
-            self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        if self.terminated or not leave:
+            return
+        if self.me:
+            self._call("fmi3EnterContinuousTimeMode", lambda: fmu.fmi3EnterContinuousTimeMode(component))
             self._in_event = False
+            next_event, self._fmu_event_s = self._fmu_event_s, None  # the model's integrator has it
+            if self.after_event is not None:
+                self.after_event(t, next_event)
+            return
+        self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        self._in_event = False
 
     def _update_discrete_states(self) -> None:
         fmu, component = self._backend.fmu, self._backend.component

@@ -51,7 +51,7 @@ def test_a_clock_schedule_from_the_experiment_ticks_in_every_episode() -> None:
             assert counts == [0, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 3]
 
 
-@pytest.mark.parametrize("interface", ["cs", "se"])
+@pytest.mark.parametrize("interface", ["cs", "me", "se"])
 def test_the_agent_ticks_a_triggered_clock_with_an_action(interface: str) -> None:
     """actions.inputs may name a triggered input clock: [0, 1] by default, ticked above 0.5, at the
     start of the sample (the time the agent acted)."""
