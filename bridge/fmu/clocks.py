@@ -161,10 +161,11 @@ class ClockDriver:
         self.ticks.clear()
         if self.scheduled:
             self._tick(start_s, self._due(start_s))
-        else:  # model exchange stays in event mode: the model's own start iterates and leaves it
+        else:
             self._in_event = True
             self._event(start_s, self._due(start_s), leave=not self.me)
-            self._in_event = False  # model exchange: left by the model's start, right after this
+        if self.me:  # left by the model's own start, right after this, which takes the next time event
+            self._in_event, self._fmu_event_s = False, None
         self._start_ticks = list(self.ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
         self._start_positions = dict(self._schedule_pos)
