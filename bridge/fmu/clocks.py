@@ -96,6 +96,19 @@ class ClockDriver:
         self.triggered = {
             n for n, v in self._by_name.items() if v.clock and v.clock.interval_variability == "triggered"
         }
+        self._asked = [
+            (v, v.clock.interval_variability)
+            for v in self.inputs
+            if v.clock is not None
+            and (
+                v.clock.interval_variability in ("countdown", "changing")
+                or (v.clock.interval_variability == "tunable" and v.clock.interval_s is None)
+            )
+        ]
+        self._vr = {v.name: _vrs([v]) for v in info.clocks}  # one value reference per call
+        self._set_vrs: dict[tuple[str, ...], tuple[Any, Any]] = {}  # fmi3SetClock's arguments
+        self._interval_buf = ((fmi3.fmi3Float64 * 1)(), (fmi3.fmi3IntervalQualifier * 1)())
+        self._output_buf = (_vrs(self.outputs), (fmi3.fmi3Clock * len(self.outputs))())
         self._intervals = _check_intervals(info, self._by_name, intervals or {})
         self._schedule = _check_schedule(info, self._by_name, schedule or {})
         self.timing: dict[str, Timing] = {}
@@ -323,8 +336,13 @@ class ClockDriver:
             self._call("fmi3EnterEventMode", lambda: fmu.fmi3EnterEventMode(component))
             self._in_event = True
         if names:
-            variables = [self._by_name[n] for n in names]
-            vrs, values = _vrs(variables), (fmi3.fmi3Clock * len(names))(*([True] * len(names)))
+            key = tuple(names)
+            arguments = self._set_vrs.get(key)
+            if arguments is None:
+                variables = [self._by_name[n] for n in names]
+                arguments = _vrs(variables), (fmi3.fmi3Clock * len(names))(*([True] * len(names)))
+                self._set_vrs[key] = arguments
+            vrs, values = arguments
             self._call("fmi3SetClock", lambda: fmu.fmi3SetClock(component, vrs, len(names), values))
         self._update_discrete_states()
         self._log(t, names)
@@ -402,19 +420,15 @@ class ClockDriver:
         if not self.outputs:
             return
         fmu, component = self._backend.fmu, self._backend.component
-        vrs, values = _vrs(self.outputs), (fmi3.fmi3Clock * len(self.outputs))()
+        vrs, values = self._output_buf
         self._call("fmi3GetClock", lambda: fmu.fmi3GetClock(component, vrs, len(self.outputs), values))
         self._log(t, [v.name for v, active in zip(self.outputs, values, strict=True) if active])
 
     def _read_intervals(self, t: float, activated: set[str]) -> None:
-        for var in self.inputs:
-            timing = self.timing.get(var.name)
-            if timing is None:
-                continue
-            kind = var.clock.interval_variability if var.clock else ""
-            asked = kind == "countdown" or (kind == "changing" and var.name in activated)
-            asked |= kind == "tunable" and var.clock is not None and var.clock.interval_s is None
-            if not asked:
+        """The intervals FMI 3.0 says to ask for at an event: countdown clocks always, tunable clocks
+        whose interval the FMU computes, changing clocks that just ticked."""
+        for var, kind in self._asked:
+            if kind == "changing" and var.name not in activated:
                 continue
             interval, qualifier = self._interval(var)
             if qualifier != CHANGED:
@@ -427,7 +441,7 @@ class ClockDriver:
     # -- FMI calls -----------------------------------------------------------------------------------
     def _interval(self, var: Variable) -> tuple[float, int]:
         fmu, component = self._backend.fmu, self._backend.component
-        vrs, interval, qualifier = _vrs([var]), (fmi3.fmi3Float64 * 1)(), (fmi3.fmi3IntervalQualifier * 1)()
+        vrs, (interval, qualifier) = self._vr[var.name], self._interval_buf
         self._call(
             f"fmi3GetIntervalDecimal({var.name})",
             lambda: fmu.fmi3GetIntervalDecimal(component, vrs, 1, interval, qualifier),
@@ -443,7 +457,16 @@ class ClockDriver:
         return float(shift[0])
 
     def _call(self, what: str, fn: Callable[[], Any]) -> Any:
-        return self._backend.call(f"{what} at t={self._time:g} s", fn)
+        """An FMI call; FMPy's exceptions become :class:`FmuError` with the time and the FMU's log."""
+        try:
+            return fn()
+        except FmuError:
+            raise
+        except Exception as exc:
+            raise FmuError(
+                f"{self.info.model_name}: {what} at t={self._time:g} s failed ({exc})",
+                log=self._backend.log.recent(),
+            ) from exc
 
     def _log(self, t: float, names: Iterable[str]) -> None:
         for name in names:
