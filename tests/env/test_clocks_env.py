@@ -12,6 +12,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from bridge.env.batch import BatchEnv
 from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError
 from bridge.experiment.config import parse_experiment
 from bridge.models.clocked import clocks_fmu
 
@@ -93,3 +94,16 @@ def test_a_batch_of_clocked_fmus_equals_single_envs(interface: str) -> None:
             env.reset(seed=i)
             single = [env.step(a[i])[0] for a in actions]
         np.testing.assert_array_equal(np.array(batched)[:, i], np.array(single))
+
+
+def test_clock_settings_the_fmu_cannot_take_are_refused_when_the_env_opens() -> None:
+    bad = _experiment("cs", clock_schedule={"c_const": [0.5]})
+    with pytest.raises(ConfigError, match=r"clock_schedule names 'c_const'.*\['trigger'\]"):
+        FmuEnv(parse_experiment(bad))
+    no_clocks = _experiment("cs", clock_intervals={"c_fixed": 0.2})
+    no_clocks["model"]["fmu"] = "example:feedthrough:3.0"
+    no_clocks["actions"] = {"inputs": ["u"], "low": {"u": -1.0}, "high": {"u": 1.0}}
+    no_clocks["observations"] = {"outputs": ["y"]}
+    no_clocks["reward"] = {"expression": "-abs(y)"}
+    with pytest.raises(ConfigError, match=r"clock_intervals and clock_schedule need FMI 3.0 input clocks"):
+        FmuEnv(parse_experiment(no_clocks))
