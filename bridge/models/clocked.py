@@ -84,7 +84,9 @@ def model_description(interface: str) -> str:
         '<Float64 name="tunable_period" valueReference="26" causality="parameter" variability="tunable" '
         'start="0.5" description="interval of c_tunable"/>',
         '<Float64 name="alarm_time" valueReference="27" causality="parameter" variability="fixed" '
-        'start="1.737" description="co-simulation: the FMU\'s own time event"/>',
+        'start="1.737" description="the FMU\'s own time event"/>',
+        '<Float64 name="announce_alarm" valueReference="29" causality="parameter" variability="fixed" '
+        'start="1" description="1: the FMU announces alarm_time as its next event time; 0: it does not"/>',
         '<Float64 name="t_alarm" valueReference="49" causality="output" variability="discrete" '
         'description="when the time event was handled (-1 before)"/>',
     ]

@@ -21,8 +21,9 @@
  *   trigger     triggered input: whenever the importer activates it
  *   c_out       triggered output: at every second c_const tick
  * Clocked outputs n_<clock> count each clock's ticks and t_<clock> hold the time of the last one.
- * Co-simulation only: a time event of the FMU's own at alarm_time (announced as nextEventTime, and
- * with eventHandlingNeeded by a doStep that passes it) sets t_alarm to the time it was handled at. */
+ * Co-simulation and model exchange: a time event of the FMU's own at alarm_time (announced as
+ * nextEventTime unless announce_alarm is 0; co-simulation: eventHandlingNeeded from the doStep that
+ * passes it) sets t_alarm to the time it was handled at. */
 #include "fmi3Functions.h"
 
 #include <math.h>
@@ -39,6 +40,7 @@ enum { C_CTRL = 1, C_CONST, C_FIXED, C_CALC, C_TUNABLE, C_CHANGING, C_COUNTDOWN,
 #define N_INPUT_CLOCKS 8 /* value references 1..8; c_out is 9 */
 /* Float64 value references */
 enum { VR_TIME = 0, VR_X = 20, VR_U, VR_R, VR_GAIN, VR_X0, VR_PERIOD, VR_TUNABLE_PERIOD, VR_ALARM_TIME };
+#define VR_ANNOUNCE_ALARM 29
 #define VR_T_ALARM 49
 #define VR_DER_X 28
 #define VR_N_FIRST 31 /* Int32 n_<clock>: 31..39 (c_ctrl .. c_out) */
@@ -49,7 +51,7 @@ typedef enum { INSTANTIATED, INITIALIZATION, EVENT, STEP, CONTINUOUS, CLOCK_ACTI
 typedef struct {
     double time;
     Mode mode;
-    double x, u, r, gain, x0, period, tunable_period, fixed_interval, alarm_time, t_alarm;
+    double x, u, r, gain, x0, period, tunable_period, fixed_interval, alarm_time, t_alarm, announce_alarm;
     bool alarm_fired;
     bool active[N_INPUT_CLOCKS + 2];
     bool out_clock;
@@ -93,6 +95,7 @@ static void set_start_values(State* s) {
     s->r = 1.0;
     s->alarm_time = 1.737;
     s->t_alarm = -1.0;
+    s->announce_alarm = 1.0;
 }
 
 static fmi3Instance instantiate(fmi3String name, fmi3String token, fmi3InstanceEnvironment env,
@@ -276,6 +279,7 @@ static double* float_ref(State* s, fmi3ValueReference vr) {
         case VR_TUNABLE_PERIOD: return &s->tunable_period;
         case VR_ALARM_TIME: return &s->alarm_time;
         case VR_T_ALARM: return &s->t_alarm;
+        case VR_ANNOUNCE_ALARM: return &s->announce_alarm;
         case VR_DER_X: return NULL; /* computed: see fmi3GetFloat64 */
         default:
             if (vr >= VR_T_FIRST && vr < VR_T_FIRST + N_INPUT_CLOCKS) return &s->t_last[vr - VR_T_FIRST + 1];
@@ -313,7 +317,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
             REQUIRE(values[k] > 0, "tunable_period must be > 0, got %g", values[k]);
             if (values[k] != s->tunable_period) s->tunable_qualifier = fmi3IntervalChanged;
             s->tunable_period = values[k];
-        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD || v == VR_ALARM_TIME) && init) {
+        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD || v == VR_ALARM_TIME || v == VR_ANNOUNCE_ALARM) && init) {
             *float_ref(s, v) = values[k];
         } else {
             REQUIRE(false, "fmi3SetFloat64: %u cannot be set now (mode %d)", v, (int)s->mode);
@@ -378,7 +382,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean* discrete
     *terminateSimulation = false;
     *nominalsOfContinuousStatesChanged = false;
     *valuesOfContinuousStatesChanged = false;
-    *nextEventTimeDefined = !c->s.alarm_fired;
+    *nextEventTimeDefined = !c->s.alarm_fired && c->s.announce_alarm != 0.0;
     *nextEventTime = c->s.alarm_fired ? 0.0 : c->s.alarm_time;
     return fmi3OK;
 }

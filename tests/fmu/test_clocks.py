@@ -221,3 +221,12 @@ def test_the_fmus_own_time_event_splits_the_step_where_it_says(interface: str) -
         model.advance(1)  # 1.5 -> 1.75 s, split at 1.737 s
         assert model.get(["t_alarm"])["t_alarm"] == pytest.approx(1.737, abs=1e-12)
         assert _ticks(model)["c_ctrl"][-1] == pytest.approx(1.7)  # the clocks' grid is unchanged
+
+
+def test_an_event_the_fmu_did_not_announce_is_handled_at_the_end_of_the_step() -> None:
+    """Co-simulation: a doStep that passes the FMU's unannounced time event returns
+    eventHandlingNeeded; the event is handled at the end of that step (1.75 s)."""
+    with Model(clocks_fmu("cs"), step_size_s=0.25) as model:
+        model.reset({"alarm_time": 1.737, "announce_alarm": 0.0})
+        model.advance(7)
+        assert model.get(["t_alarm"])["t_alarm"] == pytest.approx(1.75, abs=1e-12)
