@@ -60,11 +60,12 @@ class Timing:
 
 
 def clock_driver_needed(info: ModelInfo, interface: str) -> bool:
-    """Whether the instance runs its clocks: scheduled execution, or co-simulation in event mode
-    with at least one input clock."""
+    """Whether the instance runs its clocks: scheduled execution, or FMI 3.0 model exchange or
+    co-simulation in event mode with at least one input clock."""
     if interface == "se":
         return True
-    return interface == "cs" and info.has_event_mode and any(v.causality == "input" for v in info.clocks)
+    inputs = any(v.causality == "input" for v in info.clocks)
+    return inputs and (interface == "me" or (interface == "cs" and info.has_event_mode))
 
 
 class ClockDriver:
@@ -84,12 +85,30 @@ class ClockDriver:
         schedule: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self._backend, self.info, self.scheduled = backend, info, interface == "se"
+        self.me = interface == "me"
+        # model exchange: the model integrates [t0, t1] (True: termination) and restarts its
+        # integrator after an event at t with the FMU's next time event
+        self.integrate: Callable[[float, float], bool] | None = None
+        self.after_event: Callable[[float, float | None], None] | None = None
         self.inputs = sorted((v for v in info.clocks if v.causality == "input"), key=_priority)
         self.outputs = [v for v in info.clocks if v.causality == "output"]
         self._by_name = {v.name: v for v in self.inputs}
         self.triggered = {
             n for n, v in self._by_name.items() if v.clock and v.clock.interval_variability == "triggered"
         }
+        self._asked = [
+            (v, v.clock.interval_variability)
+            for v in self.inputs
+            if v.clock is not None
+            and (
+                v.clock.interval_variability in ("countdown", "changing")
+                or (v.clock.interval_variability == "tunable" and v.clock.interval_s is None)
+            )
+        ]
+        self._vr = {v.name: _vrs([v]) for v in info.clocks}  # one value reference per call
+        self._set_vrs: dict[tuple[str, ...], tuple[Any, Any]] = {}  # fmi3SetClock's arguments
+        self._interval_buf = ((fmi3.fmi3Float64 * 1)(), (fmi3.fmi3IntervalQualifier * 1)())
+        self._output_buf = (_vrs(self.outputs), (fmi3.fmi3Clock * len(self.outputs))())
         self._intervals = _check_intervals(info, self._by_name, intervals or {})
         self._schedule = _check_schedule(info, self._by_name, schedule or {})
         self.timing: dict[str, Timing] = {}
@@ -157,7 +176,9 @@ class ClockDriver:
             self._tick(start_s, self._due(start_s))
         else:
             self._in_event = True
-            self._event(start_s, self._due(start_s))
+            self._event(start_s, self._due(start_s), leave=not self.me)
+        if self.me:  # left by the model's own start, right after this, which takes the next time event
+            self._in_event, self._fmu_event_s = False, None
         self._start_ticks = list(self.ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
         self._start_positions = dict(self._schedule_pos)
@@ -195,9 +216,17 @@ class ClockDriver:
             write()
             self._update_discrete_states()
         self._read_intervals(t, activated=set())
-        if not self.scheduled and not self.terminated:
-            self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        if self.scheduled or self.terminated:
+            return
+        if self.me:
+            self._call("fmi3EnterContinuousTimeMode", lambda: fmu.fmi3EnterContinuousTimeMode(component))
             self._in_event = False
+            next_event, self._fmu_event_s = self._fmu_event_s, None
+            if self.after_event is not None:
+                self.after_event(t, next_event)
+            return
+        self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        self._in_event = False
 
     # -- activation from outside ------------------------------------------------------------------
     def activate(self, name: str) -> None:
@@ -243,7 +272,13 @@ class ClockDriver:
         return DISCARD if self.terminated else OK
 
     def _do_step(self, t: float, h: float) -> int:
-        """``fmi3DoStep`` over ``[t, t + h]``; an event the FMU asks for at its end is handled there."""
+        """``fmi3DoStep`` over ``[t, t + h]``; an event the FMU asks for at its end is handled there.
+        Model exchange: the model's integrator over ``[t, t + h]``."""
+        if self.integrate is not None:
+            if self.integrate(t, t + h):
+                self.terminated = True
+                return DISCARD
+            return OK
         status: int = self._backend.do_step(t, h)
         if status <= WARNING and self._backend.event_handling_needed():
             self._time = t + h
@@ -295,23 +330,36 @@ class ClockDriver:
         return sorted(names, key=order.__getitem__)
 
     # -- co-simulation: event mode ----------------------------------------------------------------
-    def _event(self, t: float, names: list[str]) -> None:
+    def _event(self, t: float, names: list[str], *, leave: bool = True) -> None:
         fmu, component = self._backend.fmu, self._backend.component
         if not self._in_event:
             self._call("fmi3EnterEventMode", lambda: fmu.fmi3EnterEventMode(component))
             self._in_event = True
         if names:
-            variables = [self._by_name[n] for n in names]
-            vrs, values = _vrs(variables), (fmi3.fmi3Clock * len(names))(*([True] * len(names)))
+            key = tuple(names)
+            arguments = self._set_vrs.get(key)
+            if arguments is None:
+                variables = [self._by_name[n] for n in names]
+                arguments = _vrs(variables), (fmi3.fmi3Clock * len(names))(*([True] * len(names)))
+                self._set_vrs[key] = arguments
+            vrs, values = arguments
             self._call("fmi3SetClock", lambda: fmu.fmi3SetClock(component, vrs, len(names), values))
         self._update_discrete_states()
         self._log(t, names)
         self._advance(names)
         self._read_outputs(t)
         self._read_intervals(t, activated=set(names))
-        if not self.terminated:
-            self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        if self.terminated or not leave:
+            return
+        if self.me:
+            self._call("fmi3EnterContinuousTimeMode", lambda: fmu.fmi3EnterContinuousTimeMode(component))
             self._in_event = False
+            next_event, self._fmu_event_s = self._fmu_event_s, None  # the model's integrator has it
+            if self.after_event is not None:
+                self.after_event(t, next_event)
+            return
+        self._call("fmi3EnterStepMode", lambda: fmu.fmi3EnterStepMode(component))
+        self._in_event = False
 
     def _update_discrete_states(self) -> None:
         fmu, component = self._backend.fmu, self._backend.component
@@ -372,19 +420,15 @@ class ClockDriver:
         if not self.outputs:
             return
         fmu, component = self._backend.fmu, self._backend.component
-        vrs, values = _vrs(self.outputs), (fmi3.fmi3Clock * len(self.outputs))()
+        vrs, values = self._output_buf
         self._call("fmi3GetClock", lambda: fmu.fmi3GetClock(component, vrs, len(self.outputs), values))
         self._log(t, [v.name for v, active in zip(self.outputs, values, strict=True) if active])
 
     def _read_intervals(self, t: float, activated: set[str]) -> None:
-        for var in self.inputs:
-            timing = self.timing.get(var.name)
-            if timing is None:
-                continue
-            kind = var.clock.interval_variability if var.clock else ""
-            asked = kind == "countdown" or (kind == "changing" and var.name in activated)
-            asked |= kind == "tunable" and var.clock is not None and var.clock.interval_s is None
-            if not asked:
+        """The intervals FMI 3.0 says to ask for at an event: countdown clocks always, tunable clocks
+        whose interval the FMU computes, changing clocks that just ticked."""
+        for var, kind in self._asked:
+            if kind == "changing" and var.name not in activated:
                 continue
             interval, qualifier = self._interval(var)
             if qualifier != CHANGED:
@@ -397,7 +441,7 @@ class ClockDriver:
     # -- FMI calls -----------------------------------------------------------------------------------
     def _interval(self, var: Variable) -> tuple[float, int]:
         fmu, component = self._backend.fmu, self._backend.component
-        vrs, interval, qualifier = _vrs([var]), (fmi3.fmi3Float64 * 1)(), (fmi3.fmi3IntervalQualifier * 1)()
+        vrs, (interval, qualifier) = self._vr[var.name], self._interval_buf
         self._call(
             f"fmi3GetIntervalDecimal({var.name})",
             lambda: fmu.fmi3GetIntervalDecimal(component, vrs, 1, interval, qualifier),
@@ -413,7 +457,16 @@ class ClockDriver:
         return float(shift[0])
 
     def _call(self, what: str, fn: Callable[[], Any]) -> Any:
-        return self._backend.call(f"{what} at t={self._time:g} s", fn)
+        """An FMI call; FMPy's exceptions become :class:`FmuError` with the time and the FMU's log."""
+        try:
+            return fn()
+        except FmuError:
+            raise
+        except Exception as exc:
+            raise FmuError(
+                f"{self.info.model_name}: {what} at t={self._time:g} s failed ({exc})",
+                log=self._backend.log.recent(),
+            ) from exc
 
     def _log(self, t: float, names: Iterable[str]) -> None:
         for name in names:

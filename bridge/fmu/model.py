@@ -306,12 +306,12 @@ class Model:
                 raise VariableError(_not_settable_in_step(var, self.info))
         variables = list(dict.fromkeys(var for var, _ in elements.values()))
         flat = access.merge(self._backend, elements, values, self._to_c, self._where)
-        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
-            self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
-            return
         clocks = self._clocks
         if clocks is not None and self._initialized and any(v.variability != "continuous" for v in variables):
             clocks.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
+            return
+        if self.interface == "me" and any(v.variability != "continuous" for v in variables):
+            self.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
             return
         access.write(self._backend, variables, flat, self._where)
         if self.interface == "me":
@@ -411,7 +411,7 @@ class Model:
             if self._me is not None:
                 self._me.restart(self.start_time_s)
                 self._me.next_event_s = next_event_s
-            elif self._clocks is not None:
+            if self._clocks is not None:
                 self._clocks.rewind(self.start_time_s)
             return
         policy = self.reset_policy
@@ -476,10 +476,10 @@ class Model:
         if self._clocks is not None:
             self._clocks.configure(self.start_time_s)
         self._backend.exit_initialization()
+        if self._clocks is not None:  # model exchange: the clocks due at the start, in event mode
+            self._clocks.start(self.start_time_s)
         if self.interface == "me":
             self._start_me()
-        if self._clocks is not None:
-            self._clocks.start(self.start_time_s)
         self._initialized = True
         self._init_failed = False
         self._failed_status = 0
@@ -783,6 +783,8 @@ class Model:
 
     def _advance_me(self, n: int) -> bool:
         assert self._me is not None  # guarded by the caller
+        if self._clocks is not None:
+            return self._advance_clocked_me(n)
         start = self.time_s
         end = self.start_time_s + (self.step_index + n) * self.step_size_s
         # Inputs are held piecewise constant: restart the integrator only where they may have jumped.
@@ -791,6 +793,27 @@ class Model:
         self.step_index += n
         self.terminated = terminated
         return terminated
+
+    def _advance_clocked_me(self, n: int) -> bool:
+        """Model exchange with clocks: each FMU step integrated between the clocks' ticks."""
+        clocks, me = self._clocks, self._me
+        assert clocks is not None and me is not None  # guarded by the caller
+
+        def integrate(t0: float, t1: float) -> bool:
+            restart, self._inputs_dirty = self._inputs_dirty, False
+            return me.advance(t0, t1, self.step_index, restart=restart)
+
+        def after_event(t: float, next_event_s: float | None) -> None:
+            me.restart(t)
+            me.next_event_s = next_event_s
+
+        clocks.integrate, clocks.after_event = integrate, after_event
+        for _ in range(n):
+            status = clocks.step(self.time_s, self.step_size_s)
+            if status > WARNING:
+                return self._step_failed(status)
+            self.step_index += 1
+        return False
 
     def _step_failed(self, status: int) -> bool:
         stopped = self._clocks.terminated if self._clocks is not None else False

@@ -1,4 +1,4 @@
-"""``clocks3``: our FMI 3.0 clock model, built as a co-simulation (event mode) or a scheduled-execution FMU.
+"""``clocks3``: our FMI 3.0 clock model, as a co-simulation (event mode), ME or scheduled-execution FMU.
 
 Unlike the ``model.json`` models, ``models/clocks3/clocks3.c`` implements the FMI 3.0 functions itself
 (event mode, ``fmi3SetClock``, intervals and shifts, ``fmi3ActivateModelPartition``), since the shared C
@@ -22,7 +22,7 @@ from bridge.models.sources import models_root
 
 NAME: Final = "clocks3"
 TOKEN: Final = "{5f0c1c3e-0c1f-4c55-9a0e-c10c4b3c1a03}"
-VARIANTS: Final = ("cs", "se")
+VARIANTS: Final = ("cs", "me", "se")
 
 # (name, value reference, XML attributes): one input Clock of each time-based kind, a triggered input
 # and a triggered output Clock. The value references are those of clocks3.c.
@@ -49,12 +49,15 @@ _DESCRIPTIONS: Final = {
 
 
 def model_description(interface: str) -> str:
-    """``modelDescription.xml`` of the co-simulation (``"cs"``) or scheduled-execution (``"se"``) archive."""
+    """``modelDescription.xml`` of the co-simulation (``"cs"``), model-exchange (``"me"``) or
+    scheduled-execution (``"se"``) archive."""
     if interface == "cs":
         element = (
             f'<CoSimulation modelIdentifier="{NAME}" canHandleVariableCommunicationStepSize="true" '
             f'hasEventMode="true" canGetAndSetFMUState="true"/>'
         )
+    elif interface == "me":
+        element = f'<ModelExchange modelIdentifier="{NAME}" canGetAndSetFMUState="true"/>'
     else:
         element = f'<ScheduledExecution modelIdentifier="{NAME}" canGetAndSetFMUState="true"/>'
     variables = ['<Float64 name="time" valueReference="0" causality="independent" variability="continuous"/>']
@@ -81,10 +84,17 @@ def model_description(interface: str) -> str:
         '<Float64 name="tunable_period" valueReference="26" causality="parameter" variability="tunable" '
         'start="0.5" description="interval of c_tunable"/>',
         '<Float64 name="alarm_time" valueReference="27" causality="parameter" variability="fixed" '
-        'start="1.737" description="co-simulation: the FMU\'s own time event"/>',
+        'start="1.737" description="the FMU\'s own time event"/>',
+        '<Float64 name="announce_alarm" valueReference="29" causality="parameter" variability="fixed" '
+        'start="1" description="1: the FMU announces alarm_time as its next event time; 0: it does not"/>',
         '<Float64 name="t_alarm" valueReference="49" causality="output" variability="discrete" '
         'description="when the time event was handled (-1 before)"/>',
     ]
+    if interface == "me":
+        variables.append(
+            '<Float64 name="der(x)" valueReference="28" causality="local" variability="continuous" '
+            'derivative="20"/>'
+        )
     names = [name for name, _, _ in _CLOCKS]
     for i, name in enumerate(names):
         variables.append(
@@ -102,6 +112,9 @@ def model_description(interface: str) -> str:
         )
     outputs = [9, 20, 21, *range(31, 40), *range(41, 50)]
     structure = "\n    ".join(f'<Output valueReference="{vr}"/>' for vr in outputs)
+    if interface == "me":
+        structure += '\n    <ContinuousStateDerivative valueReference="28"/>'
+
     body = "\n    ".join(variables)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="3.0" modelName="{NAME}" instantiationToken="{TOKEN}"
@@ -119,7 +132,8 @@ def model_description(interface: str) -> str:
 
 
 def clocks_fmu(interface: str = "cs", *, rebuild: bool = False) -> Path:
-    """Path of the ``clocks3`` archive for ``interface`` (``"cs"`` or ``"se"``), building it if needed.
+    """Path of the ``clocks3`` archive for ``interface`` (``"cs"``, ``"me"`` or ``"se"``), building it
+    if needed.
 
     Raises:
         ConfigError: ``interface`` is neither.

@@ -2,7 +2,8 @@
  * a triggered output Clock and a clocked controller, for co-simulation with event mode and for
  * scheduled execution (the same binary; modelDescription.xml says which interface an archive offers).
  *
- * Plant: x' = -x + u, integrated exactly (u is held between the controller's ticks).
+ * Plant: x' = -x + u, integrated exactly in co-simulation and scheduled execution (u is held between
+ * the controller's ticks); in model exchange the importer integrates it (state x, derivative der(x)).
  * Controller (Clock c_ctrl, constant, every 0.1 s from 0): u := gain * (r - x).
  *
  * Clocks and their ticks (t_start = 0, all closed forms):
@@ -20,8 +21,9 @@
  *   trigger     triggered input: whenever the importer activates it
  *   c_out       triggered output: at every second c_const tick
  * Clocked outputs n_<clock> count each clock's ticks and t_<clock> hold the time of the last one.
- * Co-simulation only: a time event of the FMU's own at alarm_time (announced as nextEventTime, and
- * with eventHandlingNeeded by a doStep that passes it) sets t_alarm to the time it was handled at. */
+ * Co-simulation and model exchange: a time event of the FMU's own at alarm_time (announced as
+ * nextEventTime unless announce_alarm is 0; co-simulation: eventHandlingNeeded from the doStep that
+ * passes it) sets t_alarm to the time it was handled at. */
 #include "fmi3Functions.h"
 
 #include <math.h>
@@ -38,16 +40,18 @@ enum { C_CTRL = 1, C_CONST, C_FIXED, C_CALC, C_TUNABLE, C_CHANGING, C_COUNTDOWN,
 #define N_INPUT_CLOCKS 8 /* value references 1..8; c_out is 9 */
 /* Float64 value references */
 enum { VR_TIME = 0, VR_X = 20, VR_U, VR_R, VR_GAIN, VR_X0, VR_PERIOD, VR_TUNABLE_PERIOD, VR_ALARM_TIME };
+#define VR_ANNOUNCE_ALARM 29
 #define VR_T_ALARM 49
+#define VR_DER_X 28
 #define VR_N_FIRST 31 /* Int32 n_<clock>: 31..39 (c_ctrl .. c_out) */
 #define VR_T_FIRST 41 /* Float64 t_<clock>: 41..48 (c_ctrl .. trigger) */
 
-typedef enum { INSTANTIATED, INITIALIZATION, EVENT, STEP, CLOCK_ACTIVATION, TERMINATED } Mode;
+typedef enum { INSTANTIATED, INITIALIZATION, EVENT, STEP, CONTINUOUS, CLOCK_ACTIVATION, TERMINATED } Mode;
 
 typedef struct {
     double time;
     Mode mode;
-    double x, u, r, gain, x0, period, tunable_period, fixed_interval, alarm_time, t_alarm;
+    double x, u, r, gain, x0, period, tunable_period, fixed_interval, alarm_time, t_alarm, announce_alarm;
     bool alarm_fired;
     bool active[N_INPUT_CLOCKS + 2];
     bool out_clock;
@@ -91,6 +95,7 @@ static void set_start_values(State* s) {
     s->r = 1.0;
     s->alarm_time = 1.737;
     s->t_alarm = -1.0;
+    s->announce_alarm = 1.0;
 }
 
 static fmi3Instance instantiate(fmi3String name, fmi3String token, fmi3InstanceEnvironment env,
@@ -160,10 +165,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
                                           fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    (void)instanceName; (void)instantiationToken; (void)resourcePath; (void)visible; (void)loggingOn;
-    if (logMessage != NULL)
-        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "clocks3 has no model-exchange interface");
-    return NULL;
+    (void)resourcePath; (void)visible; (void)loggingOn;
+    return instantiate(instanceName, instantiationToken, instanceEnvironment, logMessage, false, NULL);
 }
 
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
@@ -236,7 +239,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
 
 fmi3Status fmi3EnterEventMode(fmi3Instance instance) {
     INST;
-    REQUIRE(c->s.mode == STEP, "fmi3EnterEventMode: only from step mode");
+    REQUIRE(c->s.mode == STEP || c->s.mode == CONTINUOUS, "fmi3EnterEventMode: only from step or continuous-time mode");
     c->s.mode = EVENT;
     c->s.evaluated = false;
     return fmi3OK;
@@ -276,6 +279,8 @@ static double* float_ref(State* s, fmi3ValueReference vr) {
         case VR_TUNABLE_PERIOD: return &s->tunable_period;
         case VR_ALARM_TIME: return &s->alarm_time;
         case VR_T_ALARM: return &s->t_alarm;
+        case VR_ANNOUNCE_ALARM: return &s->announce_alarm;
+        case VR_DER_X: return NULL; /* computed: see fmi3GetFloat64 */
         default:
             if (vr >= VR_T_FIRST && vr < VR_T_FIRST + N_INPUT_CLOCKS) return &s->t_last[vr - VR_T_FIRST + 1];
             return NULL;
@@ -287,6 +292,10 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     INST;
     REQUIRE(nValues == nvr, "fmi3GetFloat64: nValues %zu != nValueReferences %zu", nValues, nvr);
     for (size_t k = 0; k < nvr; k++) {
+        if (vr[k] == VR_DER_X) {
+            values[k] = -c->s.x + c->s.u;
+            continue;
+        }
         double* p = float_ref(&c->s, vr[k]);
         REQUIRE(p != NULL, "fmi3GetFloat64: %u is not a Float64 variable", vr[k]);
         values[k] = *p;
@@ -308,7 +317,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
             REQUIRE(values[k] > 0, "tunable_period must be > 0, got %g", values[k]);
             if (values[k] != s->tunable_period) s->tunable_qualifier = fmi3IntervalChanged;
             s->tunable_period = values[k];
-        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD || v == VR_ALARM_TIME) && init) {
+        } else if ((v == VR_GAIN || v == VR_X0 || v == VR_PERIOD || v == VR_ALARM_TIME || v == VR_ANNOUNCE_ALARM) && init) {
             *float_ref(s, v) = values[k];
         } else {
             REQUIRE(false, "fmi3SetFloat64: %u cannot be set now (mode %d)", v, (int)s->mode);
@@ -373,7 +382,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance instance, fmi3Boolean* discrete
     *terminateSimulation = false;
     *nominalsOfContinuousStatesChanged = false;
     *valuesOfContinuousStatesChanged = false;
-    *nextEventTimeDefined = !c->s.alarm_fired;
+    *nextEventTimeDefined = !c->s.alarm_fired && c->s.announce_alarm != 0.0;
     *nextEventTime = c->s.alarm_fired ? 0.0 : c->s.alarm_time;
     return fmi3OK;
 }
@@ -480,6 +489,80 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
     return fmi3OK;
 }
 
+/* --- model exchange: the importer integrates x' = -x + u -------------------------------------- */
+fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance instance) {
+    INST;
+    REQUIRE(c->s.mode == EVENT, "fmi3EnterContinuousTimeMode: only from event mode");
+    c->s.mode = CONTINUOUS;
+    memset(c->s.active, 0, sizeof c->s.active);
+    c->s.out_clock = false;
+    return fmi3OK;
+}
+
+fmi3Status fmi3CompletedIntegratorStep(fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                                       fmi3Boolean* enterEventMode, fmi3Boolean* terminateSimulation) {
+    INST;
+    (void)noSetFMUStatePriorToCurrentPoint;
+    *enterEventMode = false;
+    *terminateSimulation = false;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetTime(fmi3Instance instance, fmi3Float64 time) {
+    INST;
+    c->s.time = time;
+    return fmi3OK;
+}
+
+fmi3Status fmi3SetContinuousStates(fmi3Instance instance, const fmi3Float64 continuousStates[],
+                                   size_t nContinuousStates) {
+    INST;
+    REQUIRE(nContinuousStates == 1, "fmi3SetContinuousStates: 1 state, got %zu", nContinuousStates);
+    c->s.x = continuousStates[0];
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates) {
+    INST;
+    REQUIRE(nContinuousStates == 1, "fmi3GetContinuousStates: 1 state, got %zu", nContinuousStates);
+    continuousStates[0] = c->s.x;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetContinuousStateDerivatives(fmi3Instance instance, fmi3Float64 derivatives[],
+                                             size_t nContinuousStates) {
+    INST;
+    REQUIRE(nContinuousStates == 1, "fmi3GetContinuousStateDerivatives: 1 state, got %zu", nContinuousStates);
+    derivatives[0] = -c->s.x + c->s.u;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 nominals[],
+                                             size_t nContinuousStates) {
+    INST;
+    for (size_t k = 0; k < nContinuousStates; k++) nominals[k] = 1.0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators) {
+    INST;
+    (void)eventIndicators;
+    REQUIRE(nEventIndicators == 0, "fmi3GetEventIndicators: no event indicators, got %zu", nEventIndicators);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t* nEventIndicators) {
+    INST;
+    *nEventIndicators = 0;
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance instance, size_t* nContinuousStates) {
+    INST;
+    *nContinuousStates = 1;
+    return fmi3OK;
+}
+
 /* --- FMU state (a copy of the State struct) ------------------------------------------------ */
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState* FMUState) {
     INST;
@@ -572,19 +655,5 @@ REFUSED(fmi3SetShiftDecimal, (fmi3Instance instance, const fmi3ValueReference vr
 REFUSED(fmi3SetShiftFraction, (fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                const fmi3UInt64 counters[], const fmi3UInt64 resolutions[]))
 REFUSED(fmi3EvaluateDiscreteStates, (fmi3Instance instance))
-REFUSED(fmi3EnterContinuousTimeMode, (fmi3Instance instance))
-REFUSED(fmi3CompletedIntegratorStep, (fmi3Instance instance, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                                      fmi3Boolean* enterEventMode, fmi3Boolean* terminateSimulation))
-REFUSED(fmi3SetTime, (fmi3Instance instance, fmi3Float64 time))
-REFUSED(fmi3SetContinuousStates, (fmi3Instance instance, const fmi3Float64 continuousStates[],
-                                  size_t nContinuousStates))
-REFUSED(fmi3GetContinuousStateDerivatives, (fmi3Instance instance, fmi3Float64 derivatives[],
-                                            size_t nContinuousStates))
-REFUSED(fmi3GetEventIndicators, (fmi3Instance instance, fmi3Float64 eventIndicators[], size_t nEventIndicators))
-REFUSED(fmi3GetContinuousStates, (fmi3Instance instance, fmi3Float64 continuousStates[], size_t nContinuousStates))
-REFUSED(fmi3GetNominalsOfContinuousStates, (fmi3Instance instance, fmi3Float64 nominals[],
-                                            size_t nContinuousStates))
-REFUSED(fmi3GetNumberOfEventIndicators, (fmi3Instance instance, size_t* nEventIndicators))
-REFUSED(fmi3GetNumberOfContinuousStates, (fmi3Instance instance, size_t* nContinuousStates))
 REFUSED(fmi3GetOutputDerivatives, (fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr,
                                    const fmi3Int32 orders[], fmi3Float64 values[], size_t nValues))

@@ -10,7 +10,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from bridge.env.batch import BatchEnv
 from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError
 from bridge.experiment.config import parse_experiment
 from bridge.models.clocked import clocks_fmu
 
@@ -51,7 +53,7 @@ def test_a_clock_schedule_from_the_experiment_ticks_in_every_episode() -> None:
             assert counts == [0, 1, 1, 1, 2, 2, 2, 2, 2, 2, 2, 3]
 
 
-@pytest.mark.parametrize("interface", ["cs", "se"])
+@pytest.mark.parametrize("interface", ["cs", "me", "se"])
 def test_the_agent_ticks_a_triggered_clock_with_an_action(interface: str) -> None:
     """actions.inputs may name a triggered input clock: [0, 1] by default, ticked above 0.5, at the
     start of the sample (the time the agent acted)."""
@@ -71,3 +73,37 @@ def test_the_agent_ticks_a_triggered_clock_with_an_action(interface: str) -> Non
         counts = [c for c, _ in seen]
         assert counts == [0, 1, 1, 1, 2, 3, 3, 3]
         assert seen[-1][1] == pytest.approx(0.25 * ticked[-1])  # t_trigger: the last tick's time
+
+
+@pytest.mark.parametrize("interface", ["cs", "se"])
+def test_a_batch_of_clocked_fmus_equals_single_envs(interface: str) -> None:
+    """The batch steps clocked FMUs in Python (no native loop) and gives what FmuEnv gives."""
+    experiment = _experiment(interface)
+    experiment["actions"]["inputs"] = ["r", "trigger"]
+    exp = parse_experiment(experiment)
+    rng = np.random.default_rng(3)
+    actions = rng.uniform(-1.0, 1.0, size=(10, 2, 2)).astype(np.float32)
+    batch = BatchEnv(exp, 2)
+    try:
+        batch.reset_all([0, 1])
+        batched = [batch.step(a)[0].copy() for a in actions]
+    finally:
+        batch.close()
+    for i in range(2):
+        with FmuEnv(exp) as env:
+            env.reset(seed=i)
+            single = [env.step(a[i])[0] for a in actions]
+        np.testing.assert_array_equal(np.array(batched)[:, i], np.array(single))
+
+
+def test_clock_settings_the_fmu_cannot_take_are_refused_when_the_env_opens() -> None:
+    bad = _experiment("cs", clock_schedule={"c_const": [0.5]})
+    with pytest.raises(ConfigError, match=r"clock_schedule names 'c_const'.*\['trigger'\]"):
+        FmuEnv(parse_experiment(bad))
+    no_clocks = _experiment("cs", clock_intervals={"c_fixed": 0.2})
+    no_clocks["model"]["fmu"] = "example:feedthrough:3.0"
+    no_clocks["actions"] = {"inputs": ["u"], "low": {"u": -1.0}, "high": {"u": 1.0}}
+    no_clocks["observations"] = {"outputs": ["y"]}
+    no_clocks["reward"] = {"expression": "-abs(y)"}
+    with pytest.raises(ConfigError, match=r"clock_intervals and clock_schedule need FMI 3.0 input clocks"):
+        FmuEnv(parse_experiment(no_clocks))

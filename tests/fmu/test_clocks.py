@@ -1,7 +1,7 @@
 """FMI 3.0 clocks that tick, on our clocks3 model (models/clocks3/clocks3.c), against closed forms.
 
-Co-simulation with event mode and scheduled execution run the same binary; each clock kind must tick
-at the times FMI 3.0 §2.2.9 defines for it, and its clocked variables must show the ticks.
+Co-simulation with event mode, model exchange and scheduled execution run the same binary; each clock
+kind must tick at the times FMI 3.0 §2.2.9 defines for it, and its clocked variables must show the ticks.
 """
 
 from __future__ import annotations
@@ -15,13 +15,14 @@ import pytest
 
 from bridge.errors import ConfigError
 from bridge.fmu import Model
+from bridge.fmu.model import Solver
 from bridge.models.clocked import clocks_fmu
 
 STOP_S = 3.0
 EPS = 1e-9
 
 
-@pytest.fixture(scope="module", params=["cs", "se"])
+@pytest.fixture(scope="module", params=["cs", "me", "se"])
 def fmu(request: pytest.FixtureRequest) -> Path:
     return clocks_fmu(request.param)
 
@@ -172,10 +173,17 @@ def _controller_reference(
     return out
 
 
-def test_a_clocked_controller_samples_at_its_own_rate_while_the_agent_samples_at_another() -> None:
-    """The FMU's controller runs every 0.1 s; the agent sets r and reads x every 0.25 s."""
+@pytest.mark.parametrize(
+    ("interface", "solver", "tolerance"),
+    [("cs", "cvode", 1e-12), ("me", "cvode", 2e-5), ("me", "rk4", 1e-8)],
+)
+def test_a_clocked_controller_samples_at_its_own_rate_while_the_agent_samples_at_another(
+    interface: str, solver: Solver, tolerance: float
+) -> None:
+    """The FMU's controller runs every 0.1 s; the agent sets r and reads x every 0.25 s. Model
+    exchange integrates the plant with our solvers (CVode at its tolerance, RK4 in 0.025 s steps)."""
     setpoints = [1.0, 1.0, -0.5, 0.3, 0.3, 2.0, 0.0, 1.5, -1.0, 0.7, 0.2, 0.9]
-    with Model(clocks_fmu("cs"), step_size_s=0.25) as model:
+    with Model(clocks_fmu(interface), step_size_s=0.25, solver=solver, solver_substeps=10) as model:
         model.reset()
         observed = []
         for r in setpoints:
@@ -186,8 +194,8 @@ def test_a_clocked_controller_samples_at_its_own_rate_while_the_agent_samples_at
         reference = _controller_reference(setpoints, 0.25)
         for j, (values, (x, u)) in enumerate(zip(observed, reference, strict=True)):
             t = 0.25 * (j + 1)
-            assert values["x"] == pytest.approx(x, rel=1e-12, abs=1e-12), t
-            assert values["u"] == pytest.approx(u, rel=1e-12, abs=1e-12), t
+            assert values["x"] == pytest.approx(x, rel=tolerance, abs=tolerance), t
+            assert values["u"] == pytest.approx(u, rel=tolerance, abs=tolerance), t
             last_tick = math.floor(t / 0.1 + EPS) * 0.1
             assert values["t_ctrl"] == pytest.approx(last_tick, abs=EPS)  # the controller's own grid
             assert values["n_ctrl"] == round(last_tick / 0.1) + 1
@@ -203,12 +211,22 @@ def test_bad_clock_settings_are_refused_saying_what_is_allowed(fmu: Path) -> Non
         Model(fmu, step_size_s=0.25, clock_schedule={"trigger": [0.5, 0.2]})
 
 
-def test_the_fmus_own_time_event_splits_the_step_where_it_says() -> None:
-    """Co-simulation in event mode: the FMU announces its next time event (nextEventTime)."""
-    with Model(clocks_fmu("cs"), step_size_s=0.25) as model:
+@pytest.mark.parametrize("interface", ["cs", "me"])
+def test_the_fmus_own_time_event_splits_the_step_where_it_says(interface: str) -> None:
+    """The FMU announces its next time event (nextEventTime) besides its clocks' ticks."""
+    with Model(clocks_fmu(interface), step_size_s=0.25) as model:
         model.reset({"alarm_time": 1.737})
         model.advance(6)
         assert model.get(["t_alarm"])["t_alarm"] == -1.0
         model.advance(1)  # 1.5 -> 1.75 s, split at 1.737 s
         assert model.get(["t_alarm"])["t_alarm"] == pytest.approx(1.737, abs=1e-12)
         assert _ticks(model)["c_ctrl"][-1] == pytest.approx(1.7)  # the clocks' grid is unchanged
+
+
+def test_an_event_the_fmu_did_not_announce_is_handled_at_the_end_of_the_step() -> None:
+    """Co-simulation: a doStep that passes the FMU's unannounced time event returns
+    eventHandlingNeeded; the event is handled at the end of that step (1.75 s)."""
+    with Model(clocks_fmu("cs"), step_size_s=0.25) as model:
+        model.reset({"alarm_time": 1.737, "announce_alarm": 0.0})
+        model.advance(7)
+        assert model.get(["t_alarm"])["t_alarm"] == pytest.approx(1.75, abs=1e-12)
