@@ -153,12 +153,18 @@ def agent_check(run: Path, recording: Path, runtime: str) -> subprocess.Complete
 def test_agent_run_deploys_the_rllib_run_without_torch(
     trained: RllibResult, loopback: Any, tmp_path: Path
 ) -> None:
-    """``agent run RUN --runtime onnx`` (torch and stable-baselines3 unimportable in its process)
+    """``agent run ROBOT --runtime onnx`` (torch and stable-baselines3 unimportable in its process),
+    given only what a robot gets from the run (its experiment, model snapshot and ONNX policy),
     closes the loop with a real cart-pole node in lockstep on a Zenoh router at 127.0.0.1."""
+    import shutil
+
     from tests.agents.test_deploy_torch_free import SUMMARY, agent_process, drive_one_episode
     from tests.conftest import node_process
 
-    run = trained.run_dir
+    run = tmp_path / "robot"
+    run.mkdir()
+    for name in ("experiment.yaml", "model.json", "policy.onnx"):
+        shutil.copy2(trained.run_dir / name, run / name)
     samples = 40
     log = tmp_path / "blocked.txt"
     with (
