@@ -259,6 +259,8 @@ def train_rllib(
     each; then export the policy (:func:`export_policy`). ``run_dir`` must be new or empty."""
     from agents.ray_engine import check_resources, connect
     from agents.train import prepare_run_dir
+    from bridge.env.plants import model_info_for
+    from bridge.fmu.vocab import summary_of
 
     experiment = load_experiment(experiment_path, version=version)
     settings = TrainingSettings.from_experiment(experiment, overrides or {})
@@ -268,6 +270,8 @@ def train_rllib(
     if licence is not None and settings.vec != "remote":  # nodes hold the instances there
         check_resources(ray, {licence.resource: licence.per_instance * max(1, settings.n_envs)})
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir)
+    # the variables the Task was built from: a deployed agent needs them, not the FMU (as SB3 runs)
+    (run_dir / "model.json").write_text(json.dumps(summary_of(model_info_for(experiment)), indent=2))
     info: dict[str, Any] = {
         "engine": "rllib",
         "algo": settings.algo.upper(),

@@ -5,6 +5,11 @@ process (``time.process_time``): one RLlib env runner lives in this process, so 
 runner's, not diluted by other load on the machine.
 
 Run: python benchmarks/bench_ray.py [--ks 1,8,64,256] [--steps 4096] [--repeats 3] [--no-cluster]
+[--torch-threads 1]
+
+Torch runs on one thread here (``--torch-threads``), as a runner given one CPU: with torch's default
+thread pool the idle intra-op threads spin on a loaded machine and their CPU time, counted by
+``process_time``, swamps both rates (3x lower) and makes their ratio noise.
 
 1. One ``SingleAgentEnvRunner`` (RLlib's own, with its default PPO module choosing the actions)
    sampling from a NEXT_STEP ``BatchVectorEnv`` of K cart-pole FMUs, against the same runner over
@@ -151,6 +156,12 @@ def cluster_times() -> list[tuple[str, str]]:
     ]
 
 
+def torch_threads() -> int:
+    import torch
+
+    return int(torch.get_num_threads())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--ks", default="1,8,64,256")
@@ -158,9 +169,15 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--no-cluster", action="store_true")
     parser.add_argument("--no-rates", action="store_true", help="only the cluster timings")
+    parser.add_argument("--torch-threads", type=int, default=1, help="torch threads (0: its default)")
     args = parser.parse_args()
+    if args.torch_threads > 0:
+        import torch
+
+        torch.set_num_threads(args.torch_threads)
     load = os.getloadavg()
-    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores\n")
+    print(f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} on {os.cpu_count()} cores", end="")
+    print(f", torch threads {torch_threads()}\n")
     if not args.no_rates:
         rows = rates([int(k) for k in args.ks.split(",")], args.steps, args.repeats)
         header = ("K", "runner/batch env", "runner/CartPole-v1", "batch / CartPole", "batch env alone")

@@ -153,12 +153,18 @@ def agent_check(run: Path, recording: Path, runtime: str) -> subprocess.Complete
 def test_agent_run_deploys_the_rllib_run_without_torch(
     trained: RllibResult, loopback: Any, tmp_path: Path
 ) -> None:
-    """``agent run RUN --runtime onnx`` (torch and stable-baselines3 unimportable in its process)
+    """``agent run ROBOT --runtime onnx`` (torch and stable-baselines3 unimportable in its process),
+    given only what a robot gets from the run (its experiment, model snapshot and ONNX policy),
     closes the loop with a real cart-pole node in lockstep on a Zenoh router at 127.0.0.1."""
+    import shutil
+
     from tests.agents.test_deploy_torch_free import SUMMARY, agent_process, drive_one_episode
     from tests.conftest import node_process
 
-    run = trained.run_dir
+    run = tmp_path / "robot"
+    run.mkdir()
+    for name in ("experiment.yaml", "model.json", "policy.onnx"):
+        shutil.copy2(trained.run_dir / name, run / name)
     samples = 40
     log = tmp_path / "blocked.txt"
     with (
@@ -173,3 +179,25 @@ def test_agent_run_deploys_the_rllib_run_without_torch(
     assert [f.step for f in episode] == list(range(samples))  # lockstep: each step waited for its action
     found = SUMMARY.search(" ".join(output.split()))
     assert found is not None and int(found.group(2)) >= samples - 1, output[-3000:]
+
+
+def test_the_run_exports_again_where_ray_cannot_be_imported(trained: RllibResult, tmp_path: Path) -> None:
+    """``agent export onnx`` reads ``rllib_policy.npz``: no Ray needed after training."""
+    from agents.runtime import OnnxPolicy
+
+    out = tmp_path / "again.onnx"
+    code = (
+        "import sys; sys.modules['ray'] = None  # import ray fails from here on\n"
+        "from bridge.cli.main import main\n"
+        f"sys.argv = ['fmu-bridge', 'agent', 'export', 'onnx', {str(trained.run_dir)!r}, "
+        f"'-o', {str(out)!r}]\n"
+        "main()\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=False
+    )
+    assert result.returncode == 0 and out.is_file(), result.stdout + result.stderr
+    observations = recorded_observations(trained.run_dir)
+    again, _ = OnnxPolicy(out).predict(observations)
+    first, _ = OnnxPolicy(trained.run_dir).predict(observations)
+    np.testing.assert_array_equal(again, first)
