@@ -237,11 +237,10 @@ class IsolatedFmuPlant(Plant):
         if self._broken is not None:
             return str(self._broken)
         process = self._process
-        if process is not None and not process.is_alive():  # ended between calls: none noticed yet
-            code = process.exitcode or 0
-            how = f"was killed by {signal.Signals(-code).name}" if code < 0 else f"exited with code {code}"
+        ended = _ended(process.pid) if process is not None and process.pid else None
+        if ended is not None:  # ended between calls, none noticed yet (asked from any thread)
             then = "the next reset() starts a fresh one" if self.restart else "restart the node"
-            return f"{self.name}: its process {how}; {then}"
+            return f"{self.name}: its process {ended}; {then}"
         return self._unusable
 
     _unusable: str | None = None  # the child's own model failed to initialise
@@ -438,6 +437,21 @@ def _cap_address_space(limit_mb: float) -> None:
     if hard != resource.RLIM_INFINITY:
         cap = min(cap, hard)
     resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+
+
+def _ended(pid: int) -> str | None:
+    """How child ``pid`` ended ("was killed by SIGKILL", "exited with code 0"), None while it runs.
+
+    Peeks without reaping it (WNOWAIT): the thread that joins the child still gets its status."""
+    try:
+        found = os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT)
+    except ChildProcessError:  # already reaped: its join has run, or is running
+        return None
+    if found is None:
+        return None
+    if found.si_code == os.CLD_EXITED:
+        return f"exited with code {found.si_status}"
+    return f"was killed by {signal.Signals(found.si_status).name}"
 
 
 def _vm_bytes(pid: int) -> int:

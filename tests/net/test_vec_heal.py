@@ -116,3 +116,42 @@ def test_soak_four_nodes_killed_and_restarted_in_turn_no_spare_every_transition_
     assert [(k, dead, new) for k, _, dead, new in report.replaced] == [(k, v, v) for k, v in report.kills]
     assert [i for _, i, _, _ in report.replaced] == [2, 3, 0]
     assert report.transitions == 4 * report.steps and not report.mismatches, report.mismatches[:5]
+
+
+def test_a_node_found_dead_at_a_reset_is_replaced_and_the_episode_drawn_is_the_undisturbed_one(
+    loopback: Loopback,
+) -> None:
+    """The dead node's env draws its episode before the reset fails; the replacement draws it
+    again from the same state, so the run's episodes are those of a run without the death."""
+    with node_process(CARTPOLE, "redraw-0", loopback), node_process(CARTPOLE, "redraw-1", loopback) as second:
+        vec = RemoteVecEnv(
+            CARTPOLE,
+            ["redraw-0", "redraw-1"],
+            session=loopback.session,
+            prefix=loopback.prefix,
+            replace_dead=True,
+            replace_wait_s=120.0,
+            timeout_s=5.0,
+        )
+        restarted = None
+        try:
+            vec.seed(21)
+            vec.reset()
+            for _ in range(3):
+                vec.step(ACTION)
+            second.send_signal(signal.SIGKILL)
+            second.wait(timeout=10)
+            restarted = start_node("redraw-1", loopback)
+            observations = vec.reset()  # env 1's reset meets the dead node, then its replacement
+            replaced = vec.reset_infos[1].get("node_replaced")
+            assert replaced is not None and replaced["new"] == "redraw-1", vec.reset_infos[1]
+            for i in range(2):
+                with FmuEnv(CARTPOLE) as local:
+                    local.reset(seed=21 + i)
+                    for _ in range(3):
+                        local.step(ACTION[0])
+                    np.testing.assert_array_equal(observations[i], local.reset()[0])
+        finally:
+            vec.close()
+            if restarted is not None:
+                stop_process(restarted, timeout_s=10)
