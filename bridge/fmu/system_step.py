@@ -105,6 +105,7 @@ class NativeMaster:
         self._obs_i = _ints([i for _, i in observed])
         self._ext = np.zeros(max(1, len(external)))
         self._ext_view = self._ext[: len(external)]
+        self._ext_c = (ctypes.c_double * len(external)).from_buffer(self._ext.data)
         self._obs = np.zeros(len(observed))
         self._obs_buffer = np.zeros(max(1, len(observed)))  # C writes here; :meth:`sample` copies
         self._spec = spec = MasterSample()
@@ -147,11 +148,14 @@ class NativeMaster:
         with_inputs = 0 if inputs is None else 1
         if inputs is not None:
             try:
-                self._ext_view[:] = inputs
-            except ValueError:
+                if inputs.__class__ is list:  # ctypes copies a list faster, numpy an array
+                    self._ext_c[:] = inputs
+                else:
+                    self._ext_view[:] = inputs
+            except (ValueError, TypeError) as exc:
                 raise BridgeError(
-                    f"the system's inputs: expected {self._n_ext} values, got {len(inputs)}; pass "
-                    f"one value per action input, in the order of actions.inputs"
+                    f"the system's inputs: expected {self._n_ext} numbers, got {len(inputs)} ({exc}); "
+                    f"pass one number per action input, in the order of actions.inputs"
                 ) from None
         for plant, m in self._pairs:  # Model._steppable inlined, and the sample counted ahead
             if not m._initialized or m.terminated or m._failed_status or m._closed:
