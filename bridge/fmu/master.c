@@ -181,6 +181,8 @@ typedef struct {
     int stopped;          /* 1 if a component asked to stop in the last call */
 } Sample;
 
+/* Returns master_run's failure (1 + position), else -1 if a component asked to stop, else 0 (every
+ * component stepped `count` macro steps with OK). */
 int master_sample(Sample* s, int count, int with_inputs) {
     if (with_inputs) {
         for (int e = 0; e < s->n_ext; e++) s->comps[s->ext_comp[e]].u[s->ext_j[e]] = s->ext[e];
@@ -192,5 +194,5 @@ int master_sample(Sample* s, int count, int with_inputs) {
     }
     if (failed) return failed;
     for (int o = 0; o < s->n_obs; o++) s->obs[o] = s->comps[s->obs_comp[o]].y[s->obs_i[o]];
-    return 0;
+    return s->stopped ? -1 : 0;
 }

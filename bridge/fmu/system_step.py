@@ -104,6 +104,8 @@ class NativeMaster:
         self._obs_comp = _ints([position[n] for n, _ in observed])
         self._obs_i = _ints([i for _, i in observed])
         self._ext = np.zeros(max(1, len(external)))
+        self._ext_view = self._ext[: len(external)]
+        self._ext_c = (ctypes.c_double * len(external)).from_buffer(self._ext.data)
         self._obs = np.zeros(len(observed))
         self._obs_buffer = np.zeros(max(1, len(observed)))  # C writes here; :meth:`sample` copies
         self._spec = spec = MasterSample()
@@ -146,11 +148,14 @@ class NativeMaster:
         with_inputs = 0 if inputs is None else 1
         if inputs is not None:
             try:
-                self._ext[: self._n_ext] = inputs
-            except ValueError:
+                if inputs.__class__ is list:  # ctypes copies a list faster, numpy an array
+                    self._ext_c[:] = inputs
+                else:
+                    self._ext_view[:] = inputs
+            except (ValueError, TypeError) as exc:
                 raise BridgeError(
-                    f"the system's inputs: expected {self._n_ext} values, got {len(inputs)}; pass "
-                    f"one value per action input, in the order of actions.inputs"
+                    f"the system's inputs: expected {self._n_ext} numbers, got {len(inputs)} ({exc}); "
+                    f"pass one number per action input, in the order of actions.inputs"
                 ) from None
         for plant, m in self._pairs:  # Model._steppable inlined, and the sample counted ahead
             if not m._initialized or m.terminated or m._failed_status or m._closed:
@@ -158,14 +163,16 @@ class NativeMaster:
                     counted.sample -= count
                 self._refused(with_inputs)
             plant.sample += count
-        failed = self._call(self._spec_ref, count, with_inputs)
+        code = self._call(self._spec_ref, count, with_inputs)
+        if not code:  # every component stepped `count` macro steps with OK
+            self.done = count
+            return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
         spec = self._spec
         self.done = done = spec.done
-        if failed or spec.stopped:
-            self.stopped = bool(spec.stopped)
-            for plant in self._plants:
-                plant.sample -= count
-            self._finish(failed, done)
+        self.stopped = bool(spec.stopped)
+        for plant in self._plants:
+            plant.sample -= count
+        self._finish(max(code, 0), done)
         return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
 
     def run(self, count: int) -> None:
@@ -175,11 +182,11 @@ class NativeMaster:
         for m in self._models:
             if not m._steppable:
                 self._refused(0)
-        failed = self._call(self._spec_ref, count, 0)
+        code = self._call(self._spec_ref, count, 0)
         self.done = done = self._spec.done
-        if failed or self._spec.stopped:
+        if code:
             self.stopped = bool(self._spec.stopped)
-            self._finish(failed, done)
+            self._finish(max(code, 0), done)
             return
         for plant in self._plants:
             plant.sample += done

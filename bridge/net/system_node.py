@@ -56,13 +56,30 @@ def _signals(
     from bridge.task.core import task_signal_names
 
     task = task_signal_names(experiment, _known_names(experiment, system, name, info))
-    ins: list[str] = [c.target.variable for c in system.connections if c.target.component == name]
+    # a whole array connected (to an array of its shape) by its elements, as the client connects it
+    ins = [
+        e
+        for c in system.connections
+        if c.target.component == name
+        for e in _elements(info, c.target.variable)
+    ]
     ins += [e.variable for e in _ends(task.inputs, system, "actions") if e.component == name]
     # every numeric output by element (an FMI 3.0 array: y[1,1], y[1,2], ...), as the client binds them
     outs = [e for v in info.by_causality("output") if v.is_numeric for e in v.element_names()]
-    outs += [c.source.variable for c in system.connections if c.source.component == name]
+    outs += [
+        e
+        for c in system.connections
+        if c.source.component == name
+        for e in _elements(info, c.source.variable)
+    ]
     outs += [e.variable for e in _ends(task.outputs, system, "observations") if e.component == name]
     return list(dict.fromkeys(ins)), list(dict.fromkeys(outs))
+
+
+def _elements(info: ModelInfo, name: str) -> list[str]:
+    """``name``, or its elements where it names a whole FMI 3.0 array of this component."""
+    var = info.variables.get(name)
+    return var.element_names() if var is not None and var.dimensions else [name]
 
 
 def served_info(system: SystemDescription, name: str) -> ModelInfo:

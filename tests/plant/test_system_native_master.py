@@ -156,5 +156,9 @@ def test_the_native_sample_refuses_inputs_of_the_wrong_length(tmp_path: Path) ->
         plant.bind(["gain.u"], ["cart.x"])
         plant.reset({}, [0.0])
         assert plant.master.native is not None
-        with pytest.raises(BridgeError, match="expected 1 values, got 2"):
+        with pytest.raises(BridgeError, match="expected 1 numbers, got 2"):
             plant.step([1.0, 2.0])
+        with pytest.raises(BridgeError, match="expected 1 numbers, got 2"):
+            plant.step(np.array([1.0, 2.0]))
+        with pytest.raises(BridgeError, match="expected 1 numbers, got 1"):
+            plant.step(["fast"])  # type: ignore[list-item]

@@ -154,3 +154,82 @@ def test_an_initialisation_that_does_not_converge_says_so(
             plant.reset({}, None)
         assert not plant.master.init_converged
     assert "did not converge in 3 sweeps" in caplog.text and "system.yaml" in caplog.text
+
+
+@pytest.fixture(scope="module")
+def arrays3(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """pythonfmu3's export of tests/data/slaves/Arrays3.py (u[3], k[3] in; y[2,3], n[3] out: n = k + 1)."""
+    import subprocess
+    import sys
+
+    pytest.importorskip("pythonfmu3")
+    slave = Path(__file__).resolve().parents[1] / "data" / "slaves" / "Arrays3.py"
+    out = tmp_path_factory.mktemp("arrays3_system")
+    cmd = [sys.executable, "-m", "pythonfmu3", "build", "-f", str(slave), "-d", str(out)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+    if result.returncode != 0:
+        pytest.fail(f"pythonfmu3 could not export Arrays3.py:\n{result.stdout}\n{result.stderr}")
+    return out / "Arrays3.fmu"
+
+
+def arrays_run(tmp_path: Path, fmu: Path, connections: list[str]) -> np.ndarray:
+    components = {"a": {"fmu": str(fmu)}, "b": {"fmu": str(fmu)}}
+    inputs = ["a.k[1]", "a.k[2]", "a.k[3]"]
+    outputs = ["b.n[1]", "b.n[2]", "b.n[3]", "b.k[2]"]
+    exp = experiment(
+        tmp_path,
+        components,
+        connections,
+        outputs=outputs[:3],
+        actions={"inputs": inputs, "low": dict.fromkeys(inputs, -100), "high": dict.fromkeys(inputs, 100)},
+    )
+    with SystemPlant(exp) as plant:
+        assert [str(c) for c in plant.system.connections] == [f"a.n[{i}] -> b.k[{i}]" for i in (1, 2, 3)]
+        plant.bind(inputs, outputs)
+        rows = [plant.reset({}, [0.0, 0.0, 0.0])]
+        rows += [plant.step([float(i), 2.0 * i, -3.0 * i]) for i in range(1, 6)]
+    return np.array(rows)
+
+
+def test_whole_arrays_of_one_shape_connect_element_by_element(tmp_path: Path, arrays3: Path) -> None:
+    """a.n -> b.k (both Int64 arrays of shape [3]): the run of the three element connections, and
+    b.n = b.k + 1 with b.k the a.n = a.k + 1 of the macro step before."""
+    whole = arrays_run(tmp_path, arrays3, ["a.n -> b.k"])
+    by_element = arrays_run(tmp_path, arrays3, [f"a.n[{i}] -> b.k[{i}]" for i in (1, 2, 3)])
+    np.testing.assert_array_equal(whole, by_element)
+    from bridge.net.system_node import component_signals
+    from bridge.plant.system.description import from_experiment
+
+    exp = parse_experiment(
+        {
+            "model": {"step_size": 0.1, "episode_duration": 1.0},
+            "system": {
+                "components": {"a": {"fmu": str(arrays3)}, "b": {"fmu": str(arrays3)}},
+                "connections": ["a.n -> b.k"],
+            },
+            "observations": {"outputs": ["b.n[1]"]},
+            "reward": {"terms": [{"alive": 0.0}]},
+        },
+        source=tmp_path / "node.yaml",
+    )
+    ins, _ = component_signals(exp, from_experiment(exp), "b")  # what b's node would serve
+    _, outs = component_signals(exp, from_experiment(exp), "a")
+    assert ins == ["k[1]", "k[2]", "k[3]"] and "n" not in outs and {"n[1]", "n[2]", "n[3]"} <= set(outs)
+    for step in range(2, 6):
+        k = np.array([step - 1, 2.0 * (step - 1), -3.0 * (step - 1)])  # a.k of the step before
+        np.testing.assert_array_equal(whole[step, :3], k + 2.0)
+        assert whole[step, 3] == k[1] + 1.0
+
+
+def test_whole_arrays_of_different_shapes_are_refused_with_both(tmp_path: Path, arrays3: Path) -> None:
+    components = {"a": {"fmu": str(arrays3)}, "b": {"fmu": str(arrays3)}}
+    with pytest.raises(ConfigError) as info:
+        SystemPlant(experiment(tmp_path, components, ["a.y -> b.u"], outputs=["b.n[1]"]))
+    message = str(info.value)
+    for text in (
+        "a.y is an array of shape [2, 3]",
+        "b.u is an array of shape [3]",
+        "a.y[1] -> b.u[1]",
+        "system.yaml",
+    ):
+        assert text in message, message

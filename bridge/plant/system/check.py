@@ -72,6 +72,41 @@ def check_system(
     return warnings
 
 
+def expand_arrays(system: SystemDescription, infos: Mapping[str, ModelInfo]) -> SystemDescription:
+    """``system`` with each connection between two whole FMI 3.0 arrays of one shape replaced by
+    one connection per element, in row-major order (``a.y -> b.u``: ``a.y[1] -> b.u[1]``, ...),
+    each keeping the connection's transformation; arrays of different shapes are refused with both
+    shapes. A scalar to an array stays as written (:func:`check_system` refuses it)."""
+    connections: list[Connection] = []
+    expanded = False
+    for c in system.connections:
+        source, target = _array(c.source, infos), _array(c.target, infos)
+        if source is None or target is None:
+            connections.append(c)
+            continue
+        expanded = True
+        if source.dimensions != target.dimensions:
+            raise ConfigError(
+                f"connection {c}: {c.source} is {_shape(source.dimensions)} and {c.target} is "
+                f"{_shape(target.dimensions)}; whole arrays connect element by element and need one "
+                f"shape: connect elements by name instead ({c.source}[1] -> {c.target}[1], ...)"
+                f"{system.where}"
+            )
+        for y, u in zip(source.element_names(), target.element_names()):
+            connections.append(
+                dataclasses.replace(
+                    c, source=Endpoint(c.source.component, y), target=Endpoint(c.target.component, u)
+                )
+            )
+    return dataclasses.replace(system, connections=tuple(connections)) if expanded else system
+
+
+def _array(end: Endpoint, infos: Mapping[str, ModelInfo]) -> Variable | None:
+    info = infos.get(end.component)
+    var = info.variables.get(end.variable) if info is not None else None
+    return var if var is not None and var.dimensions else None
+
+
 def _variable(
     c: Connection, end: Endpoint, infos: Mapping[str, ModelInfo], system: SystemDescription
 ) -> Variable:

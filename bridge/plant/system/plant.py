@@ -21,7 +21,7 @@ from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
 from bridge.experiment.validate import Timing, check_experiment
 from bridge.fmu.vocab import DefaultExperiment, ModelInfo
 from bridge.plant.base import MODEL_FAILED_HINT, FloatArray, Plant
-from bridge.plant.system.check import check_system
+from bridge.plant.system.check import check_system, expand_arrays
 from bridge.plant.system.description import (
     Component,
     Connection,
@@ -89,6 +89,7 @@ class SystemPlant(Plant):
             n: self.plants[n].info if n in self.plants else component_info(c, self._remote, system.where)
             for n, c in system.components.items()
         }
+        self.system = system = expand_arrays(system, self.infos)  # whole arrays: element by element
         self.couplings: dict[Connection, Convert | None] = {}
         self.warnings = check_system(system, self.infos, self.couplings)
         self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
@@ -287,7 +288,7 @@ def describe_system(experiment: Experiment, remote: RemoteComponents | None = No
     its FMU is not on this machine."""
     system = from_experiment(experiment)
     infos = {n: component_info(c, remote, system.where) for n, c in system.components.items()}
-    check_system(system, infos)  # connections and parameters, as the plant checks them
+    check_system(expand_arrays(system, infos), infos)  # connections and parameters, as the plant checks them
     return system_info(experiment, system, infos, system_timing(experiment, system))
 
 
