@@ -533,7 +533,7 @@ def _resume_from(run_dir: Path, info: dict[str, Any]) -> tuple[Path, Path | None
     if not saved:
         raise ConfigError(
             f"--resume {run_dir}: the run has no model.zip and no checkpoint to continue from "
-            f"(its training ended before the first checkpoint); train it again"
+            "(its training ended before the first checkpoint); train it again"
         )
     steps, newest = saved[-1]
     _log.warning(

@@ -11,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbags.highlevel import AnyReader
 
 from agents.evaluate import evaluate
 from bridge.errors import ConfigError
 from bridge.models import example_fmu
+from bridge.recording.env_recorder import slug
 
 VALUES = (0.9, 0.1, 2.3, 1.2345678901234567, 0.30000000000000004)  # none of them a float32
 
@@ -34,11 +36,30 @@ def _experiment(tmp_path: Path, model: str, actions: str, outputs: str) -> Path:
 FEEDTHROUGH = "{inputs: [u], low: {u: 0.1}, high: {u: 2.3}}"
 
 
-@pytest.mark.parametrize("how", ["in_process", "workers", "batch"])
+def _positions(recording: Path) -> dict[str, list[list[float]]]:
+    with AnyReader([recording]) as reader:
+        return {
+            c.topic: [
+                [float(v) for v in reader.deserialize(raw, c.msgtype).position]
+                for _, _, raw in reader.messages([c])
+            ]
+            for c in reader.connections
+            if c.topic in ("/actions", "/outputs")
+        }
+
+
+@pytest.mark.parametrize("how", ["in_process", "recorded", "workers", "batch"])
 def test_constants_reach_the_fmu_exactly(tmp_path: Path, how: str) -> None:
     path = _experiment(tmp_path, "feedthrough", FEEDTHROUGH, "[y]")
     agents = [f"constant:{v!r}" for v in VALUES]
-    result = evaluate(agents, path, episodes=2, workers=2 if how == "workers" else 1, batch=how == "batch")
+    result = evaluate(
+        agents,
+        path,
+        episodes=2,
+        workers=2 if how == "workers" else 1,
+        batch=how == "batch",
+        record_dir=tmp_path / "recordings" if how == "recorded" else None,
+    )
     for agent, value in zip(agents, VALUES):
         (traces,) = [t for (name, _), t in result.traces.items() if name == agent]
         assert len(traces) == 2
@@ -47,6 +68,14 @@ def test_constants_reach_the_fmu_exactly(tmp_path: Path, how: str) -> None:
             # y after each step is u as the FMU received it, compared with ==
             assert trace.signals["y"][1:].tolist() == [value] * (len(trace.time_s) - 1), (agent, value)
             assert float(np.float32(value)) != value  # a float32 action could not have carried it
+    if how == "recorded":  # the recordings, read by an independent reader (rosbags), say the same
+        for recording in result.recordings:
+            value = next(v for a, v in zip(agents, VALUES) if recording.name.startswith(f"{slug(a)}__"))
+            rows = _positions(recording)
+            assert rows["/actions"] == [[value]] * 10  # 2 episodes of 5 steps
+            stepped = [row for row in rows["/outputs"] if row != [0.0]]  # not the resets' y = 0
+            assert stepped == [[value]] * 10
+        assert len(result.recordings) == len(agents)
 
 
 def test_a_clipped_constant_warns_once_and_zero_keeps_a_parameter_at_its_start(

@@ -18,7 +18,9 @@ import pytest
 import yaml
 
 from agents.compare import compare_runs
-from agents.run_state import read_run, training_alive
+from agents.run_state import read_run, training_alive, training_lock
+from agents.train import train
+from bridge.errors import ConfigError
 from bridge.experiment.examples import example_experiment
 from tests.conftest import stop_process, wait_until
 
@@ -99,3 +101,26 @@ def test_a_killed_training_is_reported_interrupted_and_resumes_from_its_checkpoi
     after = _cli(tmp_path, "evaluate", str(run), "--config", str(experiment), *EVALUATE)
     assert after.returncode == 0, after.stderr[-2000:]
     assert "interrupted" not in after.stderr
+
+
+def test_the_lock_is_what_tells_a_live_training_from_a_dead_one(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"status": "running"}))
+    assert read_run(run)["status"] == "interrupted"  # no lock file: no process trains it
+    with training_lock(run):
+        assert training_alive(run) and read_run(run)["status"] == "running"
+        with (
+            pytest.raises(ConfigError, match=r"is being trained by another process \(pid \d+\)"),
+            training_lock(run),
+        ):
+            pass
+    assert not training_alive(run) and read_run(run)["status_detail"].endswith("(killed or crashed)")
+
+
+def test_resuming_a_run_that_died_before_its_first_checkpoint_says_so(tmp_path: Path) -> None:
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "run.json").write_text(json.dumps({"status": "running", "version": None}))
+    with pytest.raises(ConfigError, match=r"has no model\.zip and no checkpoint to continue from"):
+        train(None, resume=run)
