@@ -100,6 +100,14 @@ class SystemSection(_Strict):
             raise ValueError(f"component names are identifiers (letters, digits, _), got {bad}")
         return value
 
+    @field_validator("agents")
+    @classmethod
+    def _agent_names(cls, value: dict[str, AgentSection]) -> dict[str, AgentSection]:
+        bad = [name for name in value if not re.fullmatch(r"[A-Za-z_][\w-]*", name)]
+        if bad:  # an agent's name is a topic segment of its recording and a file name of its policy
+            raise ValueError(f"agent names are identifiers (letters, digits, _, -), got {bad}")
+        return value
+
     @field_validator("connections")
     @classmethod
     def _connections(cls, value: list[str]) -> list[str]:

@@ -104,3 +104,11 @@ def test_two_agents_trained_together_improve_on_their_untrained_return(tmp_path:
     assert result.recording is not None and result.recording.parent == tmp_path
     ends = [e for e in read_recording(result.recording).events if e.get("event") == "episode_end"]
     assert [e["returns"] for e in ends] == [result.untrained, result.trained]
+
+
+def test_an_agent_name_that_is_no_identifier_is_refused(tmp_path: Path) -> None:
+    """An agent's name becomes a topic segment of its recording and its policy's file name."""
+    data = yaml.safe_load(EXAMPLE.read_text())
+    data["system"]["agents"]["a/b"] = data["system"]["agents"].pop("drive")
+    with pytest.raises(ConfigError, match=r"agent names are identifiers .*'a/b'"):
+        parse_experiment(data, source=tmp_path / "agents.yaml")
