@@ -60,7 +60,9 @@ def record(
         recorder = NodeRecorder(
             session, node, output, prefix=prefix, topics=chosen, timeout_s=timeout_s, overwrite=force
         )
-        signal.signal(signal.SIGTERM, lambda *_: recorder.stop())
+        # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread, handled below): a handler that
+        # takes a lock the interrupted main thread may hold could deadlock
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
         err_console.print(
             f"recording {', '.join(chosen)} of node {node!r} into {output}; Ctrl-C stops", highlight=False
         )
@@ -115,7 +117,9 @@ def replay_cmd(
     from bridge.recording.playback import publish as play
 
     stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread, handled below): a handler that
+    # takes a lock the interrupted main thread may hold could deadlock
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     err_console.print(f"publishing {recording} as node {prefix}/{node} at rate {rate:g}; Ctrl-C stops")
     options = _zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode)
     try:

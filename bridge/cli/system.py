@@ -295,7 +295,9 @@ def serve_system(  # noqa: PLR0917 (typer options)
     try:
         nodes = start_nodes(served, prefix=prefix, session=session)
         try:
-            signal.signal(signal.SIGTERM, lambda *_: stop.set())
+            # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread, handled below): a handler that
+            # takes a lock the interrupted main thread may hold could deadlock
+            signal.signal(signal.SIGTERM, signal.default_int_handler)
             for n in nodes:
                 err_console.print(
                     f"node {n.name!r} serving {n.experiment.name} on {n.keys.base}/*", highlight=False
