@@ -159,7 +159,6 @@ class Model:
             self.close()
             raise
         backend: Any = self._backend
-        backend.event_mode = self.interface == "cs"
         backend.clock_update = driver.clock_update
         self._do_step = driver.step
         return driver
