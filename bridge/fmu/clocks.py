@@ -34,7 +34,7 @@ from typing import Any
 from fmpy import fmi3
 
 from bridge.errors import ConfigError, FmuError
-from bridge.fmu.abi import DISCARD, ERROR, OK, WARNING
+from bridge.fmu.abi import DISCARD, OK, WARNING
 from bridge.fmu.description import ModelInfo, Variable
 
 NOT_YET_KNOWN, UNCHANGED, CHANGED = 0, 1, 2
@@ -552,4 +552,12 @@ def _check_schedule(
     return checked
 
 
-__all__ = ["CHANGED", "ERROR", "NOT_YET_KNOWN", "UNCHANGED", "ClockDriver", "Timing", "clock_driver_needed"]
+__all__ = [
+    "CHANGED",
+    "NOT_YET_KNOWN",
+    "UNCHANGED",
+    "ClockDriver",
+    "ClockInputs",
+    "Timing",
+    "clock_driver_needed",
+]
