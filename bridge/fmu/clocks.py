@@ -31,6 +31,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from fmpy import fmi3
 
 from bridge.errors import ConfigError, FmuError
@@ -123,10 +125,20 @@ class ClockDriver:
         self._in_event = False
         self._activation_time = 0.0
         self._callback_error: Exception | None = None
+        self._fired: list[str] = []
+        # clocked variables (numeric, not inputs) by clock; their values read at the ticks
+        self._clocked: dict[str, list[Variable]] = {}
+        for var in info.variables.values():
+            if var.clocks and var.is_numeric and var.causality != "input":
+                for clock in var.clocks:
+                    self._clocked.setdefault(clock, []).append(var)
+        self.held: dict[str, list[Any]] = {}
+        self.read_values: Callable[[list[Variable]], dict[str, list[Any]]] | None = None
         self._fmu_event_s: float | None = None  # the FMU's next time event (co-simulation)
         self._initial_event_s: float | None = None
         self._start_ticks: list[tuple[float, str]] = []
         self._start_positions: dict[str, int] = {}
+        self._initial_held: dict[str, list[Any]] = {}
 
     # -- set-up ----------------------------------------------------------------------------------
     def configure(self, start_s: float) -> None:
@@ -164,6 +176,8 @@ class ClockDriver:
                 )
             timing[var.name] = Timing(interval_s=interval, base_s=start_s + shift)
         self.timing = timing
+        self.held.clear()
+        self._hold(None)  # every clocked variable may be read in initialization mode
 
     def start(self, start_s: float) -> None:
         """Right after initialization: the FMU is in event mode (co-simulation) or clock activation
@@ -181,11 +195,13 @@ class ClockDriver:
             self._in_event, self._fmu_event_s = False, None
         self._start_ticks = list(self.ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
+        self._initial_held = dict(self.held)
         self._start_positions = dict(self._schedule_pos)
 
     def rewind(self, start_s: float) -> None:
         """After the instance was set back to the state saved right after :meth:`start`."""
         self.timing, self._fmu_event_s = dict(self._initial), self._initial_event_s
+        self.held = dict(self._initial_held)
         self._time, self.terminated, self._in_event = start_s, False, False
         self._pending.clear()
         self._schedule_pos = dict(self._start_positions)
@@ -194,12 +210,13 @@ class ClockDriver:
 
     def save(self) -> tuple[Any, ...]:
         """What :meth:`load` needs to continue from now (for a saved model state)."""
-        positions, pending = dict(self._schedule_pos), set(self._pending)
-        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s
+        positions, pending, held = dict(self._schedule_pos), set(self._pending), dict(self.held)
+        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s, held
 
     def load(self, saved: tuple[Any, ...]) -> None:
-        timing, self._time, positions, pending, self.terminated, self._fmu_event_s = saved
+        timing, self._time, positions, pending, self.terminated, self._fmu_event_s, held = saved
         self.timing, self._schedule_pos, self._pending = dict(timing), dict(positions), set(pending)
+        self.held = dict(held)
         self._in_event = False
 
     def write_in_event_mode(self, write: Callable[[], None]) -> None:
@@ -347,7 +364,8 @@ class ClockDriver:
         self._update_discrete_states()
         self._log(t, names)
         self._advance(names)
-        self._read_outputs(t)
+        fired = self._read_outputs(t)
+        self._hold([*names, *fired])
         self._read_intervals(t, activated=set(names))
         if self.terminated or not leave:
             return
@@ -387,6 +405,7 @@ class ClockDriver:
             self._activation_time = t
             self._advance([name])  # before: the FMU's clock update callback may schedule it anew
             self._log(t, [name])
+            self._fired = []
             self._call(
                 f"fmi3ActivateModelPartition({name})",
                 lambda vr=vr: fmu.fmi3ActivateModelPartition(component, vr, t),  # type: ignore[misc]
@@ -394,13 +413,14 @@ class ClockDriver:
             error, self._callback_error = self._callback_error, None
             if error is not None:
                 raise error
+            self._hold([name, *self._fired])
 
     def clock_update(self) -> None:
         """The FMU's ``fmi3ClockUpdateCallback`` (scheduled execution): read the output clocks and
         the intervals it may have changed, now, in clock update mode."""
         t = self._activation_time
         try:
-            self._read_outputs(t)
+            self._fired += self._read_outputs(t)
             self._read_intervals(t, activated=set(self._by_name))
         except Exception as exc:  # a callback cannot raise into the FMU: raised after the activation
             self._callback_error = exc
@@ -416,13 +436,27 @@ class ClockDriver:
             else:  # aperiodic: unknown until the FMU tells
                 self.timing[name] = replace(timing, next_s=None)
 
-    def _read_outputs(self, t: float) -> None:
+    def _read_outputs(self, t: float) -> list[str]:
+        """The output clocks active now (logged as ticks)."""
         if not self.outputs:
-            return
+            return []
         fmu, component = self._backend.fmu, self._backend.component
         vrs, values = self._output_buf
         self._call("fmi3GetClock", lambda: fmu.fmi3GetClock(component, vrs, len(self.outputs), values))
-        self._log(t, [v.name for v, active in zip(self.outputs, values, strict=True) if active])
+        fired = [v.name for v, active in zip(self.outputs, values, strict=True) if active]
+        self._log(t, fired)
+        return fired
+
+    def _hold(self, clocks: Iterable[str] | None) -> None:
+        """Read the clocked variables of ``clocks`` (all of them: None) while they may be read, and
+        hold them until their clocks tick again: FMI 3.0 lets an importer read a clocked variable
+        only while its clock is active."""
+        if self.read_values is None:
+            return
+        names = set(self._clocked) if clocks is None else set(clocks)
+        variables = list(dict.fromkeys(v for n in names for v in self._clocked.get(n, ())))
+        if variables:
+            self.held.update(self.read_values(variables))
 
     def _read_intervals(self, t: float, activated: set[str]) -> None:
         """The intervals FMI 3.0 says to ask for at an event: countdown clocks always, tunable clocks
@@ -496,6 +530,44 @@ class ClockInputs:
         return None
 
 
+class ClockedOutputs:
+    """Outputs of a sample where some are clocked variables: those come from the values the driver
+    read at their clocks' last tick (:attr:`ClockDriver.held`), the others from the FMU now through
+    the :class:`~bridge.fmu.signals.SignalGroup` ``numeric``."""
+
+    def __init__(
+        self,
+        driver: ClockDriver,
+        names: Sequence[str],
+        elements: Sequence[tuple[Variable, int | None]],
+        numeric: Any,
+    ) -> None:
+        self.names = tuple(names)
+        self._driver, self._numeric = driver, numeric
+        self._held = [(i, var.name, index or 0) for i, (var, index) in enumerate(elements) if var.clocks]
+        self._others = [i for i, (var, _) in enumerate(elements) if not var.clocks]
+        self._values = np.zeros(len(self.names), dtype=np.float64)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def read(self) -> npt.NDArray[np.float64]:
+        values = self._values
+        if self._numeric is not None:
+            values[self._others] = self._numeric.read()
+        held = self._driver.held
+        for i, name, index in self._held:
+            values[i] = float(held[name][index])
+        return values.copy()
+
+    def read_into(self, out: npt.NDArray[np.float64]) -> None:
+        out[:] = self.read()
+
+    def native_buffer(self, *, writing: bool) -> None:
+        """No native sample: the clocks tick in Python."""
+        return None
+
+
 def _priority(var: Variable) -> tuple[int, int]:
     return (var.clock.priority if var.clock is not None else 0, var.value_reference)
 
@@ -558,6 +630,7 @@ __all__ = [
     "UNCHANGED",
     "ClockDriver",
     "ClockInputs",
+    "ClockedOutputs",
     "Timing",
     "clock_driver_needed",
 ]

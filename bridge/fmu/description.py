@@ -211,6 +211,7 @@ def _variable(v: ModelVariable) -> Variable:
         is_array=bool(v.dimensions),
         dimensions=_dimensions(v),
         clock=ClockInfo(str(v.intervalVariability or "unspecified")) if var_type == "Clock" else None,
+        clocks=tuple(str(c.name) for c in getattr(v, "clocks", None) or ()),
     )
 
 

@@ -25,7 +25,7 @@ from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
-from bridge.fmu.clocks import ClockDriver, ClockInputs, clock_driver_needed
+from bridge.fmu.clocks import ClockDriver, ClockedOutputs, ClockInputs, clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -160,6 +160,7 @@ class Model:
             raise
         backend: Any = self._backend
         backend.clock_update = driver.clock_update
+        driver.read_values = lambda variables: access.read(self._backend, variables, self._where)
         self._do_step = driver.step
         return driver
 
@@ -248,6 +249,10 @@ class Model:
             numeric = self.signals(others, writable=True, role=role) if others else None
             return ClockInputs(clocks, names, numeric)  # type: ignore[return-value]
         elements = [self._element(n, role) for n in names]
+        if not writable and clocks is not None and any(var.clocks for var, _ in elements):
+            others = [n for n, (var, _) in zip(names, elements, strict=True) if not var.clocks]
+            numeric = self.signals(others, role=role) if others else None
+            return ClockedOutputs(clocks, names, elements, numeric)  # type: ignore[return-value]
         if not elements and not writable:  # an empty input group: an observation-only experiment
             raise ConfigError(f"{role}: at least one variable is needed")
         for var, _ in elements:
@@ -267,7 +272,10 @@ class Model:
         one per dimension) gives one element.
         """
         wanted = {name: self._element(name) for name in names}
-        flat = access.read(self._backend, list(dict.fromkeys(var for var, _ in wanted.values())), self._where)
+        variables = list(dict.fromkeys(var for var, _ in wanted.values()))
+        held = self._clocks.held if self._clocks is not None else {}
+        flat = access.read(self._backend, [v for v in variables if v.name not in held], self._where)
+        flat.update((v.name, held[v.name]) for v in variables if v.name in held)  # read at the last tick
         return {name: access.pick(var, flat[var.name], index) for name, (var, index) in wanted.items()}
 
     def set(self, values: Mapping[str, Any]) -> None:

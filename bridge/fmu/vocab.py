@@ -70,6 +70,7 @@ class Variable:
     is_array: bool = False
     dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays: the size of each dimension, row-major
     clock: ClockInfo | None = None  # FMI 3.0 Clock variables
+    clocks: tuple[str, ...] = ()  # FMI 3.0 clocked variables: the clocks they belong to
 
     @property
     def is_numeric(self) -> bool:
