@@ -28,7 +28,7 @@ import ctypes
 import math
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -133,7 +133,9 @@ class ClockDriver:
                 for clock in var.clocks:
                     self._clocked.setdefault(clock, []).append(var)
         self.held: dict[str, list[Any]] = {}
-        self.read_values: Callable[[list[Variable]], dict[str, list[Any]]] | None = None
+        # the model's reader of a list of numeric variables (a SignalGroup over their elements)
+        self.read_values: Callable[[list[Variable]], Any] | None = None
+        self._readers: dict[tuple[str, ...], tuple[list[Variable], Any]] = {}
         self._fmu_event_s: float | None = None  # the FMU's next time event (co-simulation)
         self._initial_event_s: float | None = None
         self._start_ticks: list[tuple[float, str]] = []
@@ -432,9 +434,9 @@ class ClockDriver:
             if timing is None:
                 continue
             if timing.base_s is not None:  # periodic: the next multiple of the interval
-                self.timing[name] = replace(timing, index=timing.index + 1)
+                self.timing[name] = Timing(timing.interval_s, timing.base_s, timing.index + 1)
             else:  # aperiodic: unknown until the FMU tells
-                self.timing[name] = replace(timing, next_s=None)
+                self.timing[name] = Timing()
 
     def _read_outputs(self, t: float) -> list[str]:
         """The output clocks active now (logged as ticks)."""
@@ -453,10 +455,21 @@ class ClockDriver:
         only while its clock is active."""
         if self.read_values is None:
             return
-        names = set(self._clocked) if clocks is None else set(clocks)
-        variables = list(dict.fromkeys(v for n in names for v in self._clocked.get(n, ())))
-        if variables:
-            self.held.update(self.read_values(variables))
+        names = self._clocked if clocks is None else clocks
+        key = tuple(names)
+        reader = self._readers.get(key)
+        if reader is None:  # one reader per set of clocks that tick together, built once
+            variables = list(dict.fromkeys(v for n in names for v in self._clocked.get(n, ())))
+            reader = (variables, self.read_values(variables) if variables else None)
+            self._readers[key] = reader
+        variables, group = reader
+        if group is None:
+            return
+        values, position = group.read(), 0
+        for var in variables:
+            convert = _CONVERT.get(var.type, float)
+            self.held[var.name] = [convert(x) for x in values[position : position + var.size]]
+            position += var.size
 
     def _read_intervals(self, t: float, activated: set[str]) -> None:
         """The intervals FMI 3.0 says to ask for at an event: countdown clocks always, tunable clocks
@@ -566,6 +579,11 @@ class ClockedOutputs:
     def native_buffer(self, *, writing: bool) -> None:
         """No native sample: the clocks tick in Python."""
         return None
+
+
+_CONVERT: dict[str, Callable[[Any], Any]] = {"Boolean": bool} | {
+    t: int for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
+}
 
 
 def _priority(var: Variable) -> tuple[int, int]:

@@ -160,7 +160,7 @@ class Model:
             raise
         backend: Any = self._backend
         backend.clock_update = driver.clock_update
-        driver.read_values = lambda variables: access.read(self._backend, variables, self._where)
+        driver.read_values = self._clocked_reader
         self._do_step = driver.step
         return driver
 
@@ -190,6 +190,11 @@ class Model:
         finally:
             archive.release(self.info.path)
             once.release(self.info, self)
+
+    def _clocked_reader(self, variables: list[Variable]) -> SignalGroup:
+        """A reader of clocked variables for the clock driver (it reads them while their clocks tick)."""
+        names = [n for v in variables for n in (v.element_names() if v.dimensions else [v.name])]
+        return SignalGroup(self, [self._element(n) for n in names], names)
 
     # -- FMI 3.0 clocks ------------------------------------------------------------------------
     @property
