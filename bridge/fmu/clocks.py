@@ -179,7 +179,11 @@ class ClockDriver:
             timing[var.name] = Timing(interval_s=interval, base_s=start_s + shift)
         self.timing = timing
         self.held.clear()
-        self._hold(None)  # every clocked variable may be read in initialization mode
+        for clock_name in self._clocked:  # clocked variables may be read in initialization mode
+            try:
+                self._hold([clock_name])
+            except FmuError:  # not initialised by this FMU: held from its clock's first tick
+                continue
 
     def start(self, start_s: float) -> None:
         """Right after initialization: the FMU is in event mode (co-simulation) or clock activation
@@ -570,7 +574,14 @@ class ClockedOutputs:
             values[self._others] = self._numeric.read()
         held = self._driver.held
         for i, name, index in self._held:
-            values[i] = float(held[name][index])
+            value = held.get(name)
+            if value is None:
+                raise FmuError(
+                    f"{self._driver.info.model_name}: clocked variable {name!r} has no value yet: the FMU "
+                    f"did not give one in initialization mode and its clock has not ticked; observe it "
+                    f"from its clock's first tick on, or leave it out of the observations"
+                )
+            values[i] = float(value[index])
         return values.copy()
 
     def read_into(self, out: npt.NDArray[np.float64]) -> None:
