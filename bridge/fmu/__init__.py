@@ -2,12 +2,13 @@
 
 Every call into an FMU is made here: ``Model`` (one instance, its clock, resets and states),
 ``ModelBatch`` (N instances stepped in one native call), the one-call native sample
-(``sample``) and the C helpers (``batch.c``, ``fixed_step.c``) with their ctypes mirrors and the
-FMI status codes in one module (``abi``). FMI names (camelCase, value references, status codes)
-and ctypes stop here; everything above speaks in variable names, numpy arrays and seconds
-(pyproject.toml's import contracts enforce it). ``bridge.fmu.vocab`` (variables, model info, their
-JSON form) imports nothing heavy, so the task, the remote plant and the deployed agent use it
-without loading FMPy; the names below load the runtime on first use.
+(``sample``), FMI 3.0 clocks and scheduled execution (``clocks``) and the C helpers (``batch.c``,
+``fixed_step.c``) with their ctypes mirrors and the FMI status codes in one module (``abi``).
+FMI names (camelCase, value references, status codes) and ctypes stop here; everything above
+speaks in variable names, numpy arrays and seconds (pyproject.toml's import contracts enforce it).
+``bridge.fmu.vocab`` (variables, model info, their JSON form) imports nothing heavy, so the task,
+the remote plant and the deployed agent use it without loading FMPy; the names below load the
+runtime on first use.
 """
 
 from __future__ import annotations

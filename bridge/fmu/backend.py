@@ -20,6 +20,7 @@ from fmpy import fmi1, fmi2, fmi3
 from bridge.errors import FmuError, FmuLoadError
 from bridge.fmu import logs
 from bridge.fmu.abi import DISCARD, WARNING, status_name
+from bridge.fmu.clocks import clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo
 from bridge.fmu.events import fmi1_iterate
 
@@ -364,10 +365,11 @@ class Fmi3Backend(Backend):
     major = 3
     _SET_STATE = "fmi3SetFMUState"
 
-    event_mode = False  # co-simulation: instantiate with eventModeUsed (clocks tick in event mode)
     clock_update: Callable[[], None] | None = None  # scheduled execution: fmi3ClockUpdateCallback
 
     def _load(self, unzip_dir: pathlib.Path) -> Any:
+        # co-simulation with clocks: instantiated with eventModeUsed (its clocks tick in event mode)
+        self.event_mode = self.interface == "cs" and clock_driver_needed(self.info, self.interface)
         classes = {"cs": fmi3.FMU3Slave, "me": fmi3.FMU3Model, "se": fmi3.FMU3ScheduledExecution}
         fmu = classes[self.interface](**self._fmpy_kwargs(unzip_dir))
         self._event = fmi3.fmi3Boolean()

@@ -28,13 +28,15 @@ import ctypes
 import math
 from collections import deque
 from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from fmpy import fmi3
 
 from bridge.errors import ConfigError, FmuError
-from bridge.fmu.abi import DISCARD, ERROR, OK, WARNING
+from bridge.fmu.abi import DISCARD, OK, WARNING
 from bridge.fmu.description import ModelInfo, Variable
 
 NOT_YET_KNOWN, UNCHANGED, CHANGED = 0, 1, 2
@@ -123,10 +125,22 @@ class ClockDriver:
         self._in_event = False
         self._activation_time = 0.0
         self._callback_error: Exception | None = None
+        self._fired: list[str] = []
+        # clocked variables (numeric, not inputs) by clock; their values read at the ticks
+        self._clocked: dict[str, list[Variable]] = {}
+        for var in info.variables.values():
+            if var.clocks and var.is_numeric and var.causality != "input":
+                for clock in var.clocks:
+                    self._clocked.setdefault(clock, []).append(var)
+        self.held: dict[str, list[Any]] = {}
+        # the model's reader of a list of numeric variables (a SignalGroup over their elements)
+        self.read_values: Callable[[list[Variable]], Any] | None = None
+        self._readers: dict[tuple[str, ...], tuple[list[Variable], Any]] = {}
         self._fmu_event_s: float | None = None  # the FMU's next time event (co-simulation)
         self._initial_event_s: float | None = None
         self._start_ticks: list[tuple[float, str]] = []
         self._start_positions: dict[str, int] = {}
+        self._initial_held: dict[str, list[Any]] = {}
 
     # -- set-up ----------------------------------------------------------------------------------
     def configure(self, start_s: float) -> None:
@@ -164,6 +178,12 @@ class ClockDriver:
                 )
             timing[var.name] = Timing(interval_s=interval, base_s=start_s + shift)
         self.timing = timing
+        self.held.clear()
+        for clock_name in self._clocked:  # clocked variables may be read in initialization mode
+            try:
+                self._hold([clock_name])
+            except FmuError:  # not initialised by this FMU: held from its clock's first tick
+                continue
 
     def start(self, start_s: float) -> None:
         """Right after initialization: the FMU is in event mode (co-simulation) or clock activation
@@ -181,11 +201,13 @@ class ClockDriver:
             self._in_event, self._fmu_event_s = False, None
         self._start_ticks = list(self.ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
+        self._initial_held = dict(self.held)
         self._start_positions = dict(self._schedule_pos)
 
     def rewind(self, start_s: float) -> None:
         """After the instance was set back to the state saved right after :meth:`start`."""
         self.timing, self._fmu_event_s = dict(self._initial), self._initial_event_s
+        self.held = dict(self._initial_held)
         self._time, self.terminated, self._in_event = start_s, False, False
         self._pending.clear()
         self._schedule_pos = dict(self._start_positions)
@@ -194,12 +216,13 @@ class ClockDriver:
 
     def save(self) -> tuple[Any, ...]:
         """What :meth:`load` needs to continue from now (for a saved model state)."""
-        positions, pending = dict(self._schedule_pos), set(self._pending)
-        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s
+        positions, pending, held = dict(self._schedule_pos), set(self._pending), dict(self.held)
+        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s, held
 
     def load(self, saved: tuple[Any, ...]) -> None:
-        timing, self._time, positions, pending, self.terminated, self._fmu_event_s = saved
+        timing, self._time, positions, pending, self.terminated, self._fmu_event_s, held = saved
         self.timing, self._schedule_pos, self._pending = dict(timing), dict(positions), set(pending)
+        self.held = dict(held)
         self._in_event = False
 
     def write_in_event_mode(self, write: Callable[[], None]) -> None:
@@ -347,7 +370,8 @@ class ClockDriver:
         self._update_discrete_states()
         self._log(t, names)
         self._advance(names)
-        self._read_outputs(t)
+        fired = self._read_outputs(t)
+        self._hold([*names, *fired])
         self._read_intervals(t, activated=set(names))
         if self.terminated or not leave:
             return
@@ -387,6 +411,7 @@ class ClockDriver:
             self._activation_time = t
             self._advance([name])  # before: the FMU's clock update callback may schedule it anew
             self._log(t, [name])
+            self._fired = []
             self._call(
                 f"fmi3ActivateModelPartition({name})",
                 lambda vr=vr: fmu.fmi3ActivateModelPartition(component, vr, t),  # type: ignore[misc]
@@ -394,13 +419,14 @@ class ClockDriver:
             error, self._callback_error = self._callback_error, None
             if error is not None:
                 raise error
+            self._hold([name, *self._fired])
 
     def clock_update(self) -> None:
         """The FMU's ``fmi3ClockUpdateCallback`` (scheduled execution): read the output clocks and
         the intervals it may have changed, now, in clock update mode."""
         t = self._activation_time
         try:
-            self._read_outputs(t)
+            self._fired += self._read_outputs(t)
             self._read_intervals(t, activated=set(self._by_name))
         except Exception as exc:  # a callback cannot raise into the FMU: raised after the activation
             self._callback_error = exc
@@ -412,17 +438,42 @@ class ClockDriver:
             if timing is None:
                 continue
             if timing.base_s is not None:  # periodic: the next multiple of the interval
-                self.timing[name] = replace(timing, index=timing.index + 1)
+                self.timing[name] = Timing(timing.interval_s, timing.base_s, timing.index + 1)
             else:  # aperiodic: unknown until the FMU tells
-                self.timing[name] = replace(timing, next_s=None)
+                self.timing[name] = Timing()
 
-    def _read_outputs(self, t: float) -> None:
+    def _read_outputs(self, t: float) -> list[str]:
+        """The output clocks active now (logged as ticks)."""
         if not self.outputs:
-            return
+            return []
         fmu, component = self._backend.fmu, self._backend.component
         vrs, values = self._output_buf
         self._call("fmi3GetClock", lambda: fmu.fmi3GetClock(component, vrs, len(self.outputs), values))
-        self._log(t, [v.name for v, active in zip(self.outputs, values, strict=True) if active])
+        fired = [v.name for v, active in zip(self.outputs, values, strict=True) if active]
+        self._log(t, fired)
+        return fired
+
+    def _hold(self, clocks: Iterable[str] | None) -> None:
+        """Read the clocked variables of ``clocks`` (all of them: None) while they may be read, and
+        hold them until their clocks tick again: FMI 3.0 lets an importer read a clocked variable
+        only while its clock is active."""
+        if self.read_values is None:
+            return
+        names = self._clocked if clocks is None else clocks
+        key = tuple(names)
+        reader = self._readers.get(key)
+        if reader is None:  # one reader per set of clocks that tick together, built once
+            variables = list(dict.fromkeys(v for n in names for v in self._clocked.get(n, ())))
+            reader = (variables, self.read_values(variables) if variables else None)
+            self._readers[key] = reader
+        variables, group = reader
+        if group is None:
+            return
+        values, position = group.read(), 0
+        for var in variables:
+            convert = _CONVERT.get(var.type, float)
+            self.held[var.name] = [convert(x) for x in values[position : position + var.size]]
+            position += var.size
 
     def _read_intervals(self, t: float, activated: set[str]) -> None:
         """The intervals FMI 3.0 says to ask for at an event: countdown clocks always, tunable clocks
@@ -496,6 +547,56 @@ class ClockInputs:
         return None
 
 
+class ClockedOutputs:
+    """Outputs of a sample where some are clocked variables: those come from the values the driver
+    read at their clocks' last tick (:attr:`ClockDriver.held`), the others from the FMU now through
+    the :class:`~bridge.fmu.signals.SignalGroup` ``numeric``."""
+
+    def __init__(
+        self,
+        driver: ClockDriver,
+        names: Sequence[str],
+        elements: Sequence[tuple[Variable, int | None]],
+        numeric: Any,
+    ) -> None:
+        self.names = tuple(names)
+        self._driver, self._numeric = driver, numeric
+        self._held = [(i, var.name, index or 0) for i, (var, index) in enumerate(elements) if var.clocks]
+        self._others = [i for i, (var, _) in enumerate(elements) if not var.clocks]
+        self._values = np.zeros(len(self.names), dtype=np.float64)
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+    def read(self) -> npt.NDArray[np.float64]:
+        values = self._values
+        if self._numeric is not None:
+            values[self._others] = self._numeric.read()
+        held = self._driver.held
+        for i, name, index in self._held:
+            value = held.get(name)
+            if value is None:
+                raise FmuError(
+                    f"{self._driver.info.model_name}: clocked variable {name!r} has no value yet: the FMU "
+                    f"did not give one in initialization mode and its clock has not ticked; observe it "
+                    f"from its clock's first tick on, or leave it out of the observations"
+                )
+            values[i] = float(value[index])
+        return values.copy()
+
+    def read_into(self, out: npt.NDArray[np.float64]) -> None:
+        out[:] = self.read()
+
+    def native_buffer(self, *, writing: bool) -> None:
+        """No native sample: the clocks tick in Python."""
+        return None
+
+
+_CONVERT: dict[str, Callable[[Any], Any]] = {"Boolean": bool} | {
+    t: int for t in ("Int8", "UInt8", "Int16", "UInt16", "Int32", "UInt32", "Int64", "UInt64", "Enumeration")
+}
+
+
 def _priority(var: Variable) -> tuple[int, int]:
     return (var.clock.priority if var.clock is not None else 0, var.value_reference)
 
@@ -552,4 +653,13 @@ def _check_schedule(
     return checked
 
 
-__all__ = ["CHANGED", "ERROR", "NOT_YET_KNOWN", "UNCHANGED", "ClockDriver", "Timing", "clock_driver_needed"]
+__all__ = [
+    "CHANGED",
+    "NOT_YET_KNOWN",
+    "UNCHANGED",
+    "ClockDriver",
+    "ClockInputs",
+    "ClockedOutputs",
+    "Timing",
+    "clock_driver_needed",
+]

@@ -215,6 +215,7 @@ def _variable(v: ModelVariable) -> Variable:
             for d in v.dimensions or ()
         ),
         clock=ClockInfo(str(v.intervalVariability or "unspecified")) if var_type == "Clock" else None,
+        clocks=tuple(str(c.name) for c in getattr(v, "clocks", None) or ()),
     )
 
 

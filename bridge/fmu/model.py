@@ -25,7 +25,7 @@ from bridge.errors import ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once, serial, start_state, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
-from bridge.fmu.clocks import ClockDriver, ClockInputs, clock_driver_needed
+from bridge.fmu.clocks import ClockDriver, ClockedOutputs, ClockInputs, clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
 from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
@@ -181,8 +181,8 @@ class Model:
             self.close()
             raise
         backend: Any = self._backend
-        backend.event_mode = self.interface == "cs"
         backend.clock_update = driver.clock_update
+        driver.read_values = self._clocked_reader
         self._do_step = driver.step
         return driver
 
@@ -214,6 +214,11 @@ class Model:
         finally:
             archive.release(self.info.path)
             once.release(self.info, self)
+
+    def _clocked_reader(self, variables: list[Variable]) -> SignalGroup:
+        """A reader of clocked variables for the clock driver (it reads them while their clocks tick)."""
+        names = [n for v in variables for n in (v.element_names() if v.dimensions else [v.name])]
+        return SignalGroup(self, [self._element(n) for n in names], names)
 
     # -- FMI 3.0 clocks ------------------------------------------------------------------------
     @property
@@ -273,6 +278,10 @@ class Model:
             numeric = self.signals(others, writable=True, role=role) if others else None
             return ClockInputs(clocks, names, numeric)  # type: ignore[return-value]
         elements = [self._element(n, role) for n in names]
+        if not writable and clocks is not None and any(var.clocks for var, _ in elements):
+            others = [n for n, (var, _) in zip(names, elements, strict=True) if not var.clocks]
+            numeric = self.signals(others, role=role) if others else None
+            return ClockedOutputs(clocks, names, elements, numeric)  # type: ignore[return-value]
         if not elements and not writable:  # an empty input group: an observation-only experiment
             raise ConfigError(f"{role}: at least one variable is needed")
         for var, _ in elements:
@@ -292,7 +301,10 @@ class Model:
         one per dimension) gives one element.
         """
         wanted = {name: self._element(name) for name in names}
-        flat = access.read(self._backend, list(dict.fromkeys(var for var, _ in wanted.values())), self._where)
+        variables = list(dict.fromkeys(var for var, _ in wanted.values()))
+        held = self._clocks.held if self._clocks is not None else {}
+        flat = access.read(self._backend, [v for v in variables if v.name not in held], self._where)
+        flat.update((v.name, held[v.name]) for v in variables if v.name in held)  # read at the last tick
         return {name: access.pick(var, flat[var.name], index) for name, (var, index) in wanted.items()}
 
     def set(self, values: Mapping[str, Any]) -> None:

@@ -71,6 +71,7 @@ class Variable:
     dimensions: tuple[int, ...] = ()  # FMI 3.0 arrays: the size of each dimension, row-major
     dimension_vrs: tuple[int | None, ...] = ()  # per dimension: the structural parameter sizing it
     clock: ClockInfo | None = None  # FMI 3.0 Clock variables
+    clocks: tuple[str, ...] = ()  # FMI 3.0 clocked variables: the clocks they belong to
 
     @property
     def is_numeric(self) -> bool:

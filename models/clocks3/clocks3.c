@@ -56,6 +56,7 @@ typedef struct {
     bool active[N_INPUT_CLOCKS + 2];
     bool out_clock;
     bool evaluated;
+    int last_partition; /* scheduled execution: the partition that ran last */
     int tunable_qualifier, changing_qualifier, countdown_qualifier;
     double changing_interval, countdown_interval;
     int changing_count;
@@ -287,6 +288,25 @@ static double* float_ref(State* s, fmi3ValueReference vr) {
     }
 }
 
+/* FMI 3.0: a clocked variable is read only while its clock is active (or in initialization mode);
+ * this model refuses other reads, as a strict FMU may. */
+static int clock_of(fmi3ValueReference vr) {
+    if (vr == VR_U) return C_CTRL;
+    if (vr >= VR_N_FIRST && vr < VR_N_FIRST + N_INPUT_CLOCKS) return (int)(vr - VR_N_FIRST) + 1;
+    if (vr == VR_N_FIRST + N_INPUT_CLOCKS) return C_OUT;
+    if (vr >= VR_T_FIRST && vr < VR_T_FIRST + N_INPUT_CLOCKS) return (int)(vr - VR_T_FIRST) + 1;
+    return 0;
+}
+
+static bool readable(const Instance* c, fmi3ValueReference vr) {
+    int clock = clock_of(vr);
+    const State* s = &c->s;
+    if (clock == 0 || s->mode == INSTANTIATED || s->mode == INITIALIZATION) return true;
+    if (s->mode == EVENT) return clock == C_OUT ? s->out_clock : s->active[clock];
+    if (s->mode == CLOCK_ACTIVATION) return clock == C_OUT ? s->last_partition == C_CONST : s->last_partition == clock;
+    return false;
+}
+
 fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], size_t nvr, fmi3Float64 values[],
                           size_t nValues) {
     INST;
@@ -298,6 +318,7 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
         }
         double* p = float_ref(&c->s, vr[k]);
         REQUIRE(p != NULL, "fmi3GetFloat64: %u is not a Float64 variable", vr[k]);
+        REQUIRE(readable(c, vr[k]), "fmi3GetFloat64: %u is a clocked variable and its clock is not active", vr[k]);
         values[k] = *p;
     }
     return fmi3OK;
@@ -333,6 +354,7 @@ fmi3Status fmi3GetInt32(fmi3Instance instance, const fmi3ValueReference vr[], si
     for (size_t k = 0; k < nvr; k++) {
         REQUIRE(vr[k] >= VR_N_FIRST && vr[k] <= VR_N_FIRST + N_INPUT_CLOCKS, "fmi3GetInt32: %u is not an Int32",
                 vr[k]);
+        REQUIRE(readable(c, vr[k]), "fmi3GetInt32: %u is a clocked variable and its clock is not active", vr[k]);
         values[k] = c->s.n[vr[k] - VR_N_FIRST + 1];
     }
     return fmi3OK;
@@ -481,6 +503,7 @@ fmi3Status fmi3ActivateModelPartition(fmi3Instance instance, fmi3ValueReference 
             activationTime, c->s.time);
     integrate_to(&c->s, activationTime);
     c->s.active[clockReference] = true;
+    c->s.last_partition = (int)clockReference;
     run_partition(c, (int)clockReference);
     c->s.active[clockReference] = false;
     bool update = c->s.out_clock || (clockReference == C_CONST) || (clockReference == C_CHANGING) ||
