@@ -1,4 +1,4 @@
-"""A deployed agent without torch: ``agent run --runtime onnx`` as a process in which importing
+"""A deployed agent without torch: ``agent run --runtime onnx`` (and ``fmu``) as a process in which importing
 torch or stable-baselines3 fails (``torch_free/sitecustomize.py``), given only what a robot gets
 (the experiment, the model snapshot and ``policy.onnx``), closes the loop with a real cart-pole node
 on a Zenoh router at 127.0.0.1 for a whole episode, over the native protocol and the ROS 2 view.
@@ -40,12 +40,16 @@ SUMMARY = re.compile(r"(\d+) observations, (\d+) actions, (\d+) missing-observat
 
 @pytest.fixture(scope="module")
 def robot_run(balancer: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """What goes onto the robot: the run's experiment, model snapshot and ONNX policy, no model.zip."""
+    """What goes onto the robot: the run's experiment, model snapshot, ONNX policy and policy FMU,
+    no model.zip."""
     from agents.export.onnx import export_onnx
+    from agents.export.policy_fmu import export_fmu
 
     export_onnx(balancer, None)
+    fmu = export_fmu(balancer, "2", tmp_path_factory.mktemp("fmu") / "policy-fmi2.fmu")
     robot = tmp_path_factory.mktemp("robot") / "run"
     robot.mkdir()
+    shutil.copy2(fmu, robot / fmu.name)
     for name in ("experiment.yaml", "model.json", "policy.onnx"):
         shutil.copy2(balancer / name, robot / name)
     return robot
@@ -82,9 +86,11 @@ def test_the_blocker_makes_torch_unimportable(tmp_path: Path) -> None:
 
 
 @contextmanager
-def agent_process(run: Path, net: Loopback, transport: str, log: Path, *extra: str) -> Iterator[Any]:
-    """``fmu-bridge agent run --runtime onnx`` in the torch-free environment, up and subscribed."""
-    cmd = [sys.executable, "-m", "bridge.cli", "agent", "run", str(run), "--runtime", "onnx",
+def agent_process(
+    run: Path, net: Loopback, transport: str, log: Path, *extra: str, runtime: str = "onnx"
+) -> Iterator[Any]:
+    """``fmu-bridge agent run --runtime onnx|fmu`` in the torch-free environment, up and subscribed."""
+    cmd = [sys.executable, "-m", "bridge.cli", "agent", "run", str(run), "--runtime", runtime,
            "--transport", transport, "--node", "plant", "--prefix", net.prefix,
            "--connect", net.endpoint, "--timeout", "120", "--duration", "900", *extra]  # fmt: skip
     process = subprocess.Popen(
@@ -147,10 +153,18 @@ def session_modes(net: Loopback) -> list[str]:
     return sorted(str(t.whatami) for t in net.session.info.transports())  # type: ignore[attr-defined]
 
 
-@pytest.mark.parametrize("mode", ["default", "peer"])
-@pytest.mark.parametrize("transport", ["zenoh", "ros2"])
-def test_torch_free_agent_keeps_the_pole_up_for_a_whole_episode(
-    robot_run: Path, loopback: Loopback, tmp_path: Path, transport: str, mode: str
+@pytest.mark.parametrize(
+    ("transport", "mode", "runtime"),
+    [
+        ("zenoh", "default", "onnx"),
+        ("zenoh", "peer", "onnx"),
+        ("ros2", "default", "onnx"),
+        ("ros2", "peer", "onnx"),
+        ("ros2", "default", "fmu"),  # the policy FMU: no torch either
+    ],
+)
+def test_torch_free_agent_keeps_the_pole_up_for_a_whole_episode(  # noqa: PLR0917
+    robot_run: Path, loopback: Loopback, tmp_path: Path, transport: str, mode: str, runtime: str
 ) -> None:
     experiment = load_experiment(CARTPOLE)
     samples = round(experiment.model.episode_duration / experiment.model.sampling_time)
@@ -159,7 +173,7 @@ def test_torch_free_agent_keeps_the_pole_up_for_a_whole_episode(
     extra = () if mode == "default" else ("--zenoh-mode", mode)
     with (
         node_process(CARTPOLE, "plant", loopback, "--mode", "lockstep", "--ros", *extra),
-        agent_process(robot_run, loopback, transport, log, *extra) as agent,
+        agent_process(robot_run, loopback, transport, log, *extra, runtime=runtime) as agent,
     ):
         modes = session_modes(loopback)
         episode = drive_one_episode(loopback, samples)
