@@ -90,6 +90,12 @@ class BatchEnv:
         self.samples = np.zeros(n_envs, dtype=np.int64)
         self.obs = np.zeros((n_envs, *self.task.observation_space.shape), dtype=np.float32)
         self.outputs = np.zeros((n_envs, len(self.task.output_names)))
+        # one env: the scalar Task steps it (FmuEnv's own code, so the same results) on lists,
+        # cheaper than numpy over a batch of one
+        self._one = self.task.tasks[0] if n_envs == 1 else None
+        self._one_inputs = np.zeros((1, len(self.task.input_names)))
+        self._codes = {reason: code for code, reason in enumerate(self.task.reasons)}
+        self._discrete = self.task.tasks[0].action_mapping.kind == "discrete"
 
     def reset_one(self, i: int, seed: int | None = None, scenario: str | None = None) -> dict[str, Any]:
         """Start env ``i``'s next episode (``seed``: a fresh generator, as ``FmuEnv.reset``)."""
@@ -141,6 +147,8 @@ class BatchEnv:
             obs (of the new episode where one ended), reward, terminated, truncated, and for
             each env whose episode ended: ``final_obs``, ``final_info`` and ``reset_info``.
         """
+        if self._one is not None and self.active[0]:
+            return self._step_one(actions)
         task, plant = self.task, self.plant
         inputs = task.actions_to_inputs(actions, self.samples)
         active = self.active.copy()
@@ -160,15 +168,90 @@ class BatchEnv:
                     i, "the model returned non-finite outputs", detail, step=int(self.samples[i])
                 )
                 plant.ready[i] = False
+        return self._finish(
+            result.outputs,
+            obs=obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            code=code,
+            errors=errors,
+        )
+
+    def _finish(
+        self,
+        outputs: npt.NDArray[np.float64],
+        *,
+        obs: ObsArray,
+        reward: npt.NDArray[np.float64],
+        terminated: Any,
+        truncated: Any,
+        code: Any,
+        errors: Mapping[int, BridgeError],
+    ) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
+        """Truncate the episodes of failed envs (or raise), end and reset finished episodes."""
         if errors and self.on_error == "raise":
             raise errors[min(errors)]
         for i, error in errors.items():
             obs[i], reward[i], terminated[i], truncated[i] = self.obs[i], 0.0, False, True
             _log.warning("env %d: episode truncated by a plant error: %s", i, error)
-        self.outputs[:] = result.outputs
-        ended = self._end_episodes(obs, terminated, truncated, code, errors)
+        self.outputs[:] = outputs
+        ended = (
+            self._end_episodes(obs, terminated, truncated, code, errors)
+            if errors or terminated.any() or truncated.any()
+            else {}
+        )
         self.obs = obs
         return obs, reward, terminated, truncated, ended
+
+    def _step_one(
+        self, actions: Any
+    ) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
+        """``step`` of a batch of one, through the scalar Task (see ``_one``)."""
+        task, plant, rng = self._one, self.plant, self.rngs[0]
+        assert task is not None  # step() checked
+        a = np.asarray(actions)
+        sample = int(self.samples[0])
+        inputs = self._one_inputs
+        action = a.reshape(1)[0] if self._discrete else a.reshape(1, -1)[0]
+        try:
+            inputs[0] = task.action_to_inputs(action, sample, rng)
+        except BridgeError:
+            raise self.task.bad_actions(actions, np.ones(1, dtype=bool)) from None  # the batch's words
+        result = plant.step(inputs, self.active)
+        self.samples[0] = sample = sample + 1
+        errors: dict[int, BridgeError] = dict(result.errors)
+        obs = np.empty_like(self.obs)
+        reward = np.zeros(1)
+        terminated, truncated, code = (
+            np.zeros(1, dtype=bool),
+            np.zeros(1, dtype=bool),
+            np.zeros(1, dtype=np.int64),
+        )
+        if not errors:
+            outputs = result.outputs[0].tolist()
+            try:
+                obs[0], reward[0], terminated[0], truncated[0], reason = task.step_result(
+                    outputs, sample, bool(result.terminated[0]), rng
+                )
+                code[0] = self._codes[reason]
+            except NonFiniteOutputs:
+                errors[0] = plant.failure(
+                    0,
+                    "the model returned non-finite outputs",
+                    str(task.bad_output(outputs, sample)),
+                    step=sample,
+                )
+                plant.ready[0] = False
+        return self._finish(
+            result.outputs,
+            obs=obs,
+            reward=reward,
+            terminated=terminated,
+            truncated=truncated,
+            code=code,
+            errors=errors,
+        )
 
     def _end_episodes(
         self, obs: ObsArray, terminated: Any, truncated: Any, code: Any, errors: Mapping[int, BridgeError]

@@ -3,9 +3,11 @@
 It steps the nodes through a :class:`~bridge.env.vec.RemoteVecEnv` (the same ``RemotePlant``
 pieces as stable-baselines3's remote vector env): every action goes out before any answer is
 awaited, so K nodes on other machines step in parallel and a vector step costs one round trip,
-not K in series. Dead or hung nodes are replaced by spares (``replace_dead=True`` with a node
-pattern), and ``claim=True`` leases each node as it is taken so that vector envs drawing on one
-pool (one per Ray env runner) never share a node.
+not K in series. Resets are parallel too: each env to reset sends its request and awaits the
+reply on a thread of a pool, all at once (under NEXT_STEP alongside the step's actions), and
+a failed reset is recovered once every reply is in. Dead or hung nodes are replaced by spares
+(``replace_dead=True`` with a node pattern), and ``claim=True`` leases each node as it is taken
+so that vector envs drawing on one pool (one per Ray env runner) never share a node.
 
 Autoreset follows ``autoreset_mode``, declared in ``metadata["autoreset_mode"]`` as
 :class:`~bridge.env.batch.BatchVectorEnv` does:
@@ -22,6 +24,8 @@ Autoreset follows ``autoreset_mode``, declared in ``metadata["autoreset_mode"]``
 from __future__ import annotations
 
 from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import wait as wait_all
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +37,7 @@ from gymnasium.vector.utils import batch_space
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.vec import RemoteVecEnv, Result
+from bridge.errors import PlantError
 from bridge.experiment.config import Experiment
 
 ObsArray = npt.NDArray[np.float32]
@@ -75,6 +80,7 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
         self.render_mode = None
         self._to_reset = np.zeros(self.num_envs, dtype=bool)  # NEXT_STEP: ended last step
         self._obs: list[Any] = [None] * self.num_envs
+        self._pool: ThreadPoolExecutor | None = None  # awaits the replies of resets in flight
 
     @property
     def node_names(self) -> list[str]:
@@ -88,10 +94,10 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
         scenario = (options or {}).get("scenario")
         scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
         self.nodes._last_obs = list(self._obs)
+        options_ = [{"scenario": s} if s is not None else None for s in scenarios]
         infos: dict[str, Any] = {}
-        for i in range(self.num_envs):
-            option = {"scenario": scenarios[i]} if scenarios[i] is not None else None
-            self._obs[i], info = self.nodes._reset_one(i, seeds[i], option)
+        for i, (obs, info) in self._reset_all(range(self.num_envs), seeds, options_).items():
+            self._obs[i] = obs
             infos = self._add_info(infos, info, i)
         self._to_reset[:] = False
         return np.stack(self._obs), infos
@@ -103,11 +109,15 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
         infos: dict[str, Any] = {}
         self.nodes._last_obs = list(self._obs)
         if self.autoreset_mode is AutoresetMode.NEXT_STEP:
-            resetting = np.flatnonzero(self._to_reset).tolist()
             stepping = [i for i in range(n) if not self._to_reset[i]]
-            results = self.nodes.step_envs(actions, stepping)
-            for i in resetting:
-                self._obs[i], info = self.nodes._reset_one(i)
+            pending = self._send_resets(np.flatnonzero(self._to_reset).tolist())  # with the actions
+            try:
+                results = self.nodes.step_envs(actions, stepping)
+            except BaseException:
+                wait_all(pending.values())  # no reset left in flight
+                raise
+            for i, (obs, info) in self._await_resets(pending).items():
+                self._obs[i] = obs
                 infos = self._add_info(infos, info, i)
             for i in stepping:
                 self._obs[i], reward[i], terminated[i], truncated[i], info = _result(results[i])
@@ -115,18 +125,82 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
             self._to_reset[:] = terminated | truncated
         else:
             results = self.nodes.step_envs(actions)
+            ended: dict[int, tuple[Any, dict[str, Any]]] = {}
             for i in range(n):
                 obs, reward[i], terminated[i], truncated[i], info = _result(results[i])
                 if terminated[i] or truncated[i]:
-                    self._obs[i], reset_info = self.nodes._reset_one(i)
-                    end = {"final_obs": obs, "final_info": info, "reset_info": reset_info}
-                    infos = self._add_info(infos, end, i)
+                    ended[i] = obs, info
                 else:
                     self._obs[i] = obs
-                    infos = self._add_info(infos, info, i)
+            new = self._reset_all(list(ended))
+            for i in range(n):
+                if i in ended:
+                    self._obs[i], reset_info = new[i]
+                    end = {"final_obs": ended[i][0], "final_info": ended[i][1], "reset_info": reset_info}
+                    infos = self._add_info(infos, end, i)
+                else:
+                    infos = self._add_info(infos, _result(results[i])[4], i)
         return np.stack(self._obs), reward, terminated, truncated, infos
 
+    def _reset_all(
+        self,
+        indices: Sequence[int],
+        seeds: Sequence[int | None] | None = None,
+        options: Sequence[dict[str, Any] | None] | None = None,
+    ) -> dict[int, tuple[Any, dict[str, Any]]]:
+        """Reset envs ``indices`` (with ``seeds[i]``, ``options[i]``): all requests in flight at once."""
+        return self._await_resets(self._send_resets(indices, seeds, options), seeds, options)
+
+    def _send_resets(
+        self,
+        indices: Sequence[int],
+        seeds: Sequence[int | None] | None = None,
+        options: Sequence[dict[str, Any] | None] | None = None,
+    ) -> dict[int, Future[tuple[Any, dict[str, Any]]]]:
+        """Start the resets of envs ``indices``, each awaited on a thread of the pool."""
+        if not indices:
+            return {}
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self.num_envs, thread_name_prefix="node-reset")
+        envs = self.nodes.envs
+        return {
+            i: self._pool.submit(
+                envs[i].reset,
+                seed=None if seeds is None else seeds[i],
+                options=None if options is None else options[i],
+            )
+            for i in indices
+        }
+
+    def _await_resets(
+        self,
+        pending: dict[int, Future[tuple[Any, dict[str, Any]]]],
+        seeds: Sequence[int | None] | None = None,
+        options: Sequence[dict[str, Any] | None] | None = None,
+    ) -> dict[int, tuple[Any, dict[str, Any]]]:
+        """The first observation and info of each reset in ``pending``, once every reply is in; an
+        env whose reset failed is then recovered as ``RemoteVecEnv`` does (a spare, or the error)."""
+        wait_all(pending.values())
+        done: dict[int, tuple[Any, dict[str, Any]]] = {}
+        failed: dict[int, PlantError] = {}
+        for i, future in pending.items():
+            error = future.exception()
+            if isinstance(error, PlantError):
+                failed[i] = error
+            elif error is not None:
+                raise error
+            else:
+                done[i] = future.result()
+                self.nodes._last_obs[i] = done[i][0]
+        for i, error in sorted(failed.items()):
+            seed = None if seeds is None else seeds[i]
+            done[i] = self.nodes._reset_failed(i, error, seed, None if options is None else options[i])
+        return done
+
     def close_extras(self, **kwargs: Any) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
         self.nodes.close()
 
 

@@ -169,12 +169,20 @@ class PlantVecEnv(Sb3VecEnv):
         try:
             obs, info = self.envs[index].reset(seed=seed, options=options)
         except PlantError as exc:
-            recovered = self._recover(index, exc)
-            obs, reset_info = self.envs[index].reset(seed=seed, options=options)
-            info = {**reset_info, **recovered}
+            return self._reset_failed(index, exc, seed, options)
         if len(self._last_obs) == self.num_envs:
             self._last_obs[index] = obs
         return obs, info
+
+    def _reset_failed(
+        self, index: int, error: PlantError, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        """Env ``index``'s reset failed with ``error``: recover (raise, or a replacement) and reset again."""
+        recovered = self._recover(index, error)
+        obs, reset_info = self.envs[index].reset(seed=seed, options=options)
+        if len(self._last_obs) == self.num_envs:
+            self._last_obs[index] = obs
+        return obs, {**reset_info, **recovered}
 
     def close(self) -> None:
         for env in getattr(self, "envs", []):

@@ -143,7 +143,7 @@ class BatchTask:
         if self._kind == "continuous":
             a = np.asarray(actions, dtype=np.float64).reshape(self.n, n)
             if not np.isfinite(a).all():
-                raise self._bad_action(actions, np.asarray(~np.isfinite(a).all(axis=1)))
+                raise self.bad_actions(actions, np.asarray(~np.isfinite(a).all(axis=1)))
             u[:, :n] = self._centre + self._half * np.clip(a, -1.0, 1.0)
             physical = actions.physical if type(actions) is ExactAction else None
             if physical is not None and len(physical) == self.n * n:  # every env's values, exactly
@@ -152,14 +152,14 @@ class BatchTask:
             index = np.asarray(actions).reshape(self.n)
             bad = np.asarray((index < 0) | (index >= len(self._table)) | (index != np.floor(index)))
             if bad.any():
-                raise self._bad_action(actions, bad)
+                raise self.bad_actions(actions, bad)
             u[:, :n] = self._table[index.astype(np.int64)]
         else:
             levels_index = np.asarray(actions).reshape(self.n, n)
             sizes = np.array([len(levels) for levels in self._levels])
             bad = np.asarray(((levels_index < 0) | (levels_index >= sizes)).any(axis=1))
             if bad.any():
-                raise self._bad_action(actions, bad)
+                raise self.bad_actions(actions, bad)
             for j, levels in enumerate(self._levels):
                 u[:, j] = levels[levels_index[:, j].astype(np.int64)]
         row = self._row(samples)
@@ -169,7 +169,7 @@ class BatchTask:
             u[:, n:] = self._tables["profiles"][self._all, row]
         return u
 
-    def _bad_action(self, actions: Any, bad: BoolArray) -> BridgeError:
+    def bad_actions(self, actions: Any, bad: BoolArray) -> BridgeError:
         envs = np.flatnonzero(bad).tolist()
         return BridgeError(
             f"invalid actions for envs {envs[:10]}: {np.asarray(actions)[envs[:3]].tolist()}; "

@@ -55,13 +55,16 @@ def test_autoreset_is_not_a_vector_env_argument() -> None:
         BatchVectorEnv(cartpole(), 2, autoreset=False)
 
 
-@pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+@pytest.mark.parametrize(
+    ("native", "n"), [(True, N), (False, N), (True, 1)], ids=["native", "python", "one-env"]
+)
 @pytest.mark.parametrize("name", ["cartpole_balance", "cartpole_continuous", "dcmotor_tracking"])
-def test_next_step_equals_sync_vector_env_over_fmu_envs_in_next_step(name: str, native: bool) -> None:
-    """With actuator and sensor noise, reference tables and continuous actions too."""
+def test_next_step_equals_sync_vector_env_over_fmu_envs_in_next_step(name: str, native: bool, n: int) -> None:
+    """With actuator and sensor noise, reference tables and continuous actions too; a batch of
+    one (RLlib's runner over one FMU) steps through the scalar Task and is checked the same."""
     exp = load_experiment(example_experiment(name))
-    batch = BatchVectorEnv(exp, N, autoreset_mode=AutoresetMode.NEXT_STEP, native=native)
-    reference = SyncVectorEnv([lambda: FmuEnv(exp) for _ in range(N)], autoreset_mode=AutoresetMode.NEXT_STEP)
+    batch = BatchVectorEnv(exp, n, autoreset_mode=AutoresetMode.NEXT_STEP, native=native)
+    reference = SyncVectorEnv([lambda: FmuEnv(exp) for _ in range(n)], autoreset_mode=AutoresetMode.NEXT_STEP)
     try:
         np.testing.assert_array_equal(batch.reset(seed=11)[0], reference.reset(seed=11)[0])
         rng = np.random.default_rng(5)
@@ -69,9 +72,9 @@ def test_next_step_equals_sync_vector_env_over_fmu_envs_in_next_step(name: str, 
         space = batch.single_action_space
         for _ in range(700 if name == "dcmotor_tracking" else STEPS):
             if isinstance(space, gym.spaces.Discrete):
-                a = rng.integers(0, 2, size=N)
+                a = rng.integers(0, 2, size=n)
             else:
-                a = rng.uniform(-1.3, 1.3, size=(N, *space.shape)).astype(np.float32)
+                a = rng.uniform(-1.3, 1.3, size=(n, *space.shape)).astype(np.float32)
             obs, reward, terminated, truncated, info = batch.step(a)
             r_obs, r_reward, r_terminated, r_truncated, _ = reference.step(a)
             np.testing.assert_array_equal(obs, r_obs)
@@ -81,7 +84,7 @@ def test_next_step_equals_sync_vector_env_over_fmu_envs_in_next_step(name: str, 
             if "_scenario" in info:
                 resets += int(info["_scenario"].sum())
             assert "final_obs" not in info, "NEXT_STEP has no final_obs: the last obs is the obs"
-        assert resets >= N, "too few episodes ended: the test would not cover the next-step reset"
+        assert resets >= n, "too few episodes ended: the test would not cover the next-step reset"
     finally:
         batch.close()
         reference.close()

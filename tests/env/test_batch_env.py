@@ -13,6 +13,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from bridge.env.batch import BatchVecEnv, BatchVectorEnv
 from bridge.env.fmu_env import FmuEnv
+from bridge.errors import StepError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.experiment.examples import example_experiment
 
@@ -79,20 +80,26 @@ CASES = [
 ]
 
 
-def actions(space: gym.Space[Any], rng: np.random.Generator) -> np.ndarray:
+def actions(space: gym.Space[Any], rng: np.random.Generator, n: int = N) -> np.ndarray:
     if isinstance(space, gym.spaces.Discrete):
-        return rng.integers(0, int(space.n), size=N)
-    return rng.uniform(-1.3, 1.3, size=(N, *space.shape)).astype(np.float32)
+        return rng.integers(0, int(space.n), size=n)
+    return rng.uniform(-1.3, 1.3, size=(n, *space.shape)).astype(np.float32)
 
 
-@pytest.mark.parametrize("native", [True, False], ids=["native", "python"])
+# a batch of one steps through the scalar Task (its own path): checked as the others
+WAYS = [(True, N), (False, N), (True, 1)]
+WAY_IDS = ["native", "python", "one-env"]
+
+
+@pytest.mark.parametrize("way", WAYS, ids=WAY_IDS)
 @pytest.mark.parametrize(("name", "text", "version"), CASES, ids=[c[0] for c in CASES])
 def test_batch_vector_env_equals_sync_vector_env_over_fmu_envs_bit_for_bit(
-    tmp_path: Path, name: str, text: str | None, version: str | None, native: bool
+    tmp_path: Path, name: str, text: str | None, version: str | None, way: tuple[bool, int]
 ) -> None:
+    native, n = way
     exp = experiment_of(name, tmp_path, text, version)
-    batch = BatchVectorEnv(exp, N, native=native)
-    reference = SyncVectorEnv([lambda: FmuEnv(exp) for _ in range(N)], autoreset_mode=AutoresetMode.SAME_STEP)
+    batch = BatchVectorEnv(exp, n, native=native)
+    reference = SyncVectorEnv([lambda: FmuEnv(exp) for _ in range(n)], autoreset_mode=AutoresetMode.SAME_STEP)
     assert batch.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
     assert batch.observation_space == reference.observation_space
     obs, info = batch.reset(seed=7)
@@ -102,7 +109,7 @@ def test_batch_vector_env_equals_sync_vector_env_over_fmu_envs_bit_for_bit(
     rng = np.random.default_rng(1)
     ends = 0
     for _ in range(310):
-        a = actions(batch.single_action_space, rng)
+        a = actions(batch.single_action_space, rng, n)
         obs, reward, terminated, truncated, info = batch.step(a)
         r_obs, r_reward, r_terminated, r_truncated, r_info = reference.step(a)
         np.testing.assert_array_equal(obs, r_obs)
@@ -175,6 +182,33 @@ def test_a_failing_env_is_truncated_and_reset_while_the_others_go_on(tmp_path: P
     env.close()
 
 
+def test_a_failing_env_alone_is_truncated_and_reset(tmp_path: Path) -> None:
+    exp = experiment_of("typed", tmp_path, TYPED)
+    env = BatchVectorEnv(exp, 1)
+    env.reset(seed=0, options={"scenario": ["breaks"]})
+    zero = np.zeros((1, 1), dtype=np.float32)
+    for _ in range(2):
+        obs, _, terminated, truncated, info = env.step(zero)
+        assert not (terminated | truncated).any()
+    _, reward, terminated, truncated, info = env.step(zero)  # doStep 3 fails
+    assert truncated.tolist() == [True] and not terminated.any() and reward[0] == 0.0
+    np.testing.assert_array_equal(info["final_obs"][0], obs[0])  # the last good observation
+    assert info["final_info"]["reason"][0] == "plant_error"
+    assert "instance 0: the model failed at step 3 of episode 1" in info["final_info"]["plant_error"][0]
+    assert info["step"].tolist() == [0]
+    for _ in range(5):
+        _, _, terminated, truncated, info = env.step(zero)
+    assert not (terminated | truncated).any() and info["step"].tolist() == [5]
+    env.close()
+    raising = BatchVectorEnv(exp, 1, on_error="raise")
+    raising.reset(seed=0, options={"scenario": ["breaks"]})
+    raising.step(zero)
+    raising.step(zero)
+    with pytest.raises(StepError, match="instance 0: the model failed at step 3"):
+        raising.step(zero)
+    raising.close()
+
+
 def test_on_error_raise_raises_the_plant_error(tmp_path: Path) -> None:
     from bridge.errors import StepError
 
@@ -197,6 +231,13 @@ def test_invalid_actions_are_clear_errors() -> None:
     with pytest.raises(BridgeError, match=r"invalid actions for envs \[1\]"):
         env.step(np.array([[0.0], [np.nan]], dtype=np.float32))
     env.close()
+    one = BatchVectorEnv(example_experiment("cartpole_balance"), 1)
+    one.reset(seed=0)
+    with pytest.raises(
+        BridgeError, match=r"invalid actions for envs \[0\]: \[2\]; expected elements of Discrete\(2\)"
+    ):
+        one.step(np.array([2]))
+    one.close()
 
 
 def test_ppo_trains_on_the_batch_vec_env() -> None:

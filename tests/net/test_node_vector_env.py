@@ -7,6 +7,7 @@ step); ``claim=True`` leases nodes so that two vector envs on one pool never sha
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 from typing import Any
@@ -87,6 +88,61 @@ def test_every_action_goes_out_before_any_answer_is_awaited(loopback: Loopback) 
                 env.step(np.array([0, 1, 0]))
                 assert sorted(calls[:3]) == ["send0", "send1", "send2"], calls
                 assert sorted(calls[3:]) == ["receive0", "receive1", "receive2"], calls
+        finally:
+            env.close()
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
+def test_resets_are_all_in_flight_before_any_reply(loopback: Loopback, mode: AutoresetMode) -> None:
+    """Every env to reset has sent its request before any reset returns: the first reset waits
+    (bounded) until all of them have started, so resets one after the other would fail here."""
+    with nodes(BALANCE, ["reset-0", "reset-1", "reset-2"], loopback):
+        env = NodeVectorEnv(
+            BALANCE,
+            "reset-*",
+            n_envs=3,
+            autoreset_mode=mode,
+            session=loopback.session,
+            prefix=loopback.prefix,
+        )
+        calls: list[str] = []
+        expected = [0]  # how many resets the next vector call makes
+        changed = threading.Condition()
+        try:
+            for i, inner in enumerate(env.nodes.envs):
+
+                def recorded(*args: Any, _real: Any = inner.reset, _i: int = i, **kwargs: Any) -> Any:
+                    with changed:
+                        calls.append(f"start{_i}")
+                        changed.notify_all()
+                        changed.wait_for(lambda: sum(c.startswith("start") for c in calls) >= expected[0], 20)
+                    try:
+                        return _real(*args, **kwargs)
+                    finally:
+                        with changed:
+                            calls.append(f"end{_i}")
+
+                inner.reset = recorded  # type: ignore[method-assign]
+            expected[0] = 3
+            env.reset(seed=5)
+            assert sorted(calls[:3]) == ["start0", "start1", "start2"], calls
+            together = 0
+            ended = np.zeros(3, dtype=bool)
+            for _ in range(300):
+                resets = int(ended.sum()) if mode is AutoresetMode.NEXT_STEP else 0
+                calls.clear()
+                expected[0] = resets
+                _, _, terminated, truncated, _ = env.step(np.zeros(3, dtype=np.int64))  # pushes left: falls
+                if mode is AutoresetMode.SAME_STEP:
+                    resets = int((terminated | truncated).sum())
+                assert len(calls) == 2 * resets
+                if resets >= 2:
+                    assert all(c.startswith("start") for c in calls[:resets]), calls
+                    together += 1
+                ended = terminated | truncated
+                if together >= 2:
+                    break
+            assert together >= 2  # several steps reset 2 or 3 envs at once
         finally:
             env.close()
 
