@@ -140,3 +140,28 @@ def test_sigterm_on_an_isolated_system_node_busy_in_a_step_leaves_no_process(
         driver.join(timeout=150)
         env.close()
         assert outcome and outcome[0] is not None, "the step returned although the node was stopped"
+
+
+def test_a_hung_component_in_a_system_node_without_isolation_is_reported_and_sigterm_exits(
+    net: Loopback, tmp_path: Path
+) -> None:
+    file = tmp_path / "typed_system.yaml"
+    file.write_text(SYSTEM)
+    own = own_net(net)
+    with serve(file, own, "typed", extra=("--step-timeout", "1")) as process:
+        assert plant_processes(process) == []  # the FMU runs in the served process
+        with system_env(file, own, timeout_s=30) as env:
+            env.reset(options={"scenario": "hangs"})
+            env.step(HALF)
+            with pytest.raises(StepTimeout) as caught:
+                env.step(HALF)
+            message = str(caught.value)
+            assert "component 'typed' (node 'typed-node') hung at step 2 of episode 1" in message, message
+            assert "has not returned from step 2 of episode 1 for" in message, message
+            assert message.endswith("; the node is unhealthy until restarted"), message
+            assert plain_info(own, "typed-node")["health"] == "hung"
+        stopped_s = stop(process)
+        assert process.returncode == 3  # the native call cannot be interrupted: it leaves without it
+        assert stopped_s < 15, stopped_s
+        output = process.stdout.read() if process.stdout else ""
+        assert "node 'typed-node': " in output and "exiting without it" in output, output
