@@ -114,7 +114,8 @@ class FmuInstancePlant(Plant):
         shown += [f"and {len(values) - 10} more"] if len(values) > 10 else []
         detail = f"{said}; this reset set {', '.join(shown) if shown else 'no values'}"
         hint = MODEL_INIT_FAILED_HINT
-        return self.failure(StepError, MODEL_INIT_FAILED, detail, hint, step=None, log=exc.log)
+        # no time: the instance's clock is the last episode's until an initialisation completes
+        return self.failure(StepError, MODEL_INIT_FAILED, detail, hint, step=None, time_s=None, log=exc.log)
 
     def _bind_native(self) -> None:
         """The one-call native sample where it applies (once the instance exists), re-pointed at

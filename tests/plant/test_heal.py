@@ -47,7 +47,7 @@ def refused(env: FmuEnv, kind: str, episode: int) -> None:
     where = "in-process" if kind == "in-process" else "child process"
     assert str(error).startswith(
         f"FMU {resolve_fmu(EXPERIMENT).name} ({where}): the model's initialisation failed at reset of "
-        f"episode {episode} (t = 0 s): typed: fmi2ExitInitializationMode failed"
+        f"episode {episode}: typed: fmi2ExitInitializationMode failed"
     ), str(error)
     assert error.what == "the model's initialisation failed" and error.step is None
     assert error.detail.endswith("; this reset set real_param = 5000.0"), error.detail

@@ -220,7 +220,7 @@ class SystemPlant(Plant):
         verb = {PlantDied: "died", StepError: "failed"}.get(type(exc), "did not answer")
         hint = "the node may be overloaded, hung or unreachable; timeout_s sets the limit"
         if isinstance(exc, StepError):
-            fields["log"], hint = exc.log, MODEL_FAILED_HINT
+            fields["log"], hint = exc.log, exc.hint or MODEL_FAILED_HINT
         elif isinstance(exc, PlantDied):
             hint = "restart its node (fmu-bridge system serve) and reset"
         elif exc.what == MODEL_HUNG:  # the node's deadline passed: its words, as a remote env gives them
