@@ -55,6 +55,9 @@ class PlantError(BridgeError):
         step: the sample index the plant was stepping into, or None for a reset.
         time_s: simulation time at the failure, where known.
         detail: the cause in the plant's own words (the FMU's message and log).
+        what: what failed, as the message names it (``the model hung``), and ``hint``: how to
+            fix it; a system that reports a component's error keeps them where they are the
+            component's own.
     """
 
     def __init__(
@@ -66,12 +69,15 @@ class PlantError(BridgeError):
         step: int | None = None,
         time_s: float | None = None,
         detail: str = "",
+        what: str = "",
+        hint: str = "",
     ) -> None:
         self.plant = plant
         self.episode = episode
         self.step = step
         self.time_s = time_s
         self.detail = detail or message
+        self.what, self.hint = what, hint
         BridgeError.__init__(self, message)  # not super(): FmuError would reset ``log``
 
 
@@ -88,13 +94,23 @@ class StepError(PlantError, FmuError):
         plant: str = "",
         episode: int | None = None,
         detail: str = "",
+        what: str = "",
+        hint: str = "",
     ) -> None:
         self.log = list(log or [])
         detail = detail or message
         if self.log:
             message = message + FMU_LOG_HEADER + "\n  ".join(self.log[-20:])
         PlantError.__init__(
-            self, message, plant=plant, episode=episode, step=step, time_s=time_s, detail=detail
+            self,
+            message,
+            plant=plant,
+            episode=episode,
+            step=step,
+            time_s=time_s,
+            detail=detail,
+            what=what,
+            hint=hint,
         )
 
 

@@ -22,11 +22,14 @@ from rich.markup import escape
 from bridge import __version__
 from bridge.cli.options import (
     ConnectOpt,
+    IsolateOpt,
     ListenOpt,
     NetworkOpt,
     PrefixOpt,
+    StepTimeoutOpt,
     ZenohConfigOpt,
     ZenohModeOpt,
+    close_nodes,
     console,
     err_console,
 )
@@ -314,20 +317,8 @@ def node(
             help="Step the FMU on another simulator's ROS /clock (use_sim_time; see docs/ros2.md).",
         ),
     ] = False,
-    isolate: Annotated[
-        bool,
-        typer.Option(
-            "--isolate/--no-isolate",
-            help="Run the FMU in a child process: a hung or crashing FMU is killed at the step "
-            "deadline and restarted by the next reset (one pipe round trip more per step).",
-        ),
-    ] = False,
-    step_timeout: Annotated[
-        float,
-        typer.Option(
-            "--step-timeout", help="Seconds a reset or step may take before the node reports its FMU hung."
-        ),
-    ] = 10.0,
+    isolate: IsolateOpt = False,
+    step_timeout: StepTimeoutOpt = 10.0,
 ) -> None:
     """Serve an FMU over Zenoh until interrupted (Ctrl-C or SIGTERM)."""
     import os
@@ -378,15 +369,7 @@ def node(
     except KeyboardInterrupt:
         pass
     finally:
-        if not server.close():
-            # A native call into the FMU never returned: it cannot be interrupted, so leave now.
-            err_console.print(
-                f"node {name!r}: {server.health_detail or 'a call into the FMU did not return'}; "
-                "exiting without it",
-                highlight=False,
-            )
-            sys.stderr.flush()
-            os._exit(3)
+        close_nodes([server])
         if view is not None and view.backend == "rclpy":
             # all closed; rclpy's and Fast DDS's unloading at interpreter exit can take longer than
             # the second a stopped node has on a busy machine

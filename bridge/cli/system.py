@@ -11,10 +11,13 @@ from rich.table import Table
 
 from bridge.cli.options import (
     ConnectOpt,
+    IsolateOpt,
     ListenOpt,
     PrefixOpt,
+    StepTimeoutOpt,
     ZenohConfigOpt,
     ZenohModeOpt,
+    close_nodes,
     console,
     err_console,
     zenoh_options,
@@ -274,13 +277,16 @@ def serve_system(  # noqa: PLR0917 (typer options)
     zenoh_mode: ZenohModeOpt = None,
     prefix: PrefixOpt = "fmu_bridge",
     step_size: StepSizeOpt = None,
+    isolate: IsolateOpt = False,
+    step_timeout: StepTimeoutOpt = 10.0,
 ) -> None:
     """Serve the components that have node: as FMU nodes (lockstep) until interrupted.
 
     Each component runs in an FmuNode named by its node: key, with the inputs and outputs the
     system connects (see docs/systems.md). Run it once per machine with --component to spread
     the components: each machine needs only the FMUs of the components it serves. The system's
-    env then drives them over Zenoh."""
+    env then drives them over Zenoh. --isolate and --step-timeout apply to every served
+    component, as to a single `fmu-bridge node`."""
     import signal
     import threading
 
@@ -293,7 +299,9 @@ def serve_system(  # noqa: PLR0917 (typer options)
     served = served_experiments(_experiment(experiment, step_size), component or ())  # before the network
     session = open_session(options)
     try:
-        nodes = start_nodes(served, prefix=prefix, session=session)
+        nodes = start_nodes(
+            served, prefix=prefix, session=session, isolate=isolate, step_timeout_s=step_timeout
+        )
         try:
             # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread, handled below): a handler that
             # takes a lock the interrupted main thread may hold could deadlock
@@ -308,8 +316,7 @@ def serve_system(  # noqa: PLR0917 (typer options)
         except KeyboardInterrupt:
             pass
         finally:
-            for n in nodes:
-                n.close()
+            close_nodes(nodes)  # exits at once (code 3) if a call into an FMU never returned
     finally:
         session.close()
 

@@ -21,7 +21,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import ConfigError, FmuError, StepError, VariableError
+from bridge.errors import FMU_LOG_HEADER, ConfigError, FmuError, StepError, VariableError
 from bridge.fmu import access, archive, once, serial, start_state, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
@@ -433,8 +433,9 @@ class Model:
             try:
                 self._backend.reset()
                 self._initialize(checked)
-            except FmuError:
-                _log.warning("%s: fmi reset failed; re-instantiating", self.info.model_name, exc_info=True)
+            except FmuError as exc:
+                said = str(exc).partition(FMU_LOG_HEADER)[0]  # the log comes with the error, if it stays
+                _log.warning("%s: the FMU's reset failed (%s); re-instantiating", self.info.model_name, said)
                 self._reinstantiate(checked)
         self._remember(key)
 

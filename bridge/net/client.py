@@ -8,14 +8,16 @@ for an answer is a strategy (``bridge.net.channel``).
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 import secrets
 import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
-from bridge.errors import BridgeError, PlantDied, StepTimeout, TransportError
+from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.net import protocol as proto
 from bridge.net.channel import EventWaiting, Waiting
 from bridge.net.discovery import query_info, query_target, replier
@@ -244,6 +246,8 @@ class NodeClient:
         code, _, detail = message.partition(": ")
         if code == "unhealthy":
             return plant.failure(PlantDied, "the plant is unhealthy", detail, "restart the node", step=None)
+        if code == "model_failed":  # the node's model failed at the reset: the error it raised there
+            return _model_failed(plant, detail)
         return TransportError(f"{plant.name}: the reset was refused ({code}): {detail}")
 
     def close(self) -> None:
@@ -254,3 +258,21 @@ class NodeClient:
             except Exception:
                 _log.debug("undeclare failed", exc_info=True)
         self._declared = []
+
+
+def _model_failed(plant: Plant, text: str) -> BridgeError:
+    """The StepError a node's plant raised at a reset (``bridge.net.node_replies.model_failure``),
+    named after this plant; a reply that is not that JSON is a TransportError naming the node."""
+    try:
+        words = json.loads(text)
+        what, detail, hint, log, time_s = (words[k] for k in ("what", "detail", "hint", "log", "time_s"))
+        ok = all(isinstance(w, str) for w in (what, detail, hint)) and isinstance(log, list)
+        ok = ok and (time_s is None or (isinstance(time_s, float | int) and math.isfinite(time_s)))
+    except (ValueError, TypeError, KeyError):
+        ok = False
+    if not ok or not all(isinstance(line, str) for line in log) or not what:
+        return TransportError(
+            f"{plant.name}: the reset reply is malformed: a model_failed reply must be JSON with "
+            f"the strings what, detail, hint, a list log and a time_s; got {text[:200]!r}"
+        )
+    return plant.failure(StepError, what, detail, hint, step=None, time_s=time_s, log=log[-20:])

@@ -9,12 +9,13 @@ refused unless it takes the node over (``bridge.net.lease``).
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bridge.errors import BridgeError
+from bridge.errors import BridgeError, StepError
 from bridge.fmu.vocab import summary_of
 from bridge.net import protocol as proto
 from bridge.net.requests import BadRequest, Refused, check_empty, parse_reset, redact
@@ -34,6 +35,8 @@ def answer_reset(node: FmuNode, query: Any) -> None:
         return _reply_err(node, query, "bad_request", str(exc))
     except Refused as exc:
         return _reply_err(node, query, exc.code, str(exc))
+    except StepError as exc:  # the model failed at the reset: its words, for the client's same error
+        return _reply_err(node, query, MODEL_FAILED_CODE, model_failure(exc))
     except BridgeError as exc:
         return _reply_err(node, query, "failed", f"reset failed: {exc}")
     except Exception as exc:  # never let a handler die: count it, log it, answer
@@ -44,6 +47,17 @@ def answer_reset(node: FmuNode, query: Any) -> None:
     # the session key goes to the querier alone, beside the step-0 frame it signs
     query.reply(node.keys.reset, reply, attachment=key)
     return None
+
+
+MODEL_FAILED_CODE = "model_failed"
+
+
+def model_failure(exc: StepError) -> str:
+    """A reset's StepError as the ``model_failed`` reply carries it (JSON; read back by
+    ``bridge.net.client``): what failed, the cause, the hint, the FMU's log and the time."""
+    words: dict[str, Any] = {"what": exc.what, "detail": exc.detail, "hint": exc.hint}
+    words.update(log=exc.log[-20:], time_s=exc.time_s)
+    return json.dumps(words, ensure_ascii=False)
 
 
 def checked_reset(node: FmuNode, payload: bytes) -> tuple[bytes, bytes | None]:

@@ -30,7 +30,7 @@ from bridge.net.client import NodeClient
 from bridge.net.discovery import describe_nodes, list_nodes, query_info
 from bridge.net.served import element_start
 from bridge.net.transport import ZenohOptions, open_session
-from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, MODEL_HUNG, FloatArray, Plant
 
 if TYPE_CHECKING:
     from bridge.plant.system.description import Component
@@ -68,7 +68,7 @@ def answer(plant: Plant, frame: proto.Frame, episode: int, step: int, outputs: i
         hint = "the node killed its FMU process; reset() starts a fresh one"
         if "restart the node" in frame.message:
             hint = "the node is unhealthy until restarted"
-        raise plant.failure(StepTimeout, "the model hung", frame.message, hint, step=step, time_s=time_s)
+        raise plant.failure(StepTimeout, MODEL_HUNG, frame.message, hint, step=step, time_s=time_s)
     detail, _, log = frame.message.partition(FMU_LOG_HEADER)
     raise plant.failure(
         StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, time_s=time_s, log=log.split("\n  ")

@@ -201,12 +201,22 @@ def serve_components(
     options: ZenohOptions | None = None,
     prefix: str = "fmu_bridge",
     session: Any = None,
+    isolate: bool = False,
+    step_timeout_s: float = 10.0,
 ) -> list[FmuNode]:
     """Start an :class:`FmuNode` for each component with ``node:`` (or those in ``names``), in this
     process; the caller closes them. Each node opens its own session unless ``session`` is given.
-    Only the served components' FMUs need be on this machine."""
+    Only the served components' FMUs need be on this machine. ``isolate`` and ``step_timeout_s``
+    are each node's (:class:`FmuNode`)."""
     served = served_experiments(experiment, names)
-    return start_nodes(served, options=options, prefix=prefix, session=session)
+    return start_nodes(
+        served,
+        options=options,
+        prefix=prefix,
+        session=session,
+        isolate=isolate,
+        step_timeout_s=step_timeout_s,
+    )
 
 
 def served_experiments(experiment: Experiment, names: Sequence[str] = ()) -> dict[str, ServedComponent]:
@@ -244,15 +254,28 @@ def start_nodes(
     options: ZenohOptions | None = None,
     prefix: str = "fmu_bridge",
     session: Any = None,
+    isolate: bool = False,
+    step_timeout_s: float = 10.0,
 ) -> list[FmuNode]:
-    """An :class:`FmuNode` per ``{node name: component}``; none is left running if one fails."""
+    """An :class:`FmuNode` per ``{node name: component}``; none is left running if one fails.
+    ``isolate`` runs each component's FMU in a child process of its own, and ``step_timeout_s``
+    bounds its resets and steps, as ``fmu-bridge node --isolate --step-timeout`` does."""
     from bridge.net.node import FmuNode
 
     nodes: list[FmuNode] = []
     try:
         for node, c in components.items():
             nodes.append(
-                FmuNode(c.model, name=node, options=options, prefix=prefix, session=session, served=c.served)
+                FmuNode(
+                    c.model,
+                    name=node,
+                    options=options,
+                    prefix=prefix,
+                    session=session,
+                    served=c.served,
+                    isolate=isolate,
+                    step_timeout_s=step_timeout_s,
+                )
             )
     except BaseException:
         for started in nodes:

@@ -42,6 +42,12 @@ _NO_VALUES: FloatArray = np.zeros(0)
 _NO_VALUES.flags.writeable = False
 E = TypeVar("E", bound=PlantError)
 MODEL_FAILED = "the model failed"
+MODEL_INIT_FAILED = "the model's initialisation failed"
+MODEL_INIT_FAILED_HINT = (
+    "the FMU refused to initialise with the values this reset set (its log says why); reset with "
+    "values it accepts (the experiment's ranges and scenarios); the next reset() instantiates it afresh"
+)
+MODEL_HUNG = "the model hung"  # a node's own deadline passed (its answer says so; not a lost answer)
 MODEL_FAILED_HINT = (
     "check the model's parameters, the action bounds and the step size; reset() starts the next episode"
 )
@@ -199,5 +205,13 @@ class Plant(ABC):
         if hint:
             message += f"; {hint}"
         return kind(
-            message, plant=self.name, episode=self.episode, step=step, time_s=time_s, detail=detail, **fields
+            message,
+            plant=self.name,
+            episode=self.episode,
+            step=step,
+            time_s=time_s,
+            detail=detail,
+            what=what,
+            hint=hint,
+            **fields,
         )

@@ -19,12 +19,19 @@ from typing import Any
 
 import numpy as np
 
-from bridge.errors import BridgeError, FmuError, StepError
+from bridge.errors import FMU_LOG_HEADER, BridgeError, FmuError, StepError, VariableError
 from bridge.fmu import Model, ModelState, sha256
 from bridge.fmu.sample import NativeSample
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.state_file import StateFile
-from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.plant.base import (
+    MODEL_FAILED,
+    MODEL_FAILED_HINT,
+    MODEL_INIT_FAILED,
+    MODEL_INIT_FAILED_HINT,
+    FloatArray,
+    Plant,
+)
 
 _EMPTY = np.zeros(0)
 
@@ -94,8 +101,22 @@ class FmuInstancePlant(Plant):
             outputs: FloatArray = self._read()
         except StepError as exc:
             raise self._failed(exc, step=None) from exc
+        except FmuError as exc:
+            if isinstance(exc, VariableError) or not self.model.unusable:
+                raise  # a name or value the model refuses before the FMU is asked: already clear
+            raise self._init_refused(exc, values) from exc
         self._bind_native()
         return outputs
+
+    def _init_refused(self, exc: FmuError, values: Mapping[str, Any]) -> StepError:
+        """An FMU that refused to initialise: what it said, what this reset set, how to go on."""
+        said = str(exc).partition(FMU_LOG_HEADER)[0]
+        shown = [f"{k} = {v!r}" for k, v in list(values.items())[:10]]
+        shown += [f"and {len(values) - 10} more"] if len(values) > 10 else []
+        detail = f"{said}; this reset set {', '.join(shown) if shown else 'no values'}"
+        hint = MODEL_INIT_FAILED_HINT
+        # no time: the instance's clock is the last episode's until an initialisation completes
+        return self.failure(StepError, MODEL_INIT_FAILED, detail, hint, step=None, time_s=None, log=exc.log)
 
     def _bind_native(self) -> None:
         """The one-call native sample where it applies (once the instance exists), re-pointed at

@@ -286,9 +286,10 @@ class IsolatedFmuPlant(Plant):
                 step=step,
             )
             raise self._broken
-        if kind == "step_error":
-            detail, log, self._time_s = rest
-            raise self.failure(StepError, MODEL_FAILED, detail, MODEL_FAILED_HINT, step=step, log=log)
+        if kind == "step_error":  # the child plant's words (what failed, how to fix), this plant's name
+            detail, log, self._time_s, what, hint, time_s = rest
+            what, hint = what or MODEL_FAILED, hint or MODEL_FAILED_HINT
+            raise self.failure(StepError, what, detail, hint, step=step, time_s=time_s, log=log)
         raise rest[0]  # a BridgeError from the child (bad values, config): the plant lives on
 
     def _hung(self, step: int | None, timeout_s: float) -> StepTimeout:
@@ -372,7 +373,7 @@ def _serve(
         try:
             conn.send(_handle(plant, op, message[1:]))
         except StepError as exc:
-            conn.send(("step_error", exc.detail, exc.log, plant.time_s))
+            conn.send(("step_error", exc.detail, exc.log, plant.time_s, exc.what, exc.hint, exc.time_s))
         except BridgeError as exc:
             conn.send(("error", exc))
         except MemoryError as exc:

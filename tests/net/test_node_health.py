@@ -22,9 +22,10 @@ import psutil
 import pytest
 
 from bridge.env import RemoteFmuEnv
-from bridge.errors import BridgeError
+from bridge.errors import StepError
 from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
+from bridge.plant.base import MODEL_INIT_FAILED_HINT
 from tests.conftest import Loopback, node_process, wait_until
 
 pytestmark = pytest.mark.integration
@@ -107,8 +108,16 @@ def test_a_refused_initialisation_shows_as_unusable_until_the_next_reset_heals_i
     ):
         assert run_fine(env) == FINE
         assert health(loopback, "healing") == ("ok", "")
-        with pytest.raises(BridgeError, match="real_param = 5000 is above init_fails_above = 1000"):
+        with pytest.raises(StepError) as caught:  # what an in-process env raises (tests/plant/test_heal.py)
             env.reset(options={"scenario": "refused"})
+        error = caught.value
+        assert str(error).startswith(
+            "node 'healing': the model's initialisation failed at reset of episode 2: "
+            "typed: fmi2ExitInitializationMode failed"
+        ), str(error)
+        assert error.detail.endswith("; this reset set real_param = 5000.0"), error.detail
+        assert error.hint == MODEL_INIT_FAILED_HINT
+        assert "real_param = 5000 is above init_fails_above = 1000" in " ".join(error.log)
         state, detail = health(loopback, "healing")
         assert state == "unusable", (state, detail)
         assert ("initialisation failed" if way == "in_process" else "the last reset failed") in detail

@@ -20,7 +20,7 @@ import pytest
 
 from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
-from bridge.errors import BridgeError, TransportError
+from bridge.errors import BridgeError, StepError, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
@@ -254,6 +254,9 @@ def test_an_outputs_frame_with_the_wrong_value_count_is_a_transport_error(tmp_pa
         assert answer(plant, three, 1, 1, outputs=3) is three
 
 
+MODEL_FAILED = b'model_failed: {"what": "w", "detail": "d", "hint": "h", "log": [], "time_s": null}'
+
+
 def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
     """A session posing as node ``faker`` (its info is a real node's, its own zid, a live token)
     answers resets with short, garbled, unsigned, unkeyed or misdirected step-0 frames: each is a
@@ -268,7 +271,11 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
 
     def on_reset(query: Any) -> None:
         episode = json.loads(query.payload.to_bytes())["episode"]
-        payload, attachment = replies["make"](episode)
+        made = replies["make"](episode)
+        if isinstance(made, bytes):  # an error reply
+            query.reply_err(made)
+            return
+        payload, attachment = made
         query.reply(keys.reset, payload, attachment=attachment)
 
     entities = [
@@ -294,6 +301,20 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
             lambda e: (proto.encode_values(proto.OUTPUTS, e + 5, 0, 0, [0.0] * 4, key=key), key),
             "expected the outputs of step 0 of episode",
         ),
+        # the model's failure at a reset, as a node says it (bridge.net.node_replies.model_failure)
+        "a model failure that is not JSON": (lambda e: b"model_failed: {oops", "must be JSON"),
+        "a model failure without its hint": (
+            lambda e: b'model_failed: {"what": "w", "detail": "d", "log": [], "time_s": null}',
+            "must be JSON with the strings what, detail, hint",
+        ),
+        "a model failure whose log is not lines": (
+            lambda e: MODEL_FAILED.replace(b"[]", b'[1, {"a": 2}]'),
+            "a list log",
+        ),
+        "a model failure at an infinite time": (
+            lambda e: MODEL_FAILED.replace(b"null", b"Infinity"),
+            "a time_s",
+        ),
     }
     try:
         with RemoteFmuEnv(
@@ -309,6 +330,11 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
                     message,
                 )
                 assert says in message, (case, message)
+            replies["make"] = lambda e: MODEL_FAILED.replace(b'"d"', b'"the cause"')
+            with pytest.raises(StepError) as failed:  # well formed: the model's error, as in process
+                env.reset(seed=1)
+            assert str(failed.value).startswith("node 'faker': w at reset of episode ")
+            assert str(failed.value).endswith(": the cause; h"), str(failed.value)
             replies["make"] = lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4, key=key), key)
             obs, _ = env.reset(seed=1)  # a well-formed reply is taken: the check is not a blanket refusal
             assert obs.shape == (4,)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bridge.env import FmuEnv
-from bridge.errors import BridgeError
+from bridge.errors import FmuError, StepError
 from bridge.experiment.config import Experiment, parse_experiment
 from bridge.experiment.validate import resolve_fmu, timing
 from bridge.experiment.yaml_text import parse_yaml
@@ -39,20 +39,51 @@ PLANTS: dict[str, Callable[[Experiment], object]] = {
 }
 
 
+def refused(env: FmuEnv, kind: str, episode: int) -> None:
+    """The refused reset: the plant's StepError saying what failed, what was set and how to go on."""
+    with pytest.raises(StepError) as caught:
+        env.reset(options={"scenario": "refused"})
+    error = caught.value
+    where = "in-process" if kind == "in-process" else "child process"
+    assert str(error).startswith(
+        f"FMU {resolve_fmu(EXPERIMENT).name} ({where}): the model's initialisation failed at reset of "
+        f"episode {episode}: typed: fmi2ExitInitializationMode failed"
+    ), str(error)
+    assert error.what == "the model's initialisation failed" and error.step is None
+    assert error.detail.endswith("; this reset set real_param = 5000.0"), error.detail
+    assert error.hint.startswith("the FMU refused to initialise with the values this reset set")
+    assert error.hint.endswith("the next reset() instantiates it afresh")
+    assert "real_param = 5000 is above init_fails_above = 1000" in " ".join(error.log)  # the FMU's why
+    assert str(error).endswith(
+        "FMU log (most recent last):\n  [ERROR] logStatusError: typed: real_param = 5000 is above "
+        "init_fails_above = 1000: initialisation refused (test hook)"
+    ), str(error)
+    assert isinstance(error, FmuError)  # code that caught the bare FmuError still catches it
+
+
 @pytest.mark.parametrize("kind", list(PLANTS))
 def test_a_refused_initialisation_heals_at_the_next_reset(kind: str) -> None:
     plant = PLANTS[kind](EXPERIMENT)
     with FmuEnv(EXPERIMENT, plant=plant) as env:  # type: ignore[arg-type]
         env.reset(options={"scenario": "fine"})
         assert env.plant.unusable is None
-        with pytest.raises(BridgeError, match="real_param = 5000 is above init_fails_above = 1000"):
-            env.reset(options={"scenario": "refused"})
+        refused(env, kind, 2)
         assert "failed" in str(env.plant.unusable), env.plant.unusable  # what a node's health can say
         for episode in range(2):
             env.reset(options={"scenario": "fine"})
             assert env.plant.unusable is None
             trace = [env.step(np.array([0.5], dtype=np.float32))[0] for _ in range(3)]
             assert [list(o) for o in trace] == [[0.5, 1.0], [0.5, 2.0], [0.5, 3.0]], (episode, trace)
+
+
+@pytest.mark.parametrize("kind", list(PLANTS))
+def test_a_first_reset_whose_initialisation_is_refused_is_the_same_error_and_heals(kind: str) -> None:
+    with FmuEnv(EXPERIMENT, plant=PLANTS[kind](EXPERIMENT)) as env:  # type: ignore[arg-type]
+        refused(env, kind, 1)  # the instance is created by this reset
+        refused(env, kind, 2)  # a refused reset after a refused one: the same words
+        env.reset(options={"scenario": "fine"})
+        trace = [env.step(np.array([0.5], dtype=np.float32))[0].tolist() for _ in range(3)]
+        assert trace == [[0.5, 1.0], [0.5, 2.0], [0.5, 3.0]]
 
 
 def test_reset_values_are_bounded_by_the_experiments_own_ranges() -> None:

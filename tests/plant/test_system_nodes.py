@@ -48,11 +48,14 @@ def system_file(directory: Path, name: str, nodes: dict[str, str], algorithm: st
 
 
 @contextlib.contextmanager
-def serve(file: Path, net: Loopback, *components: str) -> Iterator[subprocess.Popen[str]]:
-    """``fmu-bridge system serve`` as a real subprocess, stopped (and reaped) at the end."""
-    extra = [a for c in components for a in ("--component", c)]
+def serve(
+    file: Path, net: Loopback, *components: str, extra: tuple[str, ...] = ()
+) -> Iterator[subprocess.Popen[str]]:
+    """``fmu-bridge system serve`` as a real subprocess (``extra``: more options), stopped (and
+    reaped) at the end."""
+    chosen = [a for c in components for a in ("--component", c)]
     cmd = [sys.executable, "-m", "bridge.cli", "system", "serve", str(file), "--connect", net.endpoint]
-    cmd += ["--prefix", net.prefix, *extra]
+    cmd += ["--prefix", net.prefix, *chosen, *extra]
     env = {**os.environ, "PYTHONUNBUFFERED": "1"}
     process = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
     try:

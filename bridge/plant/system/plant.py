@@ -20,7 +20,7 @@ from bridge.errors import ConfigError, PlantDied, PlantError, StepError
 from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
 from bridge.experiment.validate import Timing, check_experiment
 from bridge.fmu.vocab import DefaultExperiment, ModelInfo
-from bridge.plant.base import MODEL_FAILED_HINT, FloatArray, Plant
+from bridge.plant.base import MODEL_FAILED_HINT, MODEL_HUNG, FloatArray, Plant
 from bridge.plant.system.check import check_system, expand_arrays
 from bridge.plant.system.description import (
     Component,
@@ -240,9 +240,11 @@ class SystemPlant(Plant):
         verb = {PlantDied: "died", StepError: "failed"}.get(type(exc), "did not answer")
         hint = "the node may be overloaded, hung or unreachable; timeout_s sets the limit"
         if isinstance(exc, StepError):
-            fields["log"], hint = exc.log, MODEL_FAILED_HINT
+            fields["log"], hint = exc.log, exc.hint or MODEL_FAILED_HINT
         elif isinstance(exc, PlantDied):
             hint = "restart its node (fmu-bridge system serve) and reset"
+        elif exc.what == MODEL_HUNG:  # the node's deadline passed: its words, as a remote env gives them
+            verb, hint = "hung", exc.hint
         error = self.failure(type(exc), f"{exc.plant} {verb}", exc.detail, hint, **fields)
         error.component = next((n for n, p in self.plants.items() if p.name == exc.plant), "")  # type: ignore[attr-defined]
         return error
