@@ -290,8 +290,11 @@ def serve_system(  # noqa: PLR0917 (typer options)
     import signal
     import threading
 
+    from bridge.net.node import check_step_timeout
     from bridge.net.system_node import served_experiments, start_nodes
     from bridge.net.transport import ZenohOptions, open_session, session_mode
+
+    check_step_timeout(step_timeout)  # before the network, like the file's checks below
 
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))

@@ -54,7 +54,7 @@ from bridge.plant.factory import fmu_plant
 _log = logging.getLogger(__name__)
 Mode = Literal["lockstep", "realtime"]
 _BODY = proto.HEADER.size
-__all__ = ["FmuNode", "Refused", "redact"]
+__all__ = ["FmuNode", "Refused", "check_step_timeout", "redact"]
 
 
 class FmuNode:
@@ -401,14 +401,19 @@ class FmuNode:
         return replies.describe(self)
 
 
+def check_step_timeout(step_timeout_s: float) -> None:
+    """A BridgeError unless the step deadline is a positive number of seconds."""
+    if not step_timeout_s > 0:
+        raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+
+
 def _check_arguments(name: str, mode: str, rate: float, step_timeout_s: float) -> None:
     """A BridgeError saying what is wrong with the node's arguments, before anything starts."""
     if mode not in ("lockstep", "realtime"):
         raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
     if rate < 0:
         raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
-    if not step_timeout_s > 0:
-        raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
+    check_step_timeout(step_timeout_s)
     try:  # a part of every key (<prefix>/<name>/...): no '/', wildcard or '$' may widen it
         check_safe_name(name)
     except ValueError as exc:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import signal
 import subprocess
+import sys
 import threading
 import time
 import uuid
@@ -165,3 +166,19 @@ def test_a_hung_component_in_a_system_node_without_isolation_is_reported_and_sig
         assert stopped_s < 15, stopped_s
         output = process.stdout.read() if process.stdout else ""
         assert "node 'typed-node': " in output and "exiting without it" in output, output
+
+
+@pytest.mark.parametrize("value", ["0", "-1", "nan"])
+def test_a_step_timeout_that_is_not_positive_is_refused_before_the_network(
+    tmp_path: Path, value: str
+) -> None:
+    file = tmp_path / "typed_system.yaml"
+    file.write_text(SYSTEM)
+    nobody = "tcp/127.0.0.1:1"  # nothing listens: reaching the network would be a different error
+    cmd = [sys.executable, "-m", "bridge.cli", "system", "serve", str(file), "--connect", nobody]
+    done = subprocess.run(
+        [*cmd, "--isolate", "--step-timeout", value], capture_output=True, text=True, timeout=120, check=False
+    )
+    assert done.returncode == 2, done.stderr
+    assert f"--step-timeout must be > 0 seconds, got {float(value)}" in done.stderr, done.stderr
+    assert "Traceback" not in done.stderr and "Zenoh" not in done.stderr
