@@ -116,6 +116,7 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
+        self._held: tuple[bytes, int, list[float], bool] | None = None  # real time: the next frame
         self._held_inputs = [element_start(self.info, n) for n in self.input_names]  # u[2]: an element
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
@@ -268,7 +269,9 @@ class FmuNode:
             self._reject(frame, ls.Reject(ls.STATE, reason))
         return reason is None
 
-    def _advance(self, inputs: list[float] | None, action: tuple[int, bytes]) -> None:
+    def _advance(self, inputs: list[float] | None, action: tuple[int, bytes], *, hold: bool = False) -> None:
+        """One step; its frame is published now, or with ``hold`` kept for the real-time driver to
+        publish at the next deadline (``_tick``)."""
         plant, state = self.plant, self.lockstep
         self.watchdog.begin("step %d of episode %d", state.step + 1, state.episode)
         try:
@@ -284,6 +287,12 @@ class FmuNode:
         self._time_ns = time_ns = round(plant.time_s * 1e9)
         values = outputs.tolist()
         frame = state.stepped(action, values, time_ns, plant.terminated)
+        if hold:
+            self._held = (frame, time_ns, values, state.ended)
+        else:
+            self._publish(frame, time_ns, values)
+
+    def _publish(self, frame: bytes, time_ns: int, values: list[float]) -> None:
         self._pub.put(frame)
         if self._link.ros is not None:
             self._link.ros.publish(time_ns, values)
@@ -325,6 +334,7 @@ class FmuNode:
             raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned")
         try:
             self.saved.clear()  # a state of the last episode (and of this FMU instance) is no use
+            self._held = None  # real time: a sample of the last episode is not published
             self.watchdog.begin("the reset of episode %d", episode)
             try:
                 outputs = self.plant.reset(values, inputs)
@@ -383,15 +393,29 @@ class FmuNode:
         return round(self.plant.time_s * 1e9)
 
     def _tick(self) -> bool:
-        """One real-time sample with the latest action held; False when the episode is over."""
+        """One real-time deadline; False when the episode is over.
+
+        The sample due now was stepped in the last period: its frame (and the clock) goes out
+        first, at the deadline, so that how long the FMU takes, and how much that varies, never
+        shifts the frames a subscriber sees. Then the next sample is stepped with the latest
+        action held over it (zero-order hold from this deadline on) and kept until the next
+        deadline. The first deadline after a reset has nothing kept: it steps and publishes at
+        once, then steps the next."""
         if not self._lock.acquire(timeout=0.5):
             return True
         try:
+            held, self._held = self._held, None
+            if held is None and not self.lockstep.ended:
+                self._advance(self._latest_inputs, (0, b""), hold=True)  # the first after a reset
+                held, self._held = self._held, None
+            if held is not None:
+                frame, time_ns, values, ended = held
+                self._publish(frame, time_ns, values)
+                if not ended:
+                    self._clock_pub.put(np.int64(time_ns).tobytes())
             if self.lockstep.ended:
-                return False
-            self._advance(self._latest_inputs, (0, b""))  # zero-order hold of the latest action
-            if not self.lockstep.ended:
-                self._clock_pub.put(np.int64(self._time_ns).tobytes())
+                return held is not None
+            self._advance(self._latest_inputs, (0, b""), hold=True)  # zero-order hold of the latest action
             return True
         finally:
             self._lock.release()
