@@ -5,6 +5,11 @@ Run: python benchmarks/bench_remote.py [--steps N] [--nodes 1,2,4]
 Prints the per-sample latency (median, p99) of RemoteFmuEnv, of the in-process FmuEnv and of a
 bare Zenoh ping-pong between two processes with the same payload size and the same wake-up
 mechanism (callback + event), then RemoteVecEnv throughput with 1, 2 and 4 nodes.
+
+Beside the latency, the CPU time one RemoteFmuEnv step costs, in the client process and in the
+node's process (every thread, from /proc/<pid>/task/*/schedstat; Linux only), and how often
+their threads were scheduled: on a loaded machine wall-clock medians are mostly the wait for a
+core, while CPU time and wake-ups still say what the step itself costs.
 """
 
 from __future__ import annotations
@@ -94,16 +99,35 @@ def ping_pong(session: object, payload_size: int, steps: int) -> list[float]:
     return samples
 
 
-def env_latency(env: object, steps: int) -> list[float]:
+def cpu_ns(pid: int) -> tuple[int, int]:
+    """CPU time (ns) and time slices so far of every thread of process ``pid`` ((0, 0) where
+    /proc has no schedstat)."""
+    run = slices = 0
+    for stat in Path(f"/proc/{pid}/task").glob("*/schedstat"):
+        try:
+            fields = stat.read_text().split()
+        except OSError:  # the thread ended meanwhile
+            continue
+        run, slices = run + int(fields[0]), slices + int(fields[2])
+    return run, slices
+
+
+def env_latency(env: object, steps: int, cpu: dict[str, int] | None = None) -> list[float]:
+    """Step latencies; with ``cpu`` (``{"client": pid, "node": pid}``), each process's CPU time
+    and time slices over the steps are written back into it as ``<who>_ns``/``<who>_slices``."""
     action = np.zeros(1, dtype=np.float32)
     env.reset(seed=0)  # type: ignore[attr-defined]
     samples = []
+    before = {who: cpu_ns(pid) for who, pid in (cpu or {}).items()}
     for _ in range(steps):
         t = time.perf_counter()
         _, _, terminated, truncated, _ = env.step(action)  # type: ignore[attr-defined]
         samples.append(time.perf_counter() - t)
         if terminated or truncated:
             env.reset()  # type: ignore[attr-defined]
+    for who, (run, slices) in before.items():
+        now = cpu_ns(cpu[who]) if cpu else (0, 0)
+        cpu[who + "_ns"], cpu[who + "_slices"] = now[0] - run, now[1] - slices  # type: ignore[index]
     env.close()  # type: ignore[attr-defined]  # ends its lease on the node: the vector env uses it next
     return samples
 
@@ -137,12 +161,13 @@ def main() -> None:
     processes += [start_node(experiment, f"bench{i}", endpoint) for i in range(max(counts))]
     try:
         payload = len(proto.encode_values(proto.OUTPUTS, 1, 1, 0, np.zeros(4)))
+        cpu = {"client": os.getpid(), "node": processes[1].pid}
         rows = []
         for name, samples in (
             (f"bare Zenoh ping-pong ({payload} B)", ping_pong(session, payload, args.steps)),
             (
                 "RemoteFmuEnv.step",
-                env_latency(RemoteFmuEnv(experiment, "bench0", session=session), args.steps),
+                env_latency(RemoteFmuEnv(experiment, "bench0", session=session), args.steps, cpu),
             ),
             ("FmuEnv.step (in-process)", env_latency(FmuEnv(experiment), args.steps)),
         ):
@@ -150,7 +175,18 @@ def main() -> None:
         print(f"loopback, {args.steps} samples each, cartpole_continuous\n")
         print(table(rows, ("per-sample latency", "median [us]", "p99 [us]")))
         ratio = float(rows[1][1]) / float(rows[0][1])
-        print(f"\nremote step / bare ping-pong (median): {ratio:.2f}  (target <= 2)\n")
+        print(f"\nremote step / bare ping-pong (median): {ratio:.2f}  (target <= 2)")
+        if cpu["client_slices"]:  # resets included (one per episode, about 1 in 40 steps)
+            print(
+                "RemoteFmuEnv.step CPU time per step (all threads): "
+                + ", ".join(
+                    f"{who} {cpu[who + '_ns'] / args.steps / 1e3:.0f} us "
+                    f"({cpu[who + '_slices'] / args.steps:.1f} time slices)"
+                    for who in ("client", "node")
+                )
+                + f"; load average {os.getloadavg()[0]:.1f}"
+            )
+        print()
         single = None
         vec_rows = []
         for n in counts:

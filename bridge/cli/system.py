@@ -290,7 +290,7 @@ def serve_system(  # noqa: PLR0917 (typer options)
     import signal
     import threading
 
-    from bridge.net.node import check_step_timeout
+    from bridge.net.node_setup import check_step_timeout
     from bridge.net.system_node import served_experiments, start_nodes
     from bridge.net.transport import ZenohOptions, open_session, session_mode
 

@@ -10,7 +10,10 @@ with their step index and simulation time; reset and info are queries
   set, input ranges, timing; ``bridge.net.requests`` checks every request against it;
 - :class:`~bridge.net.lockstep.Lockstep` decides what an action does (step, retry, or a REJECT
   with its reason) and :class:`~bridge.net.lease.Lease` who may send one;
-- :class:`~bridge.net.realtime.RealtimeDriver` owns the thread that steps on a wall clock;
+- :class:`~bridge.net.node_actions.ActionPath` carries out what the rules order for an action
+  that is not the plain next step (restore, retry, save, reject);
+- :class:`~bridge.net.realtime.RealtimeDriver` owns the thread that steps on a wall clock, and
+  :class:`~bridge.net.node_realtime.RealtimeStepping` what it does at each deadline;
 - this module wires them to Zenoh: it decodes, sends, counts and logs.
 
 An FMU error answers with an ERROR frame carrying the FMU's message and ends the episode; the
@@ -26,35 +29,34 @@ import contextlib
 import logging
 import threading
 from collections import Counter
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
-
-from bridge.errors import BridgeError, PlantError, StepTimeout
+from bridge.errors import PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
-from bridge.experiment.safe import check_safe_name
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import node_start
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
+from bridge.net.node_actions import ActionPath
 from bridge.net.node_health import Health
 from bridge.net.node_link import NodeLink
+from bridge.net.node_realtime import RealtimeStepping, Sample
+from bridge.net.node_setup import check_arguments, served_plant
 from bridge.net.node_state import SavedState
 from bridge.net.realtime import Pacing, RealtimeDriver
 from bridge.net.requests import Refused, RequestRules, redact
 from bridge.net.ros2.view import RosViewSettings
-from bridge.net.served import Served, element_start, served_by
+from bridge.net.served import Served, element_start
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.net.watchdog import Watchdog
-from bridge.plant.factory import fmu_plant
 
 _log = logging.getLogger(__name__)
 Mode = Literal["lockstep", "realtime"]
 _BODY = proto.HEADER.size
-__all__ = ["FmuNode", "Refused", "check_step_timeout", "redact"]
+__all__ = ["FmuNode", "Refused", "redact"]
 
 
 class FmuNode:
@@ -86,25 +88,15 @@ class FmuNode:
         served: Served | None = None,
         pacing: Pacing | None = None,
     ) -> None:
-        _check_arguments(name, mode, rate, step_timeout_s)
+        check_arguments(name, mode, rate, step_timeout_s)
         self.experiment = exp = as_experiment(experiment)
         self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
-        self.plant = plant = fmu_plant(exp, isolate=isolate, timeout_s=step_timeout_s)
-        # isolated (by --isolate or model.isolation alike): the plant's own deadline bounds every
-        # call (model.isolation.timeout, else step_timeout_s) and kills the child at it
-        self.step_timeout_s = (
-            float(getattr(plant, "timeout_s", step_timeout_s)) if plant.isolated else step_timeout_s
+        plant, served, self.step_timeout_s = served_plant(
+            exp, served, isolate=isolate, step_timeout_s=step_timeout_s
         )
-        try:
-            self.info = plant.info
-            self.served = served or served_by(exp, plant.info, plant.timing)
-            self.timing = self.served.timing
-            self.input_names, self.output_names = self.served.input_names, self.served.output_names
-            plant.bind(self.input_names, self.output_names)
-        except BaseException:
-            plant.close()
-            raise
+        self.plant, self.served, self.info, self.timing = plant, served, plant.info, served.timing
+        self.input_names, self.output_names = served.input_names, served.output_names
         self.rules = RequestRules(self.served, self.info.variables)
         self.lease = Lease(name)
         self.lockstep = ls.Lockstep(self.lease, self.rules.inputs)
@@ -120,6 +112,7 @@ class FmuNode:
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
+        self._realtime: RealtimeStepping | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
         # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
         self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
@@ -154,15 +147,22 @@ class FmuNode:
             on_state=lambda query: node_start.answer_state(self, query),
             lease=self.lease,
         )
-        self._pub, self._clock_pub = link.outputs, link.clock
+        self._pub = link.outputs
+        self._actions = ActionPath(
+            self.lockstep, self.saved, self.counters, advance=self._advance, fail=self._fail,
+            put=link.outputs.put, name=self.name,
+        )  # fmt: skip
         if ros is not None:
             link.add_ros(self, ros)
         if self.mode == "realtime":  # runs from the start with the nominal values
             self.reset(dict(self.served.nominal), None, 0)
-            period = self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0
-            self._driver = RealtimeDriver(
-                self._tick, period, name=self.name, counters=self.counters, pacing=pacing
-            )
+            self._realtime = rt = RealtimeStepping(
+                lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
+                clock=link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
+                period_s=self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0,
+                name=self.name, counters=self.counters, pacing=pacing,
+            )  # fmt: skip
+            self._driver = rt.driver
             self._driver.start()
         _log.info(
             "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, link.keys.base
@@ -227,55 +227,31 @@ class FmuNode:
         values, action = list(frame.floats), (frame.sim_time_ns, payload[_BODY:])
         refused = self.lockstep.admit(action[0], values, frame.flags, self.saved.refusal, payload)
         if refused is not None:
-            return self._reject(frame, refused, payload)
+            return self._actions.reject(frame, refused, payload)
         if not self._lock.acquire(timeout=self.step_timeout_s):
-            return self._reject(frame, ls.Reject(ls.BUSY, "the node is busy with a step or reset"))
+            return self._actions.reject(frame, ls.Reject(ls.BUSY, "the node is busy with a step or reset"))
         try:
             if self._driver is not None:
                 self._latest_inputs = values
                 self.counters["held"] += 1
             else:
-                self._lockstep(frame, values, action)
+                self._actions.serve(frame, values, action)
         finally:
             self._lock.release()
         return None
 
-    def _lockstep(self, frame: proto.Frame, values: list[float], action: tuple[int, bytes]) -> None:
-        order = self.lockstep.order(frame.episode, frame.step, frame.flags, action)
-        if isinstance(order, ls.Step) and order.restore:
-            if not self._state(frame, self.saved.restore):
-                return None
-            self.lockstep.restored(frame.step)
-            self.counters["restored"] += 1
-            order = self.lockstep.next(frame.step, frame.flags & ~proto.RESTORE_STATE)
-        if isinstance(order, ls.Reject):
-            return self._reject(frame, order)
-        if order.retry:
-            self.counters["duplicate"] += 1  # a retry: the same answer again, never a second step
-            self._pub.put(self.lockstep.last_frame)
-        elif not order.save or self._state(frame, self.saved.save):
-            self._advance(values, action)
-        return None
-
-    def _state(self, frame: proto.Frame, change: Callable[[int, int], str | None]) -> bool:
-        """Save or restore the state before ``frame``'s step; False: refused or failed (answered)."""
-        try:
-            reason = change(frame.episode, frame.step)
-        except PlantError as exc:
-            self._fail(exc, (frame.sim_time_ns, b""))
-            return False
-        if reason is not None:
-            self._reject(frame, ls.Reject(ls.STATE, reason))
-        return reason is None
-
-    def _advance(self, inputs: list[float] | None, action: tuple[int, bytes]) -> None:
+    def _advance(
+        self, inputs: list[float] | None, action: tuple[int, bytes], *, hold: bool = False
+    ) -> Sample | None:
+        """One step; its frame is published now, or with ``hold`` returned for the real-time
+        stepping to publish at the next deadline (None: the step failed and was answered)."""
         plant, state = self.plant, self.lockstep
         self.watchdog.begin("step %d of episode %d", state.step + 1, state.episode)
         try:
             outputs = plant.step(inputs)
         except PlantError as exc:
             self._fail(exc, action)
-            return
+            return None
         finally:
             self.watchdog.end()
         if inputs is not None:
@@ -284,6 +260,12 @@ class FmuNode:
         self._time_ns = time_ns = round(plant.time_s * 1e9)
         values = outputs.tolist()
         frame = state.stepped(action, values, time_ns, plant.terminated)
+        if hold:
+            return frame, time_ns, values, state.ended
+        self._publish(frame, time_ns, values)
+        return None
+
+    def _publish(self, frame: bytes, time_ns: int, values: list[float]) -> None:
         self._pub.put(frame)
         if self._link.ros is not None:
             self._link.ros.publish(time_ns, values)
@@ -299,13 +281,6 @@ class FmuNode:
         self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s)
         self._link.unhealthy()
         self._pub.put(self.lockstep.error(detail, self._time_ns, hung=True))  # t: where it hung
-
-    def _reject(self, frame: proto.Frame, reject: ls.Reject, payload: bytes = b"") -> None:
-        self.counters[f"rejected_{reject.reason}"] += 1
-        if _log.isEnabledFor(logging.INFO):
-            _log.info("node %s rejected an action (%s): %s", self.name, reject.reason, reject.detail)
-        key = self.lockstep.reject_key(reject, frame.sim_time_ns, payload)
-        self._pub.put(reject.frame(frame.episode, frame.step, frame.sim_time_ns, key))
 
     @contextlib.contextmanager
     def locked(self, what: str) -> Iterator[None]:
@@ -325,6 +300,8 @@ class FmuNode:
             raise Refused("busy", f"node {self.name!r} is busy with a step that has not returned")
         try:
             self.saved.clear()  # a state of the last episode (and of this FMU instance) is no use
+            if self._realtime is not None:
+                self._realtime.drop()  # a sample of the last episode is not published
             self.watchdog.begin("the reset of episode %d", episode)
             try:
                 outputs = self.plant.reset(values, inputs)
@@ -338,9 +315,7 @@ class FmuNode:
             frame = proto.encode_values(proto.OUTPUTS, episode, 0, time_ns, outputs, key=self.lease.key)
             self.lockstep.started(episode, frame)
             # step 0 goes on the outputs key too: recorders and deployed agents see every sample
-            self._pub.put(frame)
-            if self._link.ros is not None:
-                self._link.ros.publish(time_ns, outputs.tolist())
+            self._publish(frame, time_ns, outputs.tolist())
             if self._driver is not None:
                 self._driver.restart_clock()
             return frame
@@ -382,39 +357,6 @@ class FmuNode:
         self.reset(dict(self.served.nominal), None, self.lockstep.episode + 1)
         return round(self.plant.time_s * 1e9)
 
-    def _tick(self) -> bool:
-        """One real-time sample with the latest action held; False when the episode is over."""
-        if not self._lock.acquire(timeout=0.5):
-            return True
-        try:
-            if self.lockstep.ended:
-                return False
-            self._advance(self._latest_inputs, (0, b""))  # zero-order hold of the latest action
-            if not self.lockstep.ended:
-                self._clock_pub.put(np.int64(self._time_ns).tobytes())
-            return True
-        finally:
-            self._lock.release()
-
     def describe(self) -> dict[str, Any]:
         """What ``fmu-bridge nodes`` and remote envs learn about this node."""
         return replies.describe(self)
-
-
-def check_step_timeout(step_timeout_s: float) -> None:
-    """A BridgeError unless the step deadline is a positive number of seconds."""
-    if not step_timeout_s > 0:
-        raise BridgeError(f"--step-timeout must be > 0 seconds, got {step_timeout_s}")
-
-
-def _check_arguments(name: str, mode: str, rate: float, step_timeout_s: float) -> None:
-    """A BridgeError saying what is wrong with the node's arguments, before anything starts."""
-    if mode not in ("lockstep", "realtime"):
-        raise BridgeError(f"node mode {mode!r} is unknown; use lockstep or realtime")
-    if rate < 0:
-        raise BridgeError(f"--rate must be >= 0 (0: as fast as possible), got {rate}")
-    check_step_timeout(step_timeout_s)
-    try:  # a part of every key (<prefix>/<name>/...): no '/', wildcard or '$' may widen it
-        check_safe_name(name)
-    except ValueError as exc:
-        raise BridgeError(f"the node name: {exc}; give --name or node.name a plain one") from None

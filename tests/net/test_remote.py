@@ -332,6 +332,43 @@ def test_realtime_node_runs_on_the_wall_clock_and_holds_the_latest_action(loopba
             clock_sub.undeclare()
 
 
+def test_realtime_node_publishes_each_sample_at_its_deadline_stepped_with_the_action_held_before(
+    loopback: Loopback, tmp_path: Path
+) -> None:
+    """A real-time node steps the next sample right after publishing one, with the action held
+    then: an action sent in the middle of a period shows from the sample after next (the FMU's
+    step no longer happens at the deadline, before the publish)."""
+    from bridge.models import example_fmu
+
+    experiment = tmp_path / "feedthrough.yaml"  # y after a step is the u it was stepped with
+    experiment.write_text(
+        f"model: {{fmu: '{example_fmu('feedthrough', '2.0', 'cs')}', step_size: 0.02, "
+        "sampling_time: 0.02, episode_duration: 1000.0}\n"
+        "actions: {inputs: [u], low: {u: -5.0}, high: {u: 5.0}}\n"
+        "observations: {outputs: [y]}\n"
+        "reward: {terms: [{alive: 1.0}]}\n"
+    )
+    keys = proto.Keys(loopback.prefix, "rt_held")
+    frames: list[proto.Frame] = []
+    with node_process(experiment, "rt_held", loopback, "--mode", "realtime", "--rate", "0.2"):  # 100 ms
+        sub = loopback.session.declare_subscriber(
+            keys.outputs, lambda s: frames.append(proto.decode(s.payload.to_bytes()))
+        )  # type: ignore[attr-defined]
+        try:
+            wait_until(lambda: len(frames) >= 3, 60, "3 samples from the real-time node")
+            sent_after = frames[-1].step
+            time.sleep(0.04)  # mid-period: the next sample was stepped 40 ms ago, its deadline is 60 ms away
+            loopback.session.put(keys.actions, proto.encode_values(proto.ACTION, 0, 0, 0, [1.0]))  # type: ignore[attr-defined]
+            wait_until(lambda: any(f.values[0] == 1.0 for f in frames), 60, "the action's effect")
+            first = next(f.step for f in frames if f.values[0] == 1.0)
+            # the sample after the one last seen was stepped before the action came; the one after
+            # that is the first stepped with it (later only if a loaded machine delayed delivery)
+            assert first >= sent_after + 2, (first, sent_after)
+            assert all(f.values[0] == 0.0 for f in frames if f.step <= sent_after + 1)
+        finally:
+            sub.undeclare()
+
+
 def test_nodes_command_lists_live_nodes(loopback: Loopback) -> None:
     import subprocess
     import sys
