@@ -1,7 +1,8 @@
 """Batched envs: N episodes of one experiment over a ``BatchPlant`` and a ``BatchTask``.
 
 ``BatchEnv`` is the engine (one native call steps every FMU instance, the Task's math runs
-with numpy over the batch); two interfaces sit on it:
+with numpy over the batch; a batch of one runs the scalar Task, ``FmuEnv``'s own code, on
+lists instead, which costs less than numpy for one row); two interfaces sit on it:
 
 - :class:`BatchVectorEnv`, a Gymnasium ``VectorEnv`` in either autoreset mode, declared in its
   ``metadata["autoreset_mode"]``: SAME_STEP (the default) resets an env whose episode ended in
