@@ -1,7 +1,8 @@
 """Batched envs: N episodes of one experiment over a ``BatchPlant`` and a ``BatchTask``.
 
 ``BatchEnv`` is the engine (one native call steps every FMU instance, the Task's math runs
-with numpy over the batch); two interfaces sit on it:
+with numpy over the batch; a batch of one runs the scalar Task, ``FmuEnv``'s own code, on
+lists instead, which costs less than numpy for one row); two interfaces sit on it:
 
 - :class:`BatchVectorEnv`, a Gymnasium ``VectorEnv`` in either autoreset mode, declared in its
   ``metadata["autoreset_mode"]``: SAME_STEP (the default) resets an env whose episode ended in
@@ -93,7 +94,6 @@ class BatchEnv:
         # one env: the scalar Task steps it (FmuEnv's own code, so the same results) on lists,
         # cheaper than numpy over a batch of one
         self._one = self.task.tasks[0] if n_envs == 1 else None
-        self._one_inputs = np.zeros((1, len(self.task.input_names)))
         self._codes = {reason: code for code, reason in enumerate(self.task.reasons)}
         self._discrete = self.task.tasks[0].action_mapping.kind == "discrete"
 
@@ -147,8 +147,10 @@ class BatchEnv:
             obs (of the new episode where one ended), reward, terminated, truncated, and for
             each env whose episode ended: ``final_obs``, ``final_info`` and ``reset_info``.
         """
-        if self._one is not None and self.active[0]:
-            return self._step_one(actions)
+        if self._one is not None:
+            if self.active[0]:
+                return self._step_one(actions)
+            return self._step_none()
         task, plant = self.task, self.plant
         inputs = task.actions_to_inputs(actions, self.samples)
         active = self.active.copy()
@@ -204,6 +206,11 @@ class BatchEnv:
         self.obs = obs
         return obs, reward, terminated, truncated, ended
 
+    def _step_none(self) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
+        """``step`` of a batch of one whose episode ended and awaits ``reset_one``: nothing steps
+        (its last observation, reward 0, not done)."""
+        return self.obs.copy(), np.zeros(1), np.zeros(1, dtype=bool), np.zeros(1, dtype=bool), {}
+
     def _step_one(
         self, actions: Any
     ) -> tuple[ObsArray, npt.NDArray[np.float64], Any, Any, dict[int, dict[str, Any]]]:
@@ -212,7 +219,9 @@ class BatchEnv:
         assert task is not None  # step() checked
         a = np.asarray(actions)
         sample = int(self.samples[0])
-        inputs = self._one_inputs
+        batch = self.task  # its inputs, previous inputs and signals stay current (evaluation reads them)
+        inputs = batch.inputs
+        batch.previous[0] = inputs[0]
         action = a.reshape(1)[0] if self._discrete else a.reshape(1, -1)[0]
         try:
             inputs[0] = task.action_to_inputs(action, sample, rng)
@@ -235,6 +244,7 @@ class BatchEnv:
                     outputs, sample, bool(result.terminated[0]), rng
                 )
                 code[0] = self._codes[reason]
+                batch.signals = np.array([task.signal_values])
             except NonFiniteOutputs:
                 errors[0] = plant.failure(
                     0,
@@ -243,6 +253,8 @@ class BatchEnv:
                     step=sample,
                 )
                 plant.ready[0] = False
+        if errors:  # rare: the signal rows the batch's own step leaves (evaluation reads them)
+            batch.step_result(result.outputs, self.samples, result.terminated)
         return self._finish(
             result.outputs,
             obs=obs,
@@ -343,7 +355,7 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         obs, reward, terminated, truncated, ended = engine.step(actions)  # ended envs do not step
         infos: dict[str, Any] = {}
         if self.autoreset_mode is AutoresetMode.NEXT_STEP:
-            for i in np.flatnonzero(self._to_reset).tolist():
+            for i in np.flatnonzero(self._to_reset).tolist() if self._to_reset.any() else ():
                 infos = self._add_info(infos, _per_episode(engine._reset_or_recover(i)), i)
                 obs[i], reward[i], terminated[i], truncated[i] = engine.obs[i], 0.0, False, False
             self._to_reset[:] = terminated | truncated

@@ -401,6 +401,11 @@ class Task:
         obs = self.observer.observe(signals, self._inputs, rng)
         return obs, reward, terminated, truncated, reason
 
+    @property
+    def signal_values(self) -> list[float]:
+        """The last signal vector [outputs | inputs | references] (``signal_names`` order), live."""
+        return self._signals
+
     def signal_dict(self) -> dict[str, float]:
         return dict(zip(self.signal_names, self._signals))
 

@@ -63,12 +63,13 @@ def sample(config: Any, timesteps: int = 600) -> list[Any]:
         runner.stop()
 
 
-def test_rllib_env_runner_over_next_step_batch_env_records_whole_episodes() -> None:
+@pytest.mark.parametrize("k", [K, 1])  # a batch of one runs its own (scalar Task) path
+def test_rllib_env_runner_over_next_step_batch_env_records_whole_episodes(k: int) -> None:
     exp = cartpole()
-    episodes = sample(ppo_config(exp, envs_per_runner=K))
+    episodes = sample(ppo_config(exp, envs_per_runner=k))
     names = BatchVectorEnv(exp, 1).engine.task.output_names
     finished = [e for e in episodes if e.is_done]
-    assert len(finished) >= 3 * K, f"only {len(finished)} episodes ended: sample longer"
+    assert len(finished) >= 3 * k, f"only {len(finished)} episodes ended: sample longer"
     assert episode_faults(episodes, names) == []
 
 
