@@ -1,0 +1,86 @@
+"""The FMI 3.0 array and clock models as a new user meets them: listed by ``models``, named as
+``example:...`` in an experiment, and ``init`` writing what they need (structural parameters,
+clocks, whether a state file is possible) as lines that ``check`` accepts once uncommented."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import yaml
+from typer.testing import CliRunner
+
+from bridge.cli.main import _load_plugins, app
+from bridge.errors import StateFileError
+from bridge.models import example_fmu
+
+runner = CliRunner()
+_load_plugins()
+
+
+def invoke(*args: str) -> str:
+    result = runner.invoke(app, list(args), env={"COLUMNS": "200"})
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    return result.output
+
+
+def _uncomment(text: str, key: str) -> str:
+    return text.replace(f"  # {key}:", f"  {key}:")
+
+
+def test_models_lists_the_array_and_clock_models_and_experiments_name_them() -> None:
+    rows = json.loads(invoke("models", "--json"))
+    listed = {(r["model"], r["interface"]) for r in rows if r["model"] in ("strict_arrays", "clocks3")}
+    assert listed == {
+        ("strict_arrays", "cs"),
+        ("strict_arrays", "me"),
+        ("clocks3", "cs"),
+        ("clocks3", "me"),
+        ("clocks3", "se"),
+    }
+    assert all(Path(r["path"]).is_file() for r in rows)
+    assert example_fmu("clocks3", "3.0", "se").name.startswith("clocks3-fmi3-se")
+
+
+def test_init_on_the_strict_array_model_offers_its_structural_parameter(tmp_path: Path) -> None:
+    target = tmp_path / "arrays.yaml"
+    invoke("init", str(example_fmu("strict_arrays", "3.0", "cs")), "-o", str(target))
+    text = target.read_text()
+    assert '# structural_parameters: {"n": 3}' in text
+    assert "{state_file: PATH}" not in text and "cannot save its state to a file" in text
+    target.write_text(_uncomment(text, "structural_parameters"))
+    data = yaml.safe_load(target.read_text())
+    assert data["model"]["structural_parameters"] == {"n": 3}
+    out = invoke("check", str(target), "--steps", "2")
+    assert "stable-baselines3 env checker passed" in out
+
+
+def test_init_on_the_clock_model_offers_its_settable_clocks(tmp_path: Path) -> None:
+    target = tmp_path / "clocks.yaml"
+    invoke("init", str(example_fmu("clocks3", "3.0", "se")), "-o", str(target))
+    text = target.read_text()
+    assert '# clock_intervals: {"c_fixed": 0.25}' in text
+    assert '# clock_schedule: {"trigger": [1.0]}' in text
+    target.write_text(_uncomment(_uncomment(text, "clock_intervals"), "clock_schedule"))
+    data = yaml.safe_load(target.read_text())
+    assert data["model"]["clock_schedule"] == {"trigger": [1.0]}
+    out = invoke("check", str(target), "--steps", "5")
+    assert "stable-baselines3 env checker passed" in out
+
+
+def test_init_offers_a_state_file_where_the_fmu_can_save_one(tmp_path: Path) -> None:
+    target = tmp_path / "slow.yaml"
+    invoke("init", str(example_fmu("slow_init", "2.0", "cs")), "-o", str(target))
+    assert "{state_file: PATH}" in target.read_text()
+
+
+def test_state_save_refusal_for_scheduled_execution_reads_its_own_flags(tmp_path: Path) -> None:
+    # clocks3's ScheduledExecution element declares canGetAndSetFMUState="true"; the refusal used to
+    # read the (absent) ModelExchange element and report it false
+    exp = tmp_path / "se.yaml"
+    invoke("init", str(example_fmu("clocks3", "3.0", "se")), "-o", str(exp))
+    result = runner.invoke(app, ["state", "save", str(exp), "--until", "1", "-o", str(tmp_path / "s")])
+    assert isinstance(result.exception, StateFileError)
+    message = str(result.exception)
+    assert "canSerializeFMUState=false and canGetAndSetFMUState=true" in message
+    assert not (tmp_path / "s").exists()
