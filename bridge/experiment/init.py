@@ -211,7 +211,7 @@ def _structural(info: ModelInfo) -> list[str]:
 
 def _clocks(info: ModelInfo) -> list[str]:
     """Commented ``clock_intervals`` / ``clock_schedule`` lines for the input clocks the importer may set."""
-    from bridge.fmu.clocks import clock_driver_needed
+    from bridge.fmu.clock_rules import clock_driver_needed
 
     inputs = [v for v in info.clocks if v.causality == "input" and v.clock is not None]
     settable = [

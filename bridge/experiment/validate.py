@@ -128,7 +128,20 @@ def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     signals = set(variables) | known_references(experiment)
     _check_reward_and_termination(experiment, variables, signals, where)
     _check_evaluation(experiment, signals, where)
+    _check_clocks(experiment, info, where)
     return info
+
+
+def _check_clocks(experiment: Experiment, info: ModelInfo, where: str) -> None:
+    m = experiment.model
+    if not (m.clock_intervals or m.clock_schedule):
+        return
+    from bridge.fmu.clock_rules import check_settings
+
+    try:
+        check_settings(info, m.interface, m.clock_intervals, m.clock_schedule)
+    except ConfigError as exc:
+        raise ConfigError(f"model: {exc}{where}") from None
 
 
 def configured(experiment: Experiment, info: ModelInfo) -> ModelInfo:

@@ -84,3 +84,17 @@ def test_state_save_refusal_for_scheduled_execution_reads_its_own_flags(tmp_path
     message = str(result.exception)
     assert "canSerializeFMUState=false and canGetAndSetFMUState=true" in message
     assert not (tmp_path / "s").exists()
+
+
+def test_check_refuses_a_clock_setting_before_saying_config_ok(tmp_path: Path) -> None:
+    """Before: ``check`` printed "config ok" and then failed opening the FMU on the same setting."""
+    target = tmp_path / "clocks.yaml"
+    invoke("init", str(example_fmu("clocks3", "3.0", "cs")), "-o", str(target))
+    data = yaml.safe_load(target.read_text())
+    data["model"]["clock_intervals"] = {"c_calc": 0.3}  # calculated by the FMU: not the importer's
+    target.write_text(yaml.safe_dump(data))
+    result = runner.invoke(app, ["check", str(target)], env={"COLUMNS": "200"})
+    assert result.exit_code != 0
+    assert "config ok" not in result.output
+    assert "the interval of clock 'c_calc' cannot be set" in str(result.exception)
+    assert str(target) in str(result.exception)
