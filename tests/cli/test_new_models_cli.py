@@ -98,3 +98,19 @@ def test_check_refuses_a_clock_setting_before_saying_config_ok(tmp_path: Path) -
     assert "config ok" not in result.output
     assert "the interval of clock 'c_calc' cannot be set" in str(result.exception)
     assert str(target) in str(result.exception)
+
+
+def test_an_element_beyond_the_configured_size_names_the_array_and_its_size(tmp_path: Path) -> None:
+    """Before: with ``n: 2``, ``u[3]`` was only "not a variable of the FMU", with no word of the size."""
+    target = tmp_path / "arrays.yaml"
+    invoke("init", str(example_fmu("strict_arrays", "3.0", "cs")), "-o", str(target))
+    data = yaml.safe_load(target.read_text())
+    data["model"]["structural_parameters"] = {"n": 2}  # the experiment still names u[1]..u[3]
+    target.write_text(yaml.safe_dump(data))
+    result = runner.invoke(app, ["check", str(target)], env={"COLUMNS": "200"})
+    assert result.exit_code != 0
+    message = str(result.exception)
+    assert (
+        "'u[3]' is not a variable of the FMU (u is Float64[2] here, sized by model.structural_parameters"
+        in message
+    )
