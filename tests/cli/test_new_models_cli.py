@@ -114,3 +114,22 @@ def test_an_element_beyond_the_configured_size_names_the_array_and_its_size(tmp_
         "'u[3]' is not a variable of the FMU (u is Float64[2] here, sized by model.structural_parameters"
         in message
     )
+
+
+def test_check_shows_many_signals_a_row_each_on_a_narrow_terminal(tmp_path: Path) -> None:
+    """Before: clocks3's 20 observations got a column each on 80 columns, every name cut to '…',
+    and the time column's header "t [s]" lost its unit to rich's markup."""
+    target = tmp_path / "clocks.yaml"
+    invoke("init", str(example_fmu("clocks3", "3.0", "cs")), "-o", str(target))
+    result = runner.invoke(app, ["check", str(target), "--steps", "4"], env={"COLUMNS": "80"})
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    assert all(len(line) <= 80 for line in lines)
+    (countdown,) = [line for line in lines if line.startswith("│ n_countdown")]  # a row, its name whole
+    assert countdown.split("│")[2:6] == [
+        " 2      ",
+        " 3      ",
+        " 4      ",
+        " 4      ",
+    ]  # 0.05, 0.15, 0.45, 0.75
+    assert any("t [s]" in line for line in lines)
