@@ -133,3 +133,12 @@ def test_check_shows_many_signals_a_row_each_on_a_narrow_terminal(tmp_path: Path
         " 4      ",
     ]  # 0.05, 0.15, 0.45, 0.75
     assert any("t [s]" in line for line in lines)
+
+
+def test_inspect_says_which_structural_parameter_sizes_an_array() -> None:
+    """Before: ``Float64[3]``, with nothing saying that ``n`` sets the 3."""
+    path = str(example_fmu("strict_arrays", "3.0", "cs"))
+    table = invoke("inspect", path)
+    assert "type: Float64[n=3]" in table and "type: Float64[2,n=3]" in table
+    variables = {v["name"]: v for v in json.loads(invoke("inspect", path, "--json"))["variables"]}
+    assert variables["y"]["dimensions"] == [2, 3] and variables["y"]["sized_by"] == [None, "n"]
