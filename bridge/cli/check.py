@@ -69,24 +69,34 @@ def _plugin_checkers() -> list[tuple[str, Callable[[Any], None]]]:
 def _few_steps(env: FmuEnv, steps: int, console: Console) -> None:
     policy = make_policy("zero", env.task, 0)
     obs, info = env.reset(seed=0)
-    table = Table(
-        "step",
-        "t [s]",
-        *env.output_names,
-        "reward",
-        title=f"first steps (zero action, scenario {info['scenario']})",
-    )
+    title = f"first steps (zero action, scenario {info['scenario']})"
+    header = [escape(h) for h in ("step", "t [s]", *env.output_names, "reward")]  # "[s]" is not markup
+    rows = []
     for _ in range(steps):
         obs, reward, terminated, truncated, info = env.step(policy(obs))
-        table.add_row(
-            str(info["step"]),
-            f"{info['time_s']:g}",
-            *(f"{v:.4g}" for v in info["outputs"]),
-            f"{float(reward):.4g}",
+        rows.append(
+            [
+                str(info["step"]),
+                f"{info['time_s']:g}",
+                *(f"{v:.4g}" for v in info["outputs"]),
+                f"{float(reward):.4g}",
+            ]
         )
         if terminated or truncated:
             break
+    if len(header) * _CELL_WIDTH <= console.width:
+        table = Table(*header, title=title)
+        for row in rows:
+            table.add_row(*row)
+    else:  # too many signals for a column each: a row each, a column per step
+        table = Table("step", *(row[0] for row in rows), title=title)
+        for i, name in enumerate(header[1:], start=1):
+            table.add_row(name, *(row[i] for row in rows))
     console.print(table)
+
+
+#: Characters a column of the first-steps table needs to show a name or a value whole.
+_CELL_WIDTH = 11
 
 
 def scenario_data(path: Path, *, sample: int, seed: int) -> dict[str, Any]:

@@ -35,7 +35,11 @@ def summary(path: str | Path) -> dict[str, Any]:
 def type_cell(var: dict[str, Any]) -> str:
     """``Float64`` for a scalar, ``Float64[2,3]`` for an FMI 3.0 array (elements ``y[1,1]``..``y[2,3]``)."""
     dims = var.get("dimensions")
-    return f"{var['type']}[{','.join(map(str, dims))}]" if dims else str(var["type"])
+    if not dims:
+        return str(var["type"])
+    sized_by = var.get("sized_by") or [None] * len(dims)
+    shown = [f"{by}={n}" if by else str(n) for n, by in zip(dims, sized_by, strict=False)]
+    return f"{var['type']}[{','.join(shown)}]"
 
 
 def interfaces_text(info: dict[str, Any]) -> str:

@@ -126,10 +126,10 @@ def models(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ) -> None:
     """List the bundled example models, build them with gcc, and print their paths."""
-    from bridge.models import example_fmu, list_variants
+    from bridge.models import example_fmu, handwritten_variants, list_variants
 
     rows: list[dict[str, Any]] = []
-    for variant in list_variants():
+    for variant in [*list_variants(), *handwritten_variants()]:
         path = (
             str(example_fmu(variant.name, variant.fmi_version, variant.interface, rebuild=rebuild))
             if build or rebuild

@@ -61,6 +61,8 @@ def starting_config(fmu: str | Path, *, relative_to: Path | None = None) -> str:
     inputs = [v for v in scalars if v.causality == "input"]
     observed, observed_note = observations_for(scalars)
     lines = _header(info, shown)
+    lines += _structural(info)
+    lines += _clocks(info)
     lines += _parameters(info)
     lines += _actions(inputs, [v for v in scalars if _tunable(v)])
     lines += _observations(observed, observed_note)
@@ -173,9 +175,72 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
         f"  sampling_time: {sampling!r}      # one agent sample; a whole multiple of step_size",
         f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
         *([f"  start_time: {start!r}"] if start else []),
-        "  reset_policy: auto          # restore | reset | reinstantiate | auto | {state_file: PATH}"
-        "  (a state saved by `fmu-bridge state save`)",
+        *_reset_policy(info),
     ]
+
+
+def _auto_interface(info: ModelInfo) -> str:
+    """The interface ``model.interface: auto`` runs (as ``Model`` chooses it)."""
+    return next(i for i in ("cs", "me", "se") if i in info.interfaces)
+
+
+def _reset_policy(info: ModelInfo) -> list[str]:
+    """The reset policy line; ``{state_file: PATH}`` is offered only where the FMU can save its state."""
+    from bridge.fmu.serial import refusal
+
+    line = "  reset_policy: auto          # restore | reset | reinstantiate | auto"
+    why = refusal(info, _auto_interface(info)) if info.raw is not None else "unknown"  # type: ignore[arg-type]
+    if why is None:
+        return [f"{line} | {{state_file: PATH}}  (a state saved by `fmu-bridge state save`)"]
+    return [line, "                              # (no state_file: this FMU cannot save its state to a file)"]
+
+
+def _structural(info: ModelInfo) -> list[str]:
+    """A commented ``structural_parameters`` line with the array sizes' start values, if any."""
+    sizes = [
+        v for v in info.variables.values() if v.causality == "structuralParameter" and v.start is not None
+    ]
+    if not sizes:
+        return []
+    values = ", ".join(f"{q(v.name)}: {v.start}" for v in sizes)
+    return [
+        f"  # structural_parameters: {{{values}}}  # array sizes, set in configuration mode; with",
+        "  #   other sizes, name the elements that then exist (u[1]..u[n]) below (docs/arrays.md)",
+    ]
+
+
+def _clocks(info: ModelInfo) -> list[str]:
+    """Commented ``clock_intervals`` / ``clock_schedule`` lines for the input clocks the importer may set."""
+    from bridge.fmu.clock_rules import clock_driver_needed
+
+    inputs = [v for v in info.clocks if v.causality == "input" and v.clock is not None]
+    settable = [
+        v
+        for v in inputs
+        if v.clock and v.clock.interval_variability in ("fixed", "tunable") and v.clock.interval_s is not None
+    ]
+    triggered = [v for v in inputs if v.clock and v.clock.interval_variability == "triggered"]
+    if not (settable or triggered):
+        return []
+    auto = _auto_interface(info)
+    ticking = [i for i in info.interfaces if clock_driver_needed(info, i)]
+    if not ticking:
+        return [f"  # clocks: {', '.join(q(v.name) for v in inputs)} do not tick here (see docs/clocks.md)"]
+    lines = ["  # the FMU's clocks tick at their own times (docs/clocks.md); the importer may set:"]
+    if auto not in ticking:
+        lines.append(f"  # interface: {ticking[0]}     # clocks tick only there ({auto} is what auto runs)")
+    if settable:
+        values = ", ".join(
+            f"{q(v.name)}: {_num(v.clock.interval_s)}" for v in settable if v.clock and v.clock.interval_s
+        )
+        lines.append(f"  # clock_intervals: {{{values}}}  # s, the FMU's own intervals")
+    if triggered:
+        first = info.default_experiment.start_time_s or 0.0
+        lines.append(
+            f"  # clock_schedule: {{{q(triggered[0].name)}: [{_num(first + 1.0)}]}}  # s from the start: "
+            f"ticks of {', '.join(q(v.name) for v in triggered)}"
+        )
+    return lines
 
 
 def _actions(inputs: list[Variable], tunables: list[Variable]) -> list[str]:

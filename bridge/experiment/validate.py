@@ -128,7 +128,20 @@ def check_experiment(experiment: Experiment, info: ModelInfo) -> ModelInfo:
     signals = set(variables) | known_references(experiment)
     _check_reward_and_termination(experiment, variables, signals, where)
     _check_evaluation(experiment, signals, where)
+    _check_clocks(experiment, info, where)
     return info
+
+
+def _check_clocks(experiment: Experiment, info: ModelInfo, where: str) -> None:
+    m = experiment.model
+    if not (m.clock_intervals or m.clock_schedule):
+        return
+    from bridge.fmu.clock_rules import check_settings
+
+    try:
+        check_settings(info, m.interface, m.clock_intervals, m.clock_schedule)
+    except ConfigError as exc:
+        raise ConfigError(f"model: {exc}{where}") from None
 
 
 def configured(experiment: Experiment, info: ModelInfo) -> ModelInfo:
@@ -175,19 +188,37 @@ def _number(text: str) -> object:
 
 
 def _unknown(
-    key: str, name: str, names: Iterable[str], where: str, what: str = "a variable of the FMU"
+    key: str,
+    name: str,
+    names: Iterable[str],
+    where: str,
+    what: str = "a variable of the FMU",
+    *,
+    note: str = "",
 ) -> ConfigError:
     names = sorted(names)
     close = difflib.get_close_matches(name, names, n=4, cutoff=0.5)
     hint = (
         f"did you mean {close}?" if close else f"{len(names)} are available; `fmu-bridge inspect` lists them"
     )
-    return ConfigError(f"{key}: {name!r} is not {what}; {hint}{where}")
+    return ConfigError(f"{key}: {name!r} is not {what}{note}; {hint}{where}")
+
+
+def _array_note(name: str, variables: Mapping[str, Variable]) -> str:
+    """For an element of an array that has no such element: the array's shape, and what sizes it."""
+    base = name.split("[", 1)[0] if name.endswith("]") else ""
+    var = variables.get(base) if base else None
+    if var is None or not var.dimensions:
+        return ""
+    shape = ",".join(map(str, var.dimensions))
+    sized = any(vr is not None for vr in var.dimension_vrs)
+    why = ", sized by model.structural_parameters or, without it, the structural parameters' start values"
+    return f" ({base} is {var.type}[{shape}] here{why if sized else ''})"
 
 
 def _need(key: str, name: str, variables: Mapping[str, Variable], where: str) -> Variable:
     if name not in variables:
-        raise _unknown(key, name, variables, where)
+        raise _unknown(key, name, variables, where, note=_array_note(name, variables))
     var = variables[name]
     if var.dimensions:
         shape = ",".join(map(str, var.dimensions))

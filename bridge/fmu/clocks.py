@@ -36,7 +36,8 @@ import numpy.typing as npt
 from fmpy import fmi3
 
 from bridge.errors import ConfigError, FmuError
-from bridge.fmu.abi import DISCARD, OK, WARNING
+from bridge.fmu.abi import DISCARD, ERROR, OK, WARNING
+from bridge.fmu.clock_rules import _check_intervals, _check_schedule, check_settings, clock_driver_needed
 from bridge.fmu.description import ModelInfo, Variable
 
 NOT_YET_KNOWN, UNCHANGED, CHANGED = 0, 1, 2
@@ -59,15 +60,6 @@ class Timing:
         if self.base_s is not None and self.interval_s is not None:
             return self.base_s + self.index * self.interval_s
         return self.next_s
-
-
-def clock_driver_needed(info: ModelInfo, interface: str) -> bool:
-    """Whether the instance runs its clocks: scheduled execution, or FMI 3.0 model exchange or
-    co-simulation in event mode with at least one input clock."""
-    if interface == "se":
-        return True
-    inputs = any(v.causality == "input" for v in info.clocks)
-    return inputs and (interface == "me" or (interface == "cs" and info.has_event_mode))
 
 
 class ClockDriver:
@@ -605,61 +597,15 @@ def _vrs(variables: Sequence[Variable]) -> Any:
     return (fmi3.fmi3ValueReference * len(variables))(*(v.value_reference for v in variables))
 
 
-def _check_intervals(
-    info: ModelInfo, inputs: Mapping[str, Variable], intervals: Mapping[str, float]
-) -> dict[str, float]:
-    settable = [
-        n
-        for n, v in inputs.items()
-        if v.clock and v.clock.interval_variability in ("fixed", "tunable") and v.clock.interval_s is not None
-    ]
-    checked = {}
-    for name, interval in intervals.items():
-        if name not in settable:
-            raise ConfigError(
-                f"{info.model_name}: the interval of clock {name!r} cannot be set: only fixed and tunable "
-                f"input clocks with an intervalDecimal take one from the importer; here: {settable or 'none'}"
-            )
-        if (
-            isinstance(interval, bool)
-            or not isinstance(interval, (int, float))
-            or not (math.isfinite(interval) and interval > 0)
-        ):
-            raise ConfigError(
-                f"{info.model_name}: clock {name!r}: interval {interval!r} s; expected a number > 0"
-            )
-        checked[name] = float(interval)
-    return checked
-
-
-def _check_schedule(
-    info: ModelInfo, inputs: Mapping[str, Variable], schedule: Mapping[str, Sequence[float]]
-) -> dict[str, list[float]]:
-    triggered = [n for n, v in inputs.items() if v.clock and v.clock.interval_variability == "triggered"]
-    checked = {}
-    for name, times in schedule.items():
-        if name not in triggered:
-            raise ConfigError(
-                f"{info.model_name}: clock_schedule names {name!r}, which is not a triggered input clock; "
-                f"scheduled activations are for {triggered or 'none (this FMU has none)'}"
-            )
-        values = [float(t) for t in times]
-        if any(not math.isfinite(t) for t in values) or values != sorted(values):
-            raise ConfigError(
-                f"{info.model_name}: clock_schedule.{name}: {list(times)} must be finite times in "
-                f"increasing order (seconds)"
-            )
-        checked[name] = values
-    return checked
-
-
 __all__ = [
     "CHANGED",
+    "ERROR",
     "NOT_YET_KNOWN",
     "UNCHANGED",
     "ClockDriver",
     "ClockInputs",
     "ClockedOutputs",
     "Timing",
+    "check_settings",
     "clock_driver_needed",
 ]

@@ -28,7 +28,10 @@ def refusal(info: ModelInfo, interface: Interface) -> str | None:
             f"{info.model_name} cannot save its state to a file: FMI {info.fmi_version} has no FMU state "
             f"functions (FMI 2.0 and 3.0 FMUs declare {serialize_flag} and {state_flag})"
         )
-    element = info.raw.coSimulation if interface == "cs" else info.raw.modelExchange
+    raw = info.raw
+    element = {"cs": raw.coSimulation, "me": raw.modelExchange}.get(interface) or getattr(
+        raw, "scheduledExecution", None
+    )
     can_state = bool(getattr(element, "canGetAndSetFMUstate", False))
     can_serialize = bool(getattr(element, "canSerializeFMUstate", False))
     if can_state and can_serialize:

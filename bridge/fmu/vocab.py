@@ -201,6 +201,13 @@ def unknown_variable_error(name: str, info: ModelInfo, role: str = "variable") -
     )
 
 
+def _sized_by(var: Variable, info: ModelInfo) -> list[str | None]:
+    """Per dimension of an array: the structural parameter that sizes it (None for a fixed size)."""
+    structural = (v for v in info.variables.values() if v.causality == "structuralParameter")
+    names = {v.value_reference: v.name for v in structural}
+    return [None if vr is None else names.get(vr, f"vr {vr}") for vr in var.dimension_vrs]
+
+
 def summary_of(info: ModelInfo) -> dict[str, Any]:
     de = info.default_experiment
     return {
@@ -239,6 +246,7 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
                 "description": v.description,
                 **({"enumeration": dict(v.enum_items)} if v.enum_items else {}),
                 **({"dimensions": list(v.dimensions)} if v.dimensions else {}),
+                **({"sized_by": _sized_by(v, info)} if any(vr is not None for vr in v.dimension_vrs) else {}),
                 **({"clock": _clock_summary(v.clock)} if v.clock is not None else {}),
             }
             for v in info.variables.values()

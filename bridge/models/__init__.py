@@ -39,6 +39,7 @@ __all__ = [
     "build_all",
     "cache_dir",
     "example_fmu",
+    "handwritten_variants",
     "list_variants",
     "model_names",
 ]
@@ -106,6 +107,8 @@ def example_fmu(name: str, fmi_version: str = "2.0", interface: str = "cs", *, r
         DependencyMissing: gcc or FMPy (for the FMI headers) is not installed.
         BridgeError: gcc failed; the message carries its output.
     """
+    if name in HANDWRITTEN:
+        return _handwritten(name, fmi_version, interface, rebuild=rebuild)
     spec = load_spec(_check_name(name))
     _check_variant(spec, fmi_version, interface)
     key = cache_key(spec, fmi_version, interface)
@@ -132,10 +135,53 @@ def build_all(*, rebuild: bool = False) -> list[Path]:
         return [future.result() for future in futures]
 
 
+#: Example models written without model.json (their own C and XML): name -> (FMI version, interfaces, description).
+HANDWRITTEN: dict[str, tuple[str, tuple[str, ...], str]] = {
+    "strict_arrays": (
+        "3.0",
+        ("cs", "me"),
+        "Strict FMI 3.0 arrays: u[n] in, y[2,n] out, sized by the structural parameter n (start 3); "
+        "refuses element-wise calls (docs/arrays.md). One archive holds both interfaces.",
+    ),
+    "clocks3": (
+        "3.0",
+        ("cs", "me", "se"),
+        "FMI 3.0 clocks of every time-based kind, a triggered input and output clock, and a clocked "
+        "controller; co-simulation with event mode, model exchange, or scheduled execution (docs/clocks.md).",
+    ),
+}
+
+
+def handwritten_variants() -> list[ModelVariant]:
+    """The variants of :data:`HANDWRITTEN` (``fmu-bridge models`` lists them after the others)."""
+    return [
+        ModelVariant(name, version, interface, description)
+        for name, (version, interfaces, description) in HANDWRITTEN.items()
+        for interface in interfaces
+    ]
+
+
+def _handwritten(name: str, fmi_version: str, interface: str, *, rebuild: bool) -> Path:
+    version, interfaces, _ = HANDWRITTEN[name]
+    if fmi_version != version or interface not in interfaces:
+        raise ConfigError(
+            f"{name} has no FMI {fmi_version!r} {interface!r} variant; available: fmi_version={version!r} "
+            f"interface one of {interfaces}"
+        )
+    if name == "strict_arrays":
+        from bridge.models.strict import strict_arrays_fmu
+
+        return strict_arrays_fmu(rebuild=rebuild)
+    from bridge.models.clocked import clocks_fmu
+
+    return clocks_fmu(interface, rebuild=rebuild)
+
+
 def _check_name(name: str) -> str:
     names = model_names()
     if name not in names:
-        raise ConfigError(f"model {name!r} is not an example model; available: {', '.join(names)}")
+        available = ", ".join([*names, *HANDWRITTEN])
+        raise ConfigError(f"model {name!r} is not an example model; available: {available}")
     return name
 
 

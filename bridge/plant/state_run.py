@@ -54,8 +54,10 @@ def save_state(
 ) -> SavedRun:
     """Initialise the experiment's FMU, run it to ``until_s`` (simulation time) or to a steady state,
     and write its state to ``output``; :class:`StateFileError` where the FMU cannot serialise."""
-    if (until_s is None) == (not steady):  # exactly one of them
+    if until_s is not None and steady:
         raise ConfigError("state save: give either a time to run to (--until) or --steady, not both")
+    if until_s is None and not steady:
+        raise ConfigError("state save: say when to save: --until T (simulation time, s) or --steady")
     fmu_path = resolve_fmu(experiment)
     info = check_experiment(experiment, read_model_info(fmu_path))
     t = timing(experiment, info)
@@ -92,7 +94,12 @@ def _outputs(model: Model) -> list[str]:
 
 def _steps_to(model: Model, until_s: float) -> int:
     steps = (until_s - model.start_time_s) / model.step_size_s
-    k = round(steps)
+    if math.isfinite(steps) and steps < 0:
+        raise ConfigError(
+            f"--until {until_s:g} s is before the FMU's start time {model.start_time_s:g} s; give a time at "
+            f"or after the start"
+        )
+    k = round(steps) if math.isfinite(steps) else 0
     if not math.isfinite(steps) or abs(steps - k) > 1e-9 * max(1.0, abs(steps)):
         raise ConfigError(
             f"--until {until_s:g} s is not on the FMU's time grid (start {model.start_time_s:g} s, step "

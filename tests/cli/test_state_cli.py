@@ -219,3 +219,22 @@ def test_steady_watches_the_state_derivatives_the_fmu_offers(
     assert abs(slope) * 0.5 <= 1e-9 * T
     if offered is not None:
         assert offered == pytest.approx(slope, abs=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--until", "-1"], "--until -1 s is before the FMU's start time 0 s"),
+        ([], "say when to save: --until T (simulation time, s) or --steady"),
+        (["--until", "1", "--steady"], "not both"),
+    ],
+)
+def test_state_save_refuses_a_time_before_the_start_and_says_what_is_missing(
+    tmp_path: Path, args: list[str], said: str
+) -> None:
+    """Before: ``--until -1`` saved the state at t = 0, and no option at all was answered with "not both"."""
+    exp = _experiment(tmp_path / "e.yaml")
+    result = runner.invoke(app, ["state", "save", str(exp), *args, "-o", str(tmp_path / "w.state")])
+    assert isinstance(result.exception, ConfigError), result.output
+    assert said in str(result.exception)
+    assert not (tmp_path / "w.state").exists()

@@ -66,7 +66,10 @@ def test_typed_inputs_become_levels_inside_their_ranges_and_check_passes(
     config = tmp_path / "e.yaml"
     config.write_text(starting_config(typed_fmu3, relative_to=tmp_path))
     (policy_line,) = [line for line in config.read_text().splitlines() if "reset_policy:" in line]
-    assert "{state_file: PATH}" in policy_line  # the comment names every policy
+    assert "restore | reset | reinstantiate | auto" in policy_line  # the comment names every policy
+    # typed has String and Binary variables, so it cannot serialise its state: no state_file offered
+    assert "{state_file: PATH}" not in policy_line
+    assert "no state_file: this FMU cannot save its state to a file" in config.read_text()
     exp = load_experiment(config)
     info = check_experiment(exp, read_model_info(typed_fmu3))
     with FmuEnv(config) as env:
