@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bridge.errors import ConfigError
-from bridge.models.build import CFLAGS, build_archive, cache_key
+from bridge.models.build import CFLAGS, build_archive, cache_dir, cache_key
 from bridge.models.sources import load_spec, model_names
 from bridge.models.spec import FMI_VERSIONS, INTERFACES, Spec
 
@@ -80,19 +80,6 @@ def list_variants() -> list[ModelVariant]:
     return variants
 
 
-def cache_dir() -> Path:
-    """Where built archives are kept: ``$FMU_BRIDGE_CACHE/models``, else ``~/.cache/fmu-bridge/models``.
-
-    ``FMU_BRIDGE_CACHE`` names the fmu-bridge cache root (shared with other cached downloads); the
-    directory may be deleted at any time.
-    """
-    root = os.environ.get("FMU_BRIDGE_CACHE")
-    if root:
-        return Path(root).expanduser() / "models"
-    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(xdg) / "fmu-bridge" / "models"
-
-
 def example_fmu(name: str, fmi_version: str = "2.0", interface: str = "cs", *, rebuild: bool = False) -> Path:
     """Path of the example FMU ``name`` for an FMI version and interface, building it if needed.
 
@@ -135,7 +122,8 @@ def build_all(*, rebuild: bool = False) -> list[Path]:
         return [future.result() for future in futures]
 
 
-#: Example models written without model.json (their own C and XML): name -> (FMI version, interfaces, description).
+#: Example models written without model.json (their own C and XML):
+#: name -> (FMI version, interfaces, description).
 HANDWRITTEN: dict[str, tuple[str, tuple[str, ...], str]] = {
     "strict_arrays": (
         "3.0",

@@ -172,3 +172,16 @@ def _write_zip(path: Path, files: Mapping[str, bytes]) -> None:
             info.compress_type = zipfile.ZIP_DEFLATED
             info.external_attr = 0o644 << 16
             archive.writestr(info, files[name])
+
+
+def cache_dir() -> Path:
+    """Where built archives are kept: ``$FMU_BRIDGE_CACHE/models``, else ``~/.cache/fmu-bridge/models``.
+
+    ``FMU_BRIDGE_CACHE`` names the fmu-bridge cache root (shared with other cached downloads); the
+    directory may be deleted at any time.
+    """
+    root = os.environ.get("FMU_BRIDGE_CACHE")
+    if root:
+        return Path(root).expanduser() / "models"
+    xdg = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(xdg) / "fmu-bridge" / "models"

@@ -17,7 +17,15 @@ from pathlib import Path
 from typing import Final
 
 from bridge.errors import ConfigError
-from bridge.models.build import CFLAGS, _compile, _find_gcc, _fmi_headers_dir, _write_zip, binary_path
+from bridge.models.build import (
+    CFLAGS,
+    _compile,
+    _find_gcc,
+    _fmi_headers_dir,
+    _write_zip,
+    binary_path,
+    cache_dir,
+)
 from bridge.models.sources import models_root
 
 NAME: Final = "clocks3"
@@ -140,7 +148,6 @@ def clocks_fmu(interface: str = "cs", *, rebuild: bool = False) -> Path:
         DependencyMissing: gcc or FMPy (for the FMI headers) is not installed.
         BridgeError: gcc failed; the message carries its output.
     """
-    from bridge.models import cache_dir
 
     if interface not in VARIANTS:
         raise ConfigError(f"clocks3 is built as {VARIANTS}, not {interface!r}")

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Final
 
 from bridge.models import build
+from bridge.models.build import cache_dir
 from bridge.models.sources import models_root
 
 NAME: Final = "strict_arrays"
@@ -91,7 +92,6 @@ def strict_arrays_fmu(*, rebuild: bool = False) -> Path:
         DependencyMissing: gcc or FMPy (for the FMI headers) is not installed.
         BridgeError: gcc failed; the message carries its output.
     """
-    from bridge.models import cache_dir  # the package imports this module's siblings first
 
     source = models_root() / NAME / f"{NAME}.c"
     key = _key(source)
