@@ -42,6 +42,7 @@ from bridge.errors import ConfigError
 from bridge.net.ros2 import cdr
 from bridge.plant.base import Plant
 from bridge.recording import meta
+from bridge.recording.env_recorder import close_ref, free_path
 from bridge.recording.writer import McapWriter
 
 _log = logging.getLogger(__name__)
@@ -110,25 +111,13 @@ class RecordAgents:
         self._seeds: list[int | None] = []
         self.episodes: list[dict[str, Any]] = []
         ref = weakref.ref(self)
-        self._at_exit = lambda: _close_ref(ref)
+        self._at_exit = lambda: close_ref(ref)
         atexit.register(self._at_exit)
 
     def _run_info(self, agent: str | None, seed: int | None) -> dict[str, Any]:
-        timing, origin = self._plant.timing, self._plant.provenance()
-        return {
-            "env": type(self.env).__name__,
-            "plant": self._plant.name,
-            "node": origin["node"],
-            "agent": str(agent) if agent else "",
-            "agents": list(self._specs),
-            "seed": "" if seed is None else str(seed),
-            "fmu": origin["fmu"],
-            "fmu_sha256": origin["fmu_sha256"],
-            "step_size_s": timing.step_size_s,
-            "sampling_time_s": timing.sampling_time_s,
-            "start_time_s": timing.start_time_s,
-            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        }
+        return meta.run_info(
+            type(self.env).__name__, self._plant, self._plant.timing, agent, seed, agents=list(self._specs)
+        )
 
     # -- the PettingZoo Parallel API, passed through ------------------------------------------------
     @property
@@ -266,15 +255,6 @@ def topic(agent: str, kind: str) -> str:
     return f"{meta.AGENTS}{agent}/{kind}"
 
 
-def _close_ref(ref: weakref.ReferenceType[RecordAgents]) -> None:
-    recorder = ref()
-    if recorder is not None:
-        try:
-            recorder.close()
-        except Exception as exc:  # at exit: report, never raise
-            _log.error("finishing the recording failed: %s", exc)
-
-
 def record_agents(
     env: Any,
     directory: str | Path = "recordings",
@@ -285,16 +265,7 @@ def record_agents(
 ) -> RecordAgents:
     """Wrap ``env`` to record into ``directory/<run_name>.mcap`` (a free name is chosen), as
     :func:`bridge.recording.env_recorder.record_env` does for one agent."""
-    from bridge.recording.env_recorder import check_run_name, slug
-
-    folder = Path(directory)
-    if run_name:
-        check_run_name(run_name, folder)
+    experiment = getattr(getattr(env, "experiment", None), "name", "agents")
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    base = slug(run_name or f"{getattr(getattr(env, 'experiment', None), 'name', 'agents')}-{stamp}")
-    path = folder / f"{base}.mcap"
-    counter = 1
-    while path.exists() or path.with_name(path.name + ".part").exists():
-        path = folder / f"{base}-{counter}.mcap"
-        counter += 1
+    path = free_path(Path(directory), run_name, lambda: f"{experiment}-{stamp}")
     return RecordAgents(env, path, agent=agent, seed=seed)

@@ -21,6 +21,7 @@ import os
 import re
 import unicodedata
 import weakref
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -117,26 +118,11 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self.episodes: list[dict[str, Any]] = []
         self._seeds: list[int | None] = []
         ref = weakref.ref(self)
-        self._at_exit = lambda: _close_ref(ref)
+        self._at_exit = lambda: close_ref(ref)
         atexit.register(self._at_exit)  # a program that never closes the env still gets a whole file
 
     def _run_info(self, agent: str | None, seed: int | None) -> dict[str, Any]:
-        env = self.env.unwrapped
-        timing = self.task.timing
-        origin = self._plant.provenance()
-        return {
-            "env": type(env).__name__,
-            "plant": self._plant.name,
-            "node": origin["node"],
-            "agent": str(agent) if agent else "",
-            "seed": "" if seed is None else str(seed),
-            "fmu": origin["fmu"],
-            "fmu_sha256": origin["fmu_sha256"],
-            "step_size_s": timing.step_size_s,
-            "sampling_time_s": timing.sampling_time_s,
-            "start_time_s": timing.start_time_s,
-            "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        }
+        return meta.run_info(type(self.env.unwrapped).__name__, self._plant, self.task.timing, agent, seed)
 
     # -- Gymnasium API -----------------------------------------------------------------------------
     def reset(
@@ -275,7 +261,8 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         return self.writer.path
 
 
-def _close_ref(ref: weakref.ReferenceType[RecordMcap]) -> None:
+def close_ref(ref: weakref.ReferenceType[Any]) -> None:
+    """At interpreter exit, finish the recording of a recorder the program forgot to close."""
     recorder = ref()
     if recorder is not None:
         try:
@@ -324,6 +311,20 @@ def check_run_name(name: str, folder: Path) -> None:
         )
 
 
+def free_path(folder: Path, run_name: str | None, default: Callable[[], str]) -> Path:
+    """``folder/<run_name>.mcap`` (``run_name`` checked, else ``default()``; made a plain file name by
+    :func:`slug`), with ``-1``, ``-2``, ... added while that file or its ``.part`` exists."""
+    if run_name:
+        check_run_name(run_name, folder)  # a path, '..' or control characters: refused, not mangled
+    base = slug(run_name or default())
+    path = folder / f"{base}.mcap"
+    counter = 1
+    while path.exists() or path.with_name(path.name + ".part").exists():
+        path = folder / f"{base}-{counter}.mcap"
+        counter += 1
+    return path
+
+
 def record_env(
     env: gym.Env[Any, Any],
     directory: str | Path = "recordings",
@@ -340,13 +341,5 @@ def record_env(
     ``agent`` and ``seed`` go into the
     metadata (every episode's own seed is in its start event).
     """
-    folder = Path(directory)
-    if run_name:
-        check_run_name(run_name, folder)  # a path, '..' or control characters: refused, not mangled
-    base = slug(run_name or default_run_name(env))
-    path = folder / f"{base}.mcap"
-    counter = 1
-    while path.exists() or path.with_name(path.name + ".part").exists():
-        path = folder / f"{base}-{counter}.mcap"
-        counter += 1
+    path = free_path(Path(directory), run_name, lambda: default_run_name(env))
     return RecordMcap(env, path, agent=agent, seed=seed, chunk_size=chunk_size, compression=compression)

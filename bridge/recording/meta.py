@@ -30,6 +30,7 @@ their sample (``t_k``), everything a step produces at its end (``t_k+1``).
 
 from __future__ import annotations
 
+import datetime
 import json
 import platform
 from dataclasses import dataclass
@@ -204,6 +205,28 @@ def open_channels(writer: McapWriter, topics: list[str], names: dict[str, list[s
             meta["names"] = to_json(list(names[topic]))
         ids[topic] = writer.add_channel(topic, schema_id, "cdr", meta)
     return Channels(ids)
+
+
+def run_info(
+    env_name: str, plant: Plant, timing: Any, agent: str | None, seed: int | None, **extra: Any
+) -> dict[str, Any]:
+    """The run's ``fmu_bridge`` metadata (before :func:`write_run_metadata` adds the experiment's):
+    the env, the plant and its FMU, the agent (``extra`` follows it), the seed and the timing."""
+    origin = plant.provenance()
+    return {
+        "env": env_name,
+        "plant": plant.name,
+        "node": origin["node"],
+        "agent": str(agent) if agent else "",
+        **extra,
+        "seed": "" if seed is None else str(seed),
+        "fmu": origin["fmu"],
+        "fmu_sha256": origin["fmu_sha256"],
+        "step_size_s": timing.step_size_s,
+        "sampling_time_s": timing.sampling_time_s,
+        "start_time_s": timing.start_time_s,
+        "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+    }
 
 
 def write_run_metadata(writer: McapWriter, run: dict[str, Any], experiment: Any = None) -> None:
