@@ -9,11 +9,13 @@ read by a plain Zenoh query, as any client would.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import signal
 import subprocess
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -97,6 +99,34 @@ def run_fine(env: RemoteFmuEnv) -> list[list[float]]:
 FINE = [[0.5, 1.0], [0.5, 2.0], [0.5, 3.0]]
 
 
+@contextlib.contextmanager
+def busy_in_a_forked_step(env: Any, child: psutil.Process) -> Iterator[psutil.Process]:
+    """Drive ``env`` (scenario ``forks``) in a thread until the isolated FMU process ``child`` and
+    the fork its third step makes both spin in doStep; yield the fork. On leaving, the step must
+    not have returned (the body stops the node under it)."""
+    outcome: list[BaseException | None] = []
+
+    def drive() -> None:
+        try:
+            env.reset(options={"scenario": "forks"})
+            for _ in range(3):  # the third step forks; both processes spin in doStep
+                env.step(HALF)
+            outcome.append(None)
+        except BaseException as exc:  # what the client says once the node is gone
+            outcome.append(exc)
+
+    driver = threading.Thread(target=drive, daemon=True)
+    driver.start()
+    wait_until(lambda: len(child.children()) == 1, 30, "the FMU's fork")
+    (fork,) = child.children()
+    spent = child.cpu_times().user + fork.cpu_times().user
+    wait_until(lambda: child.cpu_times().user + fork.cpu_times().user > spent + 0.2, 30, "a busy step")
+    yield fork
+    driver.join(timeout=150)
+    env.close()
+    assert outcome and outcome[0] is not None, "the step returned although the node was stopped"
+
+
 @pytest.mark.parametrize("way", ["in_process", "file"])
 def test_a_refused_initialisation_shows_as_unusable_until_the_next_reset_heals_it(
     tmp_path: Path, loopback: Loopback, way: str
@@ -178,30 +208,11 @@ def test_sigterm_on_a_node_whose_child_is_busy_in_a_step_leaves_no_process(
     with node_process(path, "busy", loopback, *flags) as node:
         (child,) = plant_processes(node)
         env = RemoteFmuEnv(path, "busy", session=loopback.session, prefix=loopback.prefix, timeout_s=120)
-        outcome: list[BaseException | None] = []
-
-        def drive() -> None:
-            try:
-                env.reset(options={"scenario": "forks"})
-                for _ in range(3):  # the third step forks; both processes spin in doStep
-                    env.step(HALF)
-                outcome.append(None)
-            except BaseException as exc:  # what the client says once the node is gone
-                outcome.append(exc)
-
-        driver = threading.Thread(target=drive, daemon=True)
-        driver.start()
-        wait_until(lambda: len(child.children()) == 1, 30, "the FMU's fork")
-        (fork,) = child.children()
-        spent = child.cpu_times().user + fork.cpu_times().user
-        wait_until(lambda: child.cpu_times().user + fork.cpu_times().user > spent + 0.2, 30, "a busy step")
-        assert plain_info(loopback, "busy")["health"] == "ok"  # mid-step, within its 60 s deadline
-        node.send_signal(signal.SIGTERM)
-        started = time.monotonic()
-        node.wait(timeout=30)
-        stopped_s = time.monotonic() - started
-        wait_until(lambda: gone(child) and gone(fork), 10, "the plant's processes to end")
-        assert stopped_s < 15, stopped_s  # about 2 s; slack for a loaded machine
-        driver.join(timeout=150)
-        env.close()
-        assert outcome and outcome[0] is not None, "the step returned although the node was stopped"
+        with busy_in_a_forked_step(env, child) as fork:
+            assert plain_info(loopback, "busy")["health"] == "ok"  # mid-step, within its 60 s deadline
+            node.send_signal(signal.SIGTERM)
+            started = time.monotonic()
+            node.wait(timeout=30)
+            stopped_s = time.monotonic() - started
+            wait_until(lambda: gone(child) and gone(fork), 10, "the plant's processes to end")
+            assert stopped_s < 15, stopped_s  # about 2 s; slack for a loaded machine

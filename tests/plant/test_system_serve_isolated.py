@@ -7,7 +7,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import threading
 import time
 import uuid
 from pathlib import Path
@@ -21,7 +20,7 @@ from bridge.experiment.config import load_experiment
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import Loopback, wait_until
-from tests.net.test_node_health import gone, plain_info, plant_processes
+from tests.net.test_node_health import busy_in_a_forked_step, gone, plain_info, plant_processes
 from tests.plant.test_system_nodes import serve
 
 pytestmark = pytest.mark.integration
@@ -117,30 +116,11 @@ def test_sigterm_on_an_isolated_system_node_busy_in_a_step_leaves_no_process(
     with serve(file, own, "typed", extra=("--isolate", "--step-timeout", "60")) as process:
         (child,) = plant_processes(process)
         env = system_env(file, own, timeout_s=120)
-        outcome: list[BaseException | None] = []
-
-        def drive() -> None:
-            try:
-                env.reset(options={"scenario": "forks"})
-                for _ in range(3):  # the third step forks; both processes spin in doStep
-                    env.step(HALF)
-                outcome.append(None)
-            except BaseException as exc:  # what the client says once the node is gone
-                outcome.append(exc)
-
-        driver = threading.Thread(target=drive, daemon=True)
-        driver.start()
-        wait_until(lambda: len(child.children()) == 1, 30, "the FMU's fork")
-        (fork,) = child.children()
-        spent = child.cpu_times().user + fork.cpu_times().user
-        wait_until(lambda: child.cpu_times().user + fork.cpu_times().user > spent + 0.2, 30, "a busy step")
-        assert plain_info(own, "typed-node")["health"] == "ok"  # mid-step, within its 60 s deadline
-        stopped_s = stop(process)
-        wait_until(lambda: gone(child) and gone(fork), 10, "the component's processes to end")
-        assert stopped_s < 15, stopped_s  # about 2 s; slack for a loaded machine
-        driver.join(timeout=150)
-        env.close()
-        assert outcome and outcome[0] is not None, "the step returned although the node was stopped"
+        with busy_in_a_forked_step(env, child) as fork:
+            assert plain_info(own, "typed-node")["health"] == "ok"  # mid-step, within its 60 s deadline
+            stopped_s = stop(process)
+            wait_until(lambda: gone(child) and gone(fork), 10, "the component's processes to end")
+            assert stopped_s < 15, stopped_s  # about 2 s; slack for a loaded machine
 
 
 def test_a_hung_component_in_a_system_node_without_isolation_is_reported_and_sigterm_exits(
