@@ -1,7 +1,10 @@
-"""What the vector envs share about Gymnasium's autoreset modes and per-env seeds (no FMU runtime:
-the vector env over nodes imports it too)."""
+"""What the vector envs share about Gymnasium's autoreset modes, per-env seeds and scenarios (no FMU
+runtime: the vector env over nodes imports it too)."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 
 from gymnasium.vector import AutoresetMode
 
@@ -31,3 +34,10 @@ def env_seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:
             raise ConfigError(f"reset(seed=[...]) needs {n} seeds (one per env), got {len(seed)}")
         return list(seed)
     return [None] * n if seed is None else [seed + i for i in range(n)]
+
+
+def env_scenarios(options: Mapping[str, Any] | None, n: int) -> list[Any]:
+    """One scenario per env from reset's ``options``: its ``scenario`` list as given, else its one
+    ``scenario`` (a name, or None: each env's schedule picks) for all ``n``."""
+    scenario = (options or {}).get("scenario")
+    return scenario if isinstance(scenario, list) else [scenario] * n

@@ -34,6 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
+from bridge.env.autoreset import env_scenarios
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
@@ -108,8 +109,7 @@ class BatchEnv:
         try:
             self.obs[i] = task.first_observation(i, outputs.tolist(), rng)
         except NonFiniteOutputs as exc:
-            self.plant.ready[i] = False
-            raise self.plant.failure(i, "the model returned non-finite outputs", str(exc), step=0) from exc
+            raise self._non_finite(i, str(exc), step=0) from exc
         self.samples[i], self.active[i] = 0, True
         self.outputs[i] = outputs
         return {
@@ -166,10 +166,7 @@ class BatchEnv:
         for i in np.flatnonzero(bad).tolist():
             if i not in errors:
                 detail = str(task.tasks[i].bad_output(result.outputs[i].tolist(), int(self.samples[i])))
-                errors[i] = plant.failure(
-                    i, "the model returned non-finite outputs", detail, step=int(self.samples[i])
-                )
-                plant.ready[i] = False
+                errors[i] = self._non_finite(i, detail, step=int(self.samples[i]))
         return self._finish(
             result.outputs,
             obs=obs,
@@ -246,13 +243,7 @@ class BatchEnv:
                 code[0] = self._codes[reason]
                 batch.signals = np.array([task.signal_values])
             except NonFiniteOutputs:
-                errors[0] = plant.failure(
-                    0,
-                    "the model returned non-finite outputs",
-                    str(task.bad_output(outputs, sample)),
-                    step=sample,
-                )
-                plant.ready[0] = False
+                errors[0] = self._non_finite(0, str(task.bad_output(outputs, sample)), step=sample)
         if errors:  # rare: the signal rows the batch's own step leaves (evaluation reads them)
             batch.step_result(result.outputs, self.samples, result.terminated)
         return self._finish(
@@ -264,6 +255,12 @@ class BatchEnv:
             code=code,
             errors=errors,
         )
+
+    def _non_finite(self, i: int, detail: str, step: int) -> StepError:
+        """Env ``i``'s model returned non-finite outputs: its instance is no longer ready (its next
+        reset starts it again); the error to raise or to truncate its episode with."""
+        self.plant.ready[i] = False
+        return self.plant.failure(i, "the model returned non-finite outputs", detail, step=step)
 
     def _end_episodes(
         self, obs: ObsArray, terminated: Any, truncated: Any, code: Any, errors: Mapping[int, BridgeError]
@@ -341,8 +338,7 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[ObsArray, dict[str, Any]]:
         seeds = _seeds(seed, self.num_envs)
-        scenario = (options or {}).get("scenario")
-        scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
+        scenarios = env_scenarios(options, self.num_envs)
         obs, infos = self.engine.reset_all(seeds, scenarios)
         self._to_reset[:] = False
         merged: dict[str, Any] = {}
@@ -394,8 +390,7 @@ class BatchVecEnv(Sb3VecEnv):
         self._actions: Any = None
 
     def reset(self) -> ObsArray:
-        scenario = self._options.get("scenario")
-        scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
+        scenarios = env_scenarios(self._options, self.num_envs)
         obs, self.reset_infos = self.engine.reset_all(self._seeds, scenarios)
         self._seeds, self._options = [None] * self.num_envs, {}
         return obs

@@ -35,6 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
+from bridge.env.autoreset import env_scenarios
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.vec import RemoteVecEnv, Result
 from bridge.errors import PlantError
@@ -91,8 +92,7 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[ObsArray, dict[str, Any]]:
         seeds = _seeds(seed, self.num_envs)
-        scenario = (options or {}).get("scenario")
-        scenarios = scenario if isinstance(scenario, list) else [scenario] * self.num_envs
+        scenarios = env_scenarios(options, self.num_envs)
         self.nodes._last_obs = list(self._obs)
         options_ = [{"scenario": s} if s is not None else None for s in scenarios]
         infos: dict[str, Any] = {}
