@@ -5,19 +5,17 @@ PettingZoo env returned; the file is read by our reader and replayed in Rerun pe
 from __future__ import annotations
 
 import json
-from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 from bridge.errors import ConfigError
 from bridge.recording import meta
 from bridge.recording.agents_recorder import RecordAgents, record_agents, topic
 from bridge.recording.reader import read_recording
+from tests.recording.test_system_recording import mcap_messages
 
 pytest.importorskip("pettingzoo", reason="pettingzoo is not installed (pip install pettingzoo)")
 
@@ -59,22 +57,13 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[dict[
     return env.path, seen
 
 
-def messages(path: Path) -> dict[str, list[tuple[int, Any]]]:
-    found: dict[str, list[tuple[int, Any]]] = defaultdict(list)
-    with path.open("rb") as stream:
-        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-        for _, channel, message, decoded in reader.iter_decoded_messages(log_time_order=True):
-            found[channel.topic].append((message.log_time, decoded))
-    return found
-
-
 def stamp(message: Any) -> int:
     return int(message.header.stamp.sec) * 1_000_000_000 + int(message.header.stamp.nanosec)
 
 
 def test_each_agent_has_its_observations_actions_and_rewards_on_its_own_topics(recorded: Any) -> None:
     path, seen = recorded
-    found = messages(path)
+    found = mcap_messages(path)
     steps = [s for s in seen if "rewards" in s]
     for agent in AGENTS:
         observed = found[topic(agent, "observations")]
@@ -99,7 +88,7 @@ def test_each_agent_has_its_observations_actions_and_rewards_on_its_own_topics(r
 
 def test_episode_events_carry_each_agents_return(recorded: Any) -> None:
     path, seen = recorded
-    found = messages(path)
+    found = mcap_messages(path)
     events = [json.loads(m.data) for _, m in found[meta.EVENTS]]
     ends = [e for e in events if e["event"] == "episode_end"]
     assert [e["reason"] for e in ends] == ["time", "closed"]
