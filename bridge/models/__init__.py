@@ -1,7 +1,8 @@
 """Example FMUs of fmu-bridge: our own C models, built into standard ``.fmu`` archives on demand.
 
 Each model lives in ``models/<name>/`` as ``model.json`` (every variable defined once) and ``model.c``
-(the equations), over a shared C framework in ``models/common/``. For a variant (FMI version and
+(the equations, or ``"equations": "<model>"`` in ``model.json`` to compile that model's), over a shared C
+framework in ``models/common/``. For a variant (FMI version and
 interface) this package generates ``modelDescription.xml`` and a C header/table of value references
 from ``model.json``, so the XML and the C code cannot drift, compiles everything with gcc against the
 FMI headers that FMPy ships, and zips the result. Archives are cached per user, keyed by a hash of

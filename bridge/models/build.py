@@ -77,7 +77,7 @@ def build_archive(spec: Spec, fmi_version: str, interface: str, key: str, target
         sources = [
             *(common / s for s in _CORE_SOURCES),
             common / _WRAPPERS[fmi_version, interface],
-            spec.directory / "model.c",
+            spec.c_source,
             work / "model_gen.c",
         ]
         library = work / "library"
@@ -147,7 +147,8 @@ def _find_gcc() -> str:
 
 def _source_files(spec: Spec) -> list[Path]:
     common = spec.directory.parent / "common"
-    return sorted(p for d in (common, spec.directory) for p in d.iterdir() if p.is_file())
+    files = {p for d in (common, spec.directory) for p in d.iterdir() if p.is_file()}
+    return sorted(files | {spec.c_source})
 
 
 def _compile(command: list[str], label: str) -> None:

@@ -39,7 +39,7 @@ _C_KEYWORDS: Final = frozenset(_C_KEYWORD_TEXT.split())
 _SPEC_KEYS: Final = frozenset(
     {"description", "variants", "default_experiment", "max_communication_step", "event_indicators"}
     | {"type_definitions", "variables", "once_per_process", "can_serialize", "state_after_initialization"}
-    | {"derivatives_in_cs"}
+    | {"derivatives_in_cs", "equations"}
 )
 
 
@@ -104,9 +104,21 @@ def _parse_spec(name: str, directory: Path, raw: dict[str, Any]) -> Spec:
         can_serialize=bool(raw.get("can_serialize", False)),
         state_after_init=bool(raw.get("state_after_initialization", False)),
         cs_derivatives=bool(raw.get("derivatives_in_cs", False)),
+        equations=_equations(name, directory, raw.get("equations")),
     )
     _check_spec(spec)
     return spec
+
+
+def _equations(name: str, directory: Path, equations: Any) -> str | None:
+    """``equations``: the model whose ``model.c`` this one compiles instead of having its own."""
+    if equations is None:
+        return None
+    if not isinstance(equations, str) or not (directory.parent / str(equations) / "model.c").is_file():
+        raise ValueError(f"equations {equations!r}: expected the name of another model with a model.c")
+    if (directory / "model.c").is_file():
+        raise ValueError(f"model {name!r} has its own model.c and equations {equations!r}; keep one")
+    return equations
 
 
 def _reject_unknown(raw: Mapping[str, Any], allowed: frozenset[str], where: str) -> None:

@@ -136,6 +136,12 @@ class Spec:
     can_serialize: bool = False  # canSerializeFMUstate: the state as bytes (no String/Binary variables)
     state_after_init: bool = False  # a state is set or deserialised only once initialised
     cs_derivatives: bool = False  # co-simulation lists the state derivatives too (<Derivatives>)
+    equations: str | None = None  # another model whose model.c this one compiles (the same equations)
+
+    @property
+    def c_source(self) -> Path:
+        """The model's C equations: its own ``model.c``, or the one of the model named by ``equations``."""
+        return (self.directory.parent / self.equations if self.equations else self.directory) / "model.c"
 
     def variable(self, name: str) -> Variable:
         return next(v for v in self.variables if v.name == name)

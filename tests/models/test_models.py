@@ -817,3 +817,34 @@ def test_changed_sources_change_the_cache_key_and_gcc_errors_are_reported(
         models.example_fmu("typed", "2.0", "cs")
     assert "error:" in str(excinfo.value) and "model.c" in str(excinfo.value)
     assert list(private_cache.iterdir()) == []  # a failed build leaves nothing behind
+
+
+def test_a_model_that_shares_anothers_equations_builds_and_rebuilds_from_that_model_c(
+    private_cache: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    root = tmp_path / "models"
+    shutil.copytree(model_sources.models_root(), root)
+    monkeypatch.setattr(model_sources, "models_root", lambda: root)
+    spec = model_sources.load_spec("slow_init_late")
+    assert spec.equations == "slow_init" and spec.c_source == root / "slow_init" / "model.c"
+    original = model_build.cache_key(spec, "2.0", "cs")
+    shared = root / "slow_init" / "model.c"
+    with zipfile.ZipFile(models.example_fmu("slow_init_late", "2.0", "cs")) as archive:
+        assert archive.read("sources/model.c") == shared.read_bytes()  # the FMU's sources are whole
+    shared.write_text(shared.read_text() + "\n/* a change */\n")
+    assert model_build.cache_key(model_sources.load_spec("slow_init_late"), "2.0", "cs") != original
+
+    late = root / "slow_init_late" / "model.json"
+    text = late.read_text()
+    for value, expected in (
+        ('"no_such_model"', "equations 'no_such_model': expected the name of another model with a model.c"),
+        ("3", "equations 3: expected the name of another model with a model.c"),
+    ):
+        late.write_text(text.replace('"equations": "slow_init"', f'"equations": {value}'))
+        with pytest.raises(BridgeError, match=re.escape(expected)):
+            model_sources.load_spec("slow_init_late")
+    late.write_text(text)
+    shutil.copy(shared, root / "slow_init_late" / "model.c")
+    both = "has its own model.c and equations 'slow_init'; keep one"
+    with pytest.raises(BridgeError, match=re.escape(both)):
+        model_sources.load_spec("slow_init_late")
