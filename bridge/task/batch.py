@@ -50,6 +50,7 @@ class BatchTask:
         self._build_step(first)
         self.inputs = np.zeros((n, len(self.input_names)))
         self.previous = np.zeros_like(self.inputs)
+        self.signals = np.zeros((n, len(self.signal_names)))  # the last step's rows (step_result)
         self.n_samples = np.zeros(n, dtype=np.int64)
         self._rows = np.ones(n, dtype=np.int64)  # rows of each env's per-sample tables (samples + 1)
         self._tables: dict[str, FloatArray] = {}
