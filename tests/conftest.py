@@ -42,6 +42,17 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> No
         time.sleep(0.01)
 
 
+def wait_for(probe: Callable[[], Any], timeout_s: float = 5.0, what: str = "the condition") -> Any:
+    """:func:`wait_until` for a probe whose truthy value the caller wants: poll it until it is
+    truthy and return that value; fail naming ``what`` and the last value after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not (value := probe()):
+        if time.monotonic() > deadline:
+            pytest.fail(f"{what}: not within {timeout_s} s (last: {value!r})")
+        time.sleep(0.01)
+    return value
+
+
 def run_pytest(
     args: Sequence[str], basetemp: Path, env: Mapping[str, str], timeout_s: float
 ) -> subprocess.CompletedProcess[str]:

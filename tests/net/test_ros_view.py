@@ -14,7 +14,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from bridge.env import RemoteFmuEnv
 from bridge.experiment.examples import example_experiment
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_for
 
 pytestmark = pytest.mark.integration
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -42,16 +42,6 @@ def collect(session: Any, key: str) -> tuple[list[tuple[Any, bytes]], Any]:
             )
 
     return received, session.declare_subscriber(key, on_sample)
-
-
-def wait_for(probe: Any, timeout_s: float = 5.0) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        value = probe()
-        if value:
-            return value
-        time.sleep(0.05)
-    raise AssertionError("condition not met in time")
 
 
 def test_outputs_as_joint_states_stamped_with_simulation_time(loopback: Loopback) -> None:

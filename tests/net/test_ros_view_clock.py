@@ -15,7 +15,7 @@ import pytest
 from rosbags.typesys import Stores, get_typestore
 
 from bridge.experiment.examples import example_experiment
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_for
 
 pytestmark = pytest.mark.integration
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
@@ -37,17 +37,6 @@ def clock_message(stamp_ns: int) -> bytes:
 def stamp_of(payload: bytes) -> int:
     header = JAZZY.deserialize_cdr(payload, "sensor_msgs/msg/JointState").header
     return int(header.stamp.sec) * 10**9 + int(header.stamp.nanosec)
-
-
-def wait_for(probe: Any, timeout_s: float, what: str) -> Any:
-    deadline = time.monotonic() + timeout_s
-    value = None
-    while time.monotonic() < deadline:
-        value = probe()
-        if value:
-            return value
-        time.sleep(0.02)
-    pytest.fail(f"{what} not met within {timeout_s} s (last: {value!r})")
 
 
 class ClockPeer:

@@ -23,7 +23,7 @@ import pytest
 
 from bridge.env import FmuEnv
 from bridge.errors import PlantDied, StepTimeout
-from tests.conftest import Loopback, node_process
+from tests.conftest import Loopback, node_process, wait_until
 from tests.plant.test_isolated import isolated_env
 
 TYPED = """\
@@ -85,10 +85,9 @@ def test_an_fmu_that_forks_leaves_no_process_after_the_deadline(typed: Path) -> 
             stop.set()
             watcher.join(timeout=5)
         assert seen, "the FMU's fork was never seen: the hook did not run"
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and not all(gone(p) for p in [child.pid, *seen]):
-            time.sleep(0.05)
-        assert all(gone(p) for p in [child.pid, *seen]), [p for p in seen if not gone(p)]
+        wait_until(
+            lambda: all(gone(p) for p in [child.pid, *seen]), 10, "the FMU's process and its fork to end"
+        )
         steps(env, "fine", 5)  # and the next reset starts a fresh process
 
 
@@ -158,10 +157,7 @@ def test_a_stopped_node_leaves_no_fmu_process(tmp_path: Path, loopback: Loopback
         assert plants, [p.cmdline() for p in children]
         node.send_signal(getattr(signal, signal_name))
         node.wait(timeout=30)
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline and not all(gone(p.pid) for p in plants):
-            time.sleep(0.05)
-        assert all(gone(p.pid) for p in plants), [p.pid for p in plants if not gone(p.pid)]
+        wait_until(lambda: all(gone(p.pid) for p in plants), 10, "the node's FMU processes to end")
 
 
 IN_PROCESS = textwrap.dedent(
