@@ -128,12 +128,12 @@ def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
         start = time.monotonic()
         process.send_signal(signal.SIGTERM)
         process.wait(timeout=15)
-        assert time.monotonic() - start < 5.0  # about 2 s; slack for a loaded machine
+        assert time.monotonic() - start < 12.0  # about 2 s; slack for a loaded machine
 
 
 def test_a_reset_after_the_node_died_says_so_at_once(loopback: Loopback) -> None:
     with node_process(CARTPOLE, "gone", loopback) as process:
-        env = RemoteFmuEnv(CARTPOLE, "gone", session=loopback.session, prefix=loopback.prefix, timeout_s=5)
+        env = RemoteFmuEnv(CARTPOLE, "gone", session=loopback.session, prefix=loopback.prefix, timeout_s=30)
         try:
             env.reset(seed=0)
             process.send_signal(signal.SIGKILL)
@@ -141,7 +141,7 @@ def test_a_reset_after_the_node_died_says_so_at_once(loopback: Loopback) -> None
             start = time.monotonic()
             with pytest.raises(PlantDied) as caught:
                 env.reset(seed=1)
-            assert time.monotonic() - start < 4.0
+            assert time.monotonic() - start < 15.0  # the death, not the 30 s timeout
             assert "within" not in str(caught.value) and "the plant died" in str(caught.value)
         finally:
             env.close()
@@ -168,7 +168,7 @@ def test_a_dead_node_is_reported_while_a_stopped_one_still_times_out(loopback: L
             start = time.monotonic()
             with pytest.raises(PlantDied, match="node 'v-1'"):
                 vec.step(np.zeros((2, 1), dtype=np.float32))
-            assert time.monotonic() - start < 4.0  # not after v-0's 8 s timeout
+            assert time.monotonic() - start < 7.0  # not after v-0's 8 s timeout
         finally:
             stopped.send_signal(signal.SIGCONT)
             vec.close()

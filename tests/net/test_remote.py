@@ -210,7 +210,7 @@ def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) 
             with pytest.raises((PlantDied, StepTimeout), match=r"^node 'victim': (the plant died|no answer)"):
                 for _ in range(100):
                     env.step(np.zeros(1, dtype=np.float32))
-            assert time.monotonic() - start < 4.0
+            assert time.monotonic() - start < 10.0  # noticed or timed out once, not 100 timeouts
         finally:
             env.close()
 

@@ -271,4 +271,4 @@ def test_publish_paces_by_the_recording_clock_and_answers_info(recording: Path, 
         stop.set()
     elapsed = time.monotonic() - started
     assert sent == [first_episode.steps + 1]  # step 0 and every step of the episode
-    assert 0.8 < elapsed < 5.0
+    assert 0.8 < elapsed < 20.0  # paced (about 1 s), and it ends
