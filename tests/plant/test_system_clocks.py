@@ -42,6 +42,7 @@ def _actions() -> list[np.ndarray]:
 def _system(interface: str, **component: Any) -> dict[str, Any]:
     clk = {
         "fmu": f"example:clocks3:3.0:{interface}",
+        "interface": interface,
         "step_size": H,
         "parameters": {"period": PERIOD},
         "clock_intervals": {"c_fixed": FIXED},
@@ -116,14 +117,17 @@ def test_a_clocked_component_ticks_as_the_fmu_alone_with_its_clock_settings(inte
     np.testing.assert_array_equal(rows[1:SAMPLES, -1], rows[: SAMPLES - 1, 0])
 
 
-def test_a_clocked_component_in_a_node_honours_its_clock_settings(net: Loopback, tmp_path: Path) -> None:
+@pytest.mark.parametrize("isolate", [False, True], ids=["in_node", "isolated_in_node"])
+def test_a_clocked_component_in_a_node_honours_its_clock_settings(
+    net: Loopback, tmp_path: Path, isolate: bool
+) -> None:
     here = parse_experiment(_system("cs"))
-    data = _system("cs", node="clk-node")
+    data = _system("cs", node=f"clk-node-{isolate:d}")
     there = tmp_path / "there.yaml"
     there.write_text(yaml.safe_dump(data))
     with FmuEnv(here) as env:
         expected = _episodes(env)
-    with serve(there, net, "clk"):
+    with serve(there, net, "clk", extra=("--isolate",) if isolate else ()):
         remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=60.0)
         with FmuEnv(there, plant=SystemPlant(load_experiment(there), remote=remote)) as env:
             assert type(env.plant.plants["clk"]).__name__ == "RemotePlant"  # type: ignore[attr-defined]
