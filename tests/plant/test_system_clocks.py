@@ -117,6 +117,30 @@ def test_a_clocked_component_ticks_as_the_fmu_alone_with_its_clock_settings(inte
     np.testing.assert_array_equal(rows[1:SAMPLES, -1], rows[: SAMPLES - 1, 0])
 
 
+@pytest.mark.parametrize("interface", ["cs", "me", "se"])
+def test_fixed_point_iteration_rolls_the_clocks_back_with_the_component(interface: str) -> None:
+    """A loop through the clocked component, solved by iteration with rollback every macro step:
+    each clock ticks once at each of its times (counters and the tick log), however many tries."""
+    data = _system(interface)
+    data["system"]["connections"].append("ft.y -> clk.r")
+    data["system"]["iteration"] = {"max_iterations": 5, "tolerance": 1e-12}
+    data["actions"] = {"inputs": ["clk.trigger"]}
+    with FmuEnv(parse_experiment(data)) as env:
+        rows = []
+        for _ in range(2):
+            rows.append(env.reset(seed=0)[0])
+            rows += [env.step(a[1:])[0] for a in _actions()]
+            log = env.plant.plants["clk"].model.clock_ticks  # type: ignore[attr-defined]
+            end = MACRO * SAMPLES + 1e-9
+            by_clock = {c: [t for t, name in log if name == c] for c in ("c_ctrl", "c_fixed", "trigger")}
+            assert by_clock["c_ctrl"] == pytest.approx([0.1 * k for k in range(13)])
+            assert by_clock["c_fixed"] == pytest.approx([0.05 + FIXED * k for k in range(6)])
+            agent = [MACRO * k for k in AGENT_TICKS]
+            assert by_clock["trigger"] == pytest.approx(sorted([*SCHEDULE, *agent]))
+            assert all(t <= end for t, _ in log)
+        _check_closed_form(np.array(rows)[:, : len(CLOCKED)])
+
+
 @pytest.mark.parametrize("isolate", [False, True], ids=["in_node", "isolated_in_node"])
 def test_a_clocked_component_in_a_node_honours_its_clock_settings(
     net: Loopback, tmp_path: Path, isolate: bool
