@@ -17,9 +17,12 @@ import yaml
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment, parse_experiment
+from bridge.models import example_fmu
+from bridge.models.clocked import clocks_fmu
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
 from tests.conftest import Loopback
+from tests.plant.ssp_files import ssd_text, write_ssp
 from tests.plant.test_system_nodes import serve
 
 MACRO = 0.06  # the agent's sample; clocks3 steps 0.02 inside it (multi-rate)
@@ -139,6 +142,32 @@ def test_fixed_point_iteration_rolls_the_clocks_back_with_the_component(interfac
             assert by_clock["trigger"] == pytest.approx(sorted([*SCHEDULE, *agent]))
             assert all(t <= end for t, _ in log)
         _check_closed_form(np.array(rows)[:, : len(CLOCKED)])
+
+
+def test_an_ssp_component_takes_its_clock_settings_from_the_system_section(tmp_path: Path) -> None:
+    """SSP 1.0 has no place for clock settings: a system: section beside it adds them by name."""
+    ssd = ssd_text(
+        {
+            "clk": ("resources/clocks3.fmu", {"r": "input", "x": "output"}, {}),
+            "ft": ("resources/feedthrough.fmu", {"u": "input", "y": "output"}, {}),
+        },
+        [("clk", "x", "ft", "u")],
+    )
+    fmus = {
+        "resources/clocks3.fmu": clocks_fmu("cs"),
+        "resources/feedthrough.fmu": example_fmu("feedthrough", "3.0", "cs"),
+    }
+    ssp = write_ssp(tmp_path / "clocked.ssp", ssd, fmus)
+    data = _system("cs")
+    clk = data["system"]["components"]["clk"]
+    del clk["fmu"]
+    data["system"] = {"components": {"clk": clk}}
+    data["model"]["fmu"] = str(ssp)
+    with FmuEnv(parse_experiment(data)) as env:
+        from_ssp = _episodes(env)
+    with FmuEnv(parse_experiment(_system("cs"))) as env:
+        np.testing.assert_array_equal(from_ssp, _episodes(env))
+    _check_closed_form(from_ssp[:, : len(CLOCKED)])
 
 
 @pytest.mark.parametrize("isolate", [False, True], ids=["in_node", "isolated_in_node"])
