@@ -144,6 +144,36 @@ def test_fixed_point_iteration_rolls_the_clocks_back_with_the_component(interfac
         _check_closed_form(np.array(rows)[:, : len(CLOCKED)])
 
 
+def test_fixed_point_iteration_rolls_a_clocked_component_node_back(net: Loopback, tmp_path: Path) -> None:
+    """The same loop with the clocked component in a node: the node saves and restores its plant
+    every macro step; the same observations as in process, bit for bit."""
+
+    def looped(**component: Any) -> dict[str, Any]:
+        data = _system("cs", **component)
+        data["system"]["connections"].append("ft.y -> clk.r")
+        data["system"]["iteration"] = {"max_iterations": 5, "tolerance": 1e-12}
+        data["actions"] = {"inputs": ["clk.trigger"]}
+        return data
+
+    def run(env: FmuEnv) -> np.ndarray:
+        rows = []
+        for _ in range(2):
+            rows.append(env.reset(seed=0)[0])
+            rows += [env.step(a[1:])[0] for a in _actions()]
+        return np.array(rows, dtype=np.float64)
+
+    with FmuEnv(parse_experiment(looped())) as env:
+        expected = run(env)
+    there = tmp_path / "looped.yaml"
+    there.write_text(yaml.safe_dump(looped(node="clk-loop")))
+    with serve(there, net, "clk"):
+        remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=60.0)
+        with FmuEnv(there, plant=SystemPlant(load_experiment(there), remote=remote)) as env:
+            got = run(env)
+    _check_closed_form(got[:, : len(CLOCKED)])
+    np.testing.assert_array_equal(got, expected)
+
+
 def test_an_ssp_component_takes_its_clock_settings_from_the_system_section(tmp_path: Path) -> None:
     """SSP 1.0 has no place for clock settings: a system: section beside it adds them by name."""
     ssd = ssd_text(
