@@ -34,11 +34,17 @@ class ComponentSection(_Strict):
         description="Path to the .fmu (relative to the experiment file) or example:NAME; may be left "
         "out for a component of the SSP that model.fmu names",
     )
-    interface: Literal["auto", "cs", "me"] = "auto"
+    interface: Literal["auto", "cs", "me", "se"] = "auto"
     step_size: PositiveFloat | None = None
     parameters: dict[str, Scalar] = {}
     structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(
         default={}, description="FMI 3.0 structural parameters (array sizes), set in configuration mode"
+    )
+    clock_intervals: dict[str, PositiveFloat] = Field(
+        default={}, description="FMI 3.0 fixed/tunable input clocks: the interval (s) set at initialisation"
+    )
+    clock_schedule: dict[str, list[FiniteFloat]] = Field(
+        default={}, description="FMI 3.0 triggered input clocks: the times (s) they tick at, per episode"
     )
     feedthrough: bool | None = Field(
         default=None,

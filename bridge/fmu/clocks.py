@@ -110,6 +110,7 @@ class ClockDriver:
         self._pending: set[str] = set()
         self._schedule_pos: dict[str, int] = {}
         self.ticks: deque[tuple[float, str]] = deque(maxlen=MAX_TICKS_KEPT)
+        self._logged = 0  # ticks logged since the start (also those the deque no longer keeps)
         self.terminated = False
         self._time = 0.0
         self._flags = [fmi3.fmi3Boolean() for _ in range(5)]
@@ -192,6 +193,7 @@ class ClockDriver:
         if self.me:  # left by the model's own start, right after this, which takes the next time event
             self._in_event, self._fmu_event_s = False, None
         self._start_ticks = list(self.ticks)
+        self._logged = len(self._start_ticks)
         self._initial, self._initial_event_s = dict(self.timing), self._fmu_event_s
         self._initial_held = dict(self.held)
         self._start_positions = dict(self._schedule_pos)
@@ -205,14 +207,22 @@ class ClockDriver:
         self._schedule_pos = dict(self._start_positions)
         self.ticks.clear()
         self.ticks.extend(self._start_ticks)  # the start's ticks are in the saved state already
+        self._logged = len(self._start_ticks)
 
     def save(self) -> tuple[Any, ...]:
         """What :meth:`load` needs to continue from now (for a saved model state)."""
         positions, pending, held = dict(self._schedule_pos), set(self._pending), dict(self.held)
-        return dict(self.timing), self._time, positions, pending, self.terminated, self._fmu_event_s, held
+        timing, event_s = dict(self.timing), self._fmu_event_s
+        return timing, self._time, positions, pending, self.terminated, event_s, held, self._logged
 
     def load(self, saved: tuple[Any, ...]) -> None:
-        timing, self._time, positions, pending, self.terminated, self._fmu_event_s, held = saved
+        """Continue from :meth:`save`'s point. The tick log drops the ticks logged after it (a
+        rollback, e.g. a system's fixed-point iteration, does not list a tick twice); a state saved
+        later than the log's end cannot give back the ticks between, and the log goes on without them."""
+        timing, self._time, positions, pending, self.terminated, self._fmu_event_s, held, logged = saved
+        for _ in range(min(max(self._logged - logged, 0), len(self.ticks))):
+            self.ticks.pop()
+        self._logged = logged
         self.timing, self._schedule_pos, self._pending = dict(timing), dict(positions), set(pending)
         self.held = dict(held)
         self._in_event = False
@@ -514,6 +524,7 @@ class ClockDriver:
     def _log(self, t: float, names: Iterable[str]) -> None:
         for name in names:
             self.ticks.append((t, name))
+            self._logged += 1
 
 
 class ClockInputs:

@@ -8,6 +8,7 @@ from typing import Final
 
 from bridge.errors import StateFileError
 from bridge.fmu.backend import Backend
+from bridge.fmu.clock_rules import clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo
 
 _CALLS: Final = {
@@ -35,12 +36,23 @@ def refusal(info: ModelInfo, interface: Interface) -> str | None:
     can_state = bool(getattr(element, "canGetAndSetFMUstate", False))
     can_serialize = bool(getattr(element, "canSerializeFMUstate", False))
     if can_state and can_serialize:
-        return None
+        return _clocks_refusal(info, interface) if clock_driver_needed(info, interface) else None
     return (
         f"{info.model_name} ({interface.upper()}) cannot save its state to a file: its model description "
         f"declares {serialize_flag}={str(can_serialize).lower()} and {state_flag}={str(can_state).lower()}, "
         f"and both must be true; re-export the FMU with state serialisation enabled, or start episodes "
         f"from initialisation (reset_policy auto/restore/reset)"
+    )
+
+
+def _clocks_refusal(info: ModelInfo, interface: Interface) -> str:
+    """Clocks that tick here have their next ticks in :mod:`bridge.fmu.clocks`, not in the FMU's
+    bytes: a state file could not put them back (an in-memory ``ModelState`` does)."""
+    return (
+        f"{info.model_name} ({interface.upper()}) cannot save its state to a file: its clocks tick here, "
+        f"and a state file holds the FMU's state but not when each clock ticks next (fmu-bridge keeps "
+        f"that), so episodes started from it would tick at other times; start episodes from "
+        f"initialisation (reset_policy auto/restore/reset)"
     )
 
 

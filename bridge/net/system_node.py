@@ -166,7 +166,7 @@ def component_model(
     experiment: Experiment, system: SystemDescription, name: str, served: Served
 ) -> Experiment:
     """The component's model as the plant factory reads it: FMU, interface, step size, sampling
-    time (the macro step), parameters and structural parameters; its signal sections only name
+    time (the macro step), parameters, structural parameters and clock settings; its signal sections only name
     what ``served`` serves."""
     component = system.components[name]
     t = served.timing
@@ -182,6 +182,8 @@ def component_model(
             "episode_duration": experiment.model.episode_duration,
             "parameters": dict(component.parameters),
             "structural_parameters": dict(component.structural_parameters),
+            "clock_intervals": dict(component.clock_intervals),
+            "clock_schedule": {k: list(v) for k, v in component.clock_schedule.items()},
         },
         "actions": {  # bounds the model's checks ask for; the node checks served.low/high itself
             "inputs": list(served.input_names),

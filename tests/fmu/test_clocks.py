@@ -7,13 +7,14 @@ kind must tick at the times FMI 3.0 §2.2.9 defines for it, and its clocked vari
 from __future__ import annotations
 
 import math
+import zipfile
 from collections import defaultdict
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, StateFileError
 from bridge.fmu import Model
 from bridge.fmu.model import Solver
 from bridge.models.clocked import clocks_fmu
@@ -141,13 +142,41 @@ def test_saved_states_carry_the_clock_schedule(fmu: Path) -> None:
         model.advance(5)
         state = model.save_state()
         model.advance(7)
-        first = _ticks(model)
+        first, log = _ticks(model), model.clock_ticks
         model.restore_state(state)
         model.advance(7)
         model.free_state(state)
         again = _ticks(model)
+        assert model.clock_ticks == log  # the ticks after the saved state are not listed twice
         assert again["c_changing"][-1] == first["c_changing"][-1] == pytest.approx(2.8)
         assert model.get(["n_changing"])["n_changing"] == len(first["c_changing"])
+
+
+def test_a_state_file_is_refused_as_it_cannot_carry_the_clock_schedule(fmu: Path, tmp_path: Path) -> None:
+    """A state file holds the FMU's bytes only; the next ticks live in the importer (above). clocks3
+    declares no serialisation; this copy of it says it can, so only the clocks refuse it (clocks3
+    would return Error from fmi3SerializedFMUStateSize)."""
+    with zipfile.ZipFile(fmu) as src:
+        xml = src.read("modelDescription.xml").decode()
+        assert 'canSerializeFMUState="true"' not in xml
+        claims = tmp_path / fmu.name
+        with zipfile.ZipFile(claims, "w") as dst:
+            for item in src.infolist():
+                data = src.read(item)
+                if item.filename == "modelDescription.xml":
+                    data = xml.replace(
+                        'canGetAndSetFMUState="true"',
+                        'canGetAndSetFMUState="true" canSerializeFMUState="true"',
+                    ).encode()
+                dst.writestr(item, data)
+    with Model(claims, step_size_s=0.25) as model:
+        model.reset()
+        model.advance(3)
+        assert not model.can_serialize
+        with pytest.raises(
+            StateFileError, match=r"clocks3 \((CS|ME|SE)\) cannot save .*its clocks tick here"
+        ):
+            model.state_file()
 
 
 def _controller_reference(

@@ -15,6 +15,7 @@ import logging
 from collections.abc import Mapping
 
 from bridge.errors import ConfigError, VariableError
+from bridge.fmu.clock_rules import check_settings
 from bridge.fmu.vocab import ModelInfo, Variable
 from bridge.plant.system.description import Connection, Endpoint, SystemDescription
 from bridge.plant.system.transform import Convert, coupling
@@ -53,6 +54,13 @@ def check_system(
         if couplings is not None:
             couplings[c] = carried.convert
     for name, component in system.components.items():
+        if component.clock_intervals or component.clock_schedule:
+            try:
+                check_settings(
+                    infos[name], component.interface, component.clock_intervals, component.clock_schedule
+                )
+            except ConfigError as exc:
+                raise ConfigError(f"system.components.{name}: {exc}{system.where}") from None
         for var_name in component.parameters:
             var = _known(
                 Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system

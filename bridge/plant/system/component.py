@@ -54,6 +54,8 @@ class FmuComponent(FmuInstancePlant):
             interface=component.interface,
             instance_name=component.name,
             structural_parameters=component.structural_parameters or None,
+            clock_intervals=component.clock_intervals,
+            clock_schedule=component.clock_schedule,
         )
         self.info = self.model.info  # the array sizes after configuration mode
 

@@ -70,6 +70,13 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
     needs only their FMUs: ``bridge.net.system_node`` checks those)."""
     section = experiment.system or SystemSection()
     where = f" [{experiment.source}]" if experiment.source else ""
+    for key in ("clock_intervals", "clock_schedule"):
+        if getattr(experiment.model, key):
+            raise ConfigError(
+                f"model.{key}: a system's clocks belong to its components, and model.{key} names "
+                f"none; move it to system.components.NAME.{key} of the component whose FMU has the "
+                f"clocks{where}"
+            )
     base: SystemDescription | None = None
     if is_system_file(experiment.model.fmu):
         base = read_ssp(_path(experiment.model.fmu, experiment, "model.fmu"))
@@ -87,8 +94,20 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         interface = spec.interface if spec.interface != "auto" or old is None else old.interface
         units = old.connector_units if old else {}
         sizes = {**(old.structural_parameters if old else {}), **spec.structural_parameters}
+        intervals = {**(old.clock_intervals if old else {}), **spec.clock_intervals}
+        schedule = {**(old.clock_schedule if old else {}), **spec.clock_schedule}
         components[name] = Component(
-            name, fmu, parameters, spec.step_size, interface, spec.feedthrough, spec.node, units, sizes
+            name,
+            fmu,
+            parameters,
+            spec.step_size,
+            interface,
+            spec.feedthrough,
+            spec.node,
+            units,
+            sizes,
+            intervals,
+            schedule,
         )
     if not components:
         raise ConfigError(f"system.components: a system needs at least one component{where}")

@@ -76,11 +76,13 @@ class Component:
     fmu: Path
     parameters: dict[str, Any] = field(default_factory=dict)
     step_size_s: float | None = None
-    interface: Literal["auto", "cs", "me"] = "auto"
+    interface: Literal["auto", "cs", "me", "se"] = "auto"
     feedthrough: bool | None = None
     node: str | None = None
     connector_units: dict[str, str] = field(default_factory=dict)  # from an SSD's connectors
     structural_parameters: dict[str, int] = field(default_factory=dict)  # FMI 3.0 array sizes
+    clock_intervals: dict[str, float] = field(default_factory=dict)  # FMI 3.0 clocks (docs/clocks.md)
+    clock_schedule: dict[str, list[float]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
