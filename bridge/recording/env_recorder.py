@@ -21,7 +21,9 @@ import os
 import re
 import unicodedata
 import weakref
+from array import array
 from collections.abc import Callable
+from itertools import chain
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -106,7 +108,8 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self._inputs = task.applied_inputs  # the list Task.action_to_inputs fills: the applied input values
         self._discrete = isinstance(env.action_space, gym.spaces.Discrete)
         self._rows: list[tuple[Any, ...]] = []
-        self._rows_per_block = max(1, chunk_size // self._block.size)
+        self._full_block = max(1, chunk_size // self._block.size)  # steps in a whole chunk
+        self._rows_per_block = self._full_block
         self._obs_dtype = np.dtype(np.float32)
         self._episode = -1
         self._in_episode = False
@@ -158,7 +161,15 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             messages += zip(self._component_topics, self._components_now())
         for topic, values in messages:
             w.add_message(ch[topic], log, self._layouts[topic].pack(t_ns, np.ravel(values).tolist()))
+        self._plan_block()
         return obs, info
+
+    def _plan_block(self) -> None:
+        """Steps in the next block: as many as fill the current chunk, so an episode's first
+        block joins its start messages in one chunk; a whole chunk's worth when less than a
+        quarter of one is left (that block then starts the next chunk)."""
+        fit = self.writer.room // self._block.size
+        self._rows_per_block = fit if fit >= max(1, self._full_block // 4) else self._full_block
 
     def _components_now(self) -> list[Any]:
         """Each component's output values now (a system of FMUs), split from one flat array."""
@@ -191,14 +202,15 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             return
         n = len(rows)
         times, inputs, actions, observations, rewards, outputs, components = zip(*rows)
-        t_ns = np.round(np.asarray(times, dtype=np.float64) * 1e9).astype(np.int64)
+        # array("d", ...) turns a tuple of Python floats into a buffer faster than np.asarray does
+        t_ns = np.round(np.frombuffer(array("d", times)) * 1e9).astype(np.int64)
         before = np.concatenate(([self._t_prev], t_ns[:-1]))  # actions are stamped at t_k
         self._t_prev = int(t_ns[-1])
         values = [
-            np.asarray(inputs, dtype=np.float64).reshape(n, -1),
+            np.frombuffer(array("d", chain.from_iterable(inputs))).reshape(n, len(inputs[0])),
             np.asarray(actions, dtype=np.float64).reshape(n, -1),
             np.frombuffer(b"".join(observations), dtype=self._obs_dtype).reshape(n, -1).astype(np.float64),
-            np.asarray(rewards, dtype=np.float64),
+            np.frombuffer(array("d", rewards)),
             np.frombuffer(b"".join(outputs), dtype=np.float64).reshape(n, -1),
         ]
         if self._component_topics:
@@ -208,6 +220,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self.writer.add_block(*self._block.pack([(before + offset, before), (t_ns + offset, t_ns)], values))
         self._steps += n
         self._return = float(sum(rewards, self._return))  # sequential, as a per-step sum would be
+        self._plan_block()
 
     def _end_episode(
         self, reason: str | None, terminated: bool, truncated: bool, info: dict[str, Any]

@@ -163,6 +163,11 @@ class McapWriter:
             self._counts[channel_id] += len(pairs)
         self._extend(*bounds)
 
+    @property
+    def room(self) -> int:
+        """Bytes left in the current chunk; a larger record starts the next chunk."""
+        return self.chunk_size - self.chunk.pos
+
     def _extend(self, start: int, end: int) -> None:
         chunk = self.chunk
         if chunk.start < 0 or start < chunk.start:
