@@ -75,6 +75,7 @@ class StepBlock:
                 field(f"val{i}", ("<f8", (len(js.names),)), 8 * len(js.names))
             template += js.tail
         self.template = bytes(template)
+        self._template_row = np.frombuffer(self.template, dtype=np.uint8)
         self._fields = [  # per message: the names of its sequence, time, stamp and value fields
             (f"seq{i}", f"log{i}", f"pub{i}", f"sec{i}", f"nsec{i}", f"val{i}" if f"val{i}" in names else "")
             for i in range(len(messages))
@@ -95,16 +96,31 @@ class StepBlock:
 
         Index offsets are relative to the start of the block.
         """
+        block = bytearray(len(times[0][0]) * self.size)
+        index, bounds = self.pack_into(block, 0, times, values)
+        return block, index, bounds
+
+    def pack_into(
+        self,
+        buffer: bytearray,
+        offset: int,
+        times: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]],
+        values: list[npt.NDArray[np.float64]],
+    ) -> tuple[IndexEntries, tuple[int, int]]:
+        """:meth:`pack`, with the records written into ``buffer`` at ``offset`` (which must hold
+        them): a writer packs straight into its chunk. Index offsets are relative to ``offset``."""
         n = len(times[0][0])
-        block = bytearray(self.template * n)
-        records = np.frombuffer(block, dtype=self.dtype)
+        rows = np.frombuffer(buffer, dtype=np.uint8, count=n * self.size, offset=offset)
+        rows.reshape(n, self.size)[:] = self._template_row
+        records = np.frombuffer(buffer, dtype=self.dtype, count=n, offset=offset)
         sequence = (np.arange(self.count, self.count + n, dtype=np.uint64) & 0xFFFFFFFF).astype(np.uint32)
         stamps = [np.divmod(stamp, _NS) for _, stamp in times]
+        starts = np.arange(0, n * self.size, self.size, dtype=np.uint64)
         slots = []  # per slot: (n, 2) of (log time, record start)
         for log, _ in times:
             pairs = np.empty((n, 2), dtype="<u8")
             pairs[:, 0] = log
-            pairs[:, 1] = np.arange(0, n * self.size, self.size, dtype=np.uint64)
+            pairs[:, 1] = starts
             slots.append(pairs)
         index: IndexEntries = []
         for i, message in enumerate(self.messages):
@@ -122,6 +138,7 @@ class StepBlock:
             pairs = slots[message.slot].copy()
             pairs[:, 1] += np.uint64(self.record_offsets[i])
             index.append((message.channel_id, pairs))
+        del rows, records  # views of ``buffer``: released, so it can grow again
         self.count += n
         bounds = (min(int(t.min()) for t, _ in times), max(int(t.max()) for t, _ in times))
-        return block, index, bounds
+        return index, bounds

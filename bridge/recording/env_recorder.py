@@ -19,6 +19,7 @@ import datetime
 import logging
 import os
 import re
+import struct
 import unicodedata
 import weakref
 from array import array
@@ -97,6 +98,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         try:
             self.channels = ch = meta.open_channels(writer, [*topics, meta.SCENARIO, meta.EVENTS], names)
             self._layouts = {t: cdr.JointStateLayout.of(n) for t, n in names.items()}
+            self._scenario_layouts: dict[tuple[str, ...], cdr.JointStateLayout] = {}
             slot = {meta.ACTIONS: 0, meta.AGENT_ACTION: 0}
             self._block = StepBlock(
                 [FixedMessage(ch[t], slot.get(t, 1), self._layouts.get(t)) for t in topics]
@@ -155,7 +157,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             event["values"] = spec.values
         w, ch, log = self.writer, self.channels, self._clock.next_start_ns
         w.add_message(ch[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
-        w.add_message(ch[meta.SCENARIO], log, cdr.encode_joint_state(t_ns, list(drawn), list(drawn.values())))
+        w.add_message(ch[meta.SCENARIO], log, self._scenario(t_ns, drawn))
         messages = [(meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])]
         if self._component_topics:
             messages += zip(self._component_topics, self._components_now())
@@ -170,6 +172,19 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         quarter of one is left (that block then starts the next chunk)."""
         fit = self.writer.room // self._block.size
         self._rows_per_block = fit if fit >= max(1, self._full_block // 4) else self._full_block
+
+    def _scenario(self, t_ns: int, drawn: dict[str, Any]) -> bytes:
+        """The scenario message: through the layout of its names (the same every episode,
+        mostly: built once by rosbags), or by rosbags itself for values that are not one float
+        per name."""
+        names = tuple(map(str, drawn))
+        layout = self._scenario_layouts.get(names)
+        if layout is None:
+            layout = self._scenario_layouts[names] = cdr.JointStateLayout.of(names)
+        try:
+            return layout.pack(t_ns, drawn.values())
+        except (struct.error, TypeError):
+            return cdr.encode_joint_state(t_ns, names, list(drawn.values()))
 
     def _components_now(self) -> list[Any]:
         """Each component's output values now (a system of FMUs), split from one flat array."""
@@ -217,7 +232,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             flat = np.frombuffer(b"".join(components), dtype=np.float64).reshape(n, -1)
             values += np.split(flat, self._component_sizes, axis=1)
         offset = self._offset
-        self.writer.add_block(*self._block.pack([(before + offset, before), (t_ns + offset, t_ns)], values))
+        self.writer.add_steps(self._block, [(before + offset, before), (t_ns + offset, t_ns)], values)
         self._steps += n
         self._return = float(sum(rewards, self._return))  # sequential, as a per-step sum would be
         self._plan_block()
