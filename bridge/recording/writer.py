@@ -160,7 +160,10 @@ class McapWriter:
     def add_block(self, data: bytes | bytearray, index: IndexEntries, bounds: tuple[int, int]) -> None:
         """Message records packed elsewhere (:class:`StepBlock`), with their index entries
         (offsets relative to ``data``) and (earliest, latest) log time; they go into one chunk."""
-        self._add_indexed(self._place(data), index, bounds)
+        pos = self._place(data)
+        for _, pairs in index:
+            pairs[:, 1] += pos
+        self._add_indexed(index, bounds)
 
     def add_steps(
         self,
@@ -174,12 +177,12 @@ class McapWriter:
         pos = self._reserve(size)
         index, bounds = block.pack_into(self.chunk.buffer, pos, times, values)
         self.chunk.pos = pos + size
-        self._add_indexed(pos, index, bounds)
+        self._add_indexed(index, bounds)
 
-    def _add_indexed(self, pos: int, index: IndexEntries, bounds: tuple[int, int]) -> None:
+    def _add_indexed(self, index: IndexEntries, bounds: tuple[int, int]) -> None:
+        """Index entries (offsets in the chunk) of records placed in it, and their time bounds."""
         chunk = self.chunk
         for channel_id, pairs in index:
-            pairs[:, 1] += pos
             chunk.blocks.append((channel_id, pairs.tobytes()))
             self._counts[channel_id] += len(pairs)
         self._extend(*bounds)
