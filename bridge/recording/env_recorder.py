@@ -24,7 +24,6 @@ import unicodedata
 import weakref
 from array import array
 from collections.abc import Callable
-from itertools import chain
 from pathlib import Path
 from typing import Any, SupportsFloat
 
@@ -45,6 +44,15 @@ STEP_TOPICS = [meta.ACTIONS, meta.AGENT_ACTION, meta.OBSERVATIONS, meta.REWARD, 
 def _as_list(action: Any) -> Any:
     """A copy of a Box/MultiDiscrete action (the agent may reuse its array)."""
     return action.tolist() if action.__class__ is np.ndarray else np.asarray(action).tolist()
+
+
+def _float_rows(values: list[Any], n: int) -> Any:
+    """``n`` rows of float64 from a flat list of numbers (``np.asarray`` for anything else)."""
+    try:
+        flat = np.frombuffer(array("d", values))
+    except (TypeError, ValueError):  # not plain numbers (a 0-d array or such): numpy decides
+        flat = np.asarray(values, dtype=np.float64).reshape(-1)
+    return flat.reshape(n, -1)
 
 
 class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
@@ -109,7 +117,9 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             raise
         self._inputs = task.applied_inputs  # the list Task.action_to_inputs fills: the applied input values
         self._discrete = isinstance(env.action_space, gym.spaces.Discrete)
-        self._rows: list[tuple[Any, ...]] = []
+        self._rows: list[tuple[Any, ...]] = []  # per step: time, observation, reward, outputs, components
+        self._input_values: list[float] = []  # every step's applied inputs, one after the other
+        self._actions: list[Any] = []  # every step's action (its elements, for a Box or MultiDiscrete)
         self._full_block = max(1, chunk_size // self._block.size)  # steps in a whole chunk
         self._rows_per_block = self._full_block
         self._obs_dtype = np.dtype(np.float32)
@@ -194,17 +204,22 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         # Keep the step's values now (bytes, copies); pack them in bulk later (bridge.recording.block).
+        # Inputs and actions go into flat lists (the same count every step): a block turns those
+        # into arrays several times faster than a tuple of per-step lists.
         self._rows.append(
             (
                 info["time_s"],
-                self._inputs[:],
-                action if self._discrete else _as_list(action),
                 obs.tobytes(),
                 reward,
                 info["outputs"].tobytes(),
                 self._plant.component_values().tobytes() if self._component_topics else b"",
             )
         )
+        self._input_values += self._inputs
+        if self._discrete:
+            self._actions.append(action)
+        else:
+            self._actions += _as_list(action)
         if terminated or truncated:
             self._end_episode(info.get("reason"), terminated, truncated, info)
         elif len(self._rows) >= self._rows_per_block:
@@ -212,18 +227,19 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         return obs, reward, terminated, truncated, info
 
     def _pack_rows(self) -> None:
-        rows, self._rows = self._rows, []
+        rows, inputs, actions = self._rows, self._input_values, self._actions
         if not rows:
             return
+        self._rows, self._input_values, self._actions = [], [], []
         n = len(rows)
-        times, inputs, actions, observations, rewards, outputs, components = zip(*rows)
-        # array("d", ...) turns a tuple of Python floats into a buffer faster than np.asarray does
+        times, observations, rewards, outputs, components = zip(*rows)
+        # array("d", ...) turns Python numbers into a buffer several times faster than np.asarray
         t_ns = np.round(np.frombuffer(array("d", times)) * 1e9).astype(np.int64)
         before = np.concatenate(([self._t_prev], t_ns[:-1]))  # actions are stamped at t_k
         self._t_prev = int(t_ns[-1])
         values = [
-            np.frombuffer(array("d", chain.from_iterable(inputs))).reshape(n, len(inputs[0])),
-            np.asarray(actions, dtype=np.float64).reshape(n, -1),
+            np.frombuffer(array("d", inputs)).reshape(n, len(inputs) // n),
+            _float_rows(actions, n),
             np.frombuffer(b"".join(observations), dtype=self._obs_dtype).reshape(n, -1).astype(np.float64),
             np.frombuffer(array("d", rewards)),
             np.frombuffer(b"".join(outputs), dtype=np.float64).reshape(n, -1),
