@@ -119,18 +119,17 @@ class StepBlock:
         rows.reshape(n, self.size)[:] = self._template_row
         records = np.frombuffer(buffer, dtype=self.dtype, count=n, offset=offset)
         sequence = np.arange(self.count, self.count + n, dtype=np.uint64) & 0xFFFFFFFF
-        heads, stamps = [], []  # per slot
-        for log, stamp in times:
-            head = np.empty(n, dtype=_HEAD)
-            head["seq"] = sequence
-            head["log"] = log
-            head["pub"] = log
-            heads.append(head.view("V20"))
-            sec, nsec = np.divmod(stamp, _NS)
-            pair = np.empty(n, dtype=_STAMP)
-            pair["sec"] = sec
-            pair["nsec"] = nsec
-            stamps.append(pair.view("<u8"))
+        logs = np.stack([log for log, _ in times])  # (slot, step)
+        head = np.empty(logs.shape, dtype=_HEAD)
+        head["seq"] = sequence
+        head["log"] = logs
+        head["pub"] = logs
+        heads = head.view("V20")
+        sec, nsec = np.divmod(np.stack([stamp for _, stamp in times]), _NS)
+        pair = np.empty(logs.shape, dtype=_STAMP)
+        pair["sec"] = sec
+        pair["nsec"] = nsec
+        stamps = pair.view("<u8")
         for i, message in enumerate(self.messages):
             head_field, stamp_field, value_field = self._fields[i]
             records[head_field] = heads[message.slot]
@@ -140,7 +139,6 @@ class StepBlock:
                 records[value_field] = values[i]
         del rows, records  # views of ``buffer``: released, so it can grow again
         # Index entries of all messages at once: (message, step) -> (log time, record offset).
-        logs = np.stack([log for log, _ in times]).astype(np.uint64)
         entries = np.empty((len(self.messages), n, 2), dtype="<u8")
         entries[:, :, 0] = logs[self._slots]
         starts = np.arange(offset, offset + n * self.size, self.size, dtype=np.uint64)
