@@ -66,9 +66,9 @@ class McapWriter:
         profile: the MCAP profile (``ros2``: schemas ``ros2msg``, messages ``cdr``).
         chunk_size: uncompressed bytes per chunk; at most this much is lost if the process dies.
         compression: ``zstd`` or ``none``.
-        level: the zstd level. -1 (zstd's first "fast" level): recordings' chunks come out as small
-            as at level 1 (the records repeat one layout; their floats barely compress at any
-            level) and compress ~10% faster; from -3 on, files grow by up to a fifth.
+        level: the zstd level. -1 (zstd's first "fast" level): cart-pole recordings' 128 KiB
+            chunks come out as small as at level 1 (0.1% to 1.4% smaller) and compress 8-15%
+            faster; at -2 they grow by 6-17%.
         work_path: the file written until ``close()`` (default ``path + ".part"``).
         overwrite: replace an existing file (else an existing recording is an error).
     """
