@@ -202,7 +202,8 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         return np.split(np.asarray(values, dtype=np.float64), self._component_sizes)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        result = self.env.step(action)
+        obs, reward, terminated, truncated, info = result
         # Keep the step's values now (bytes, copies); pack them in bulk later (bridge.recording.block).
         # Inputs and actions go into flat lists (the same count every step): a block turns those
         # into arrays several times faster than a tuple of per-step lists.
@@ -218,13 +219,13 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         self._input_values += self._inputs
         if self._discrete:
             self._actions.append(action)
-        else:
-            self._actions += _as_list(action)
+        else:  # a copy (the agent may reuse its array)
+            self._actions += action.tolist() if action.__class__ is np.ndarray else _as_list(action)
         if terminated or truncated:
             self._end_episode(info.get("reason"), terminated, truncated, info)
         elif len(self._rows) >= self._rows_per_block:
             self._pack_rows()
-        return obs, reward, terminated, truncated, info
+        return result  # type: ignore[no-any-return]
 
     def _pack_rows(self) -> None:
         rows, inputs, actions = self._rows, self._input_values, self._actions
