@@ -115,9 +115,6 @@ class StepBlock:
         them): a writer packs straight into its chunk. Index offsets are relative to the start of
         ``buffer``."""
         n = len(times[0][0])
-        rows = np.frombuffer(buffer, dtype=np.uint8, count=n * self.size, offset=offset)
-        rows.reshape(n, self.size)[:] = self._template_row
-        records = np.frombuffer(buffer, dtype=self.dtype, count=n, offset=offset)
         sequence = np.arange(self.count, self.count + n, dtype=np.uint64) & 0xFFFFFFFF
         logs = np.stack([log for log, _ in times])  # (slot, step)
         head = np.empty(logs.shape, dtype=_HEAD)
@@ -130,14 +127,18 @@ class StepBlock:
         pair["sec"] = sec
         pair["nsec"] = nsec
         stamps = pair.view("<u8")
-        for i, message in enumerate(self.messages):
-            head_field, stamp_field, value_field = self._fields[i]
-            records[head_field] = heads[message.slot]
-            if stamp_field:
-                records[stamp_field] = stamps[message.slot]
-            if value_field:
-                records[value_field] = values[i]
-        del rows, records  # views of ``buffer``: released, so it can grow again
+        records = np.frombuffer(buffer, dtype=self.dtype, count=n, offset=offset)
+        try:
+            records.view(np.uint8).reshape(n, self.size)[:] = self._template_row
+            for i, message in enumerate(self.messages):
+                head_field, stamp_field, value_field = self._fields[i]
+                records[head_field] = heads[message.slot]
+                if stamp_field:
+                    records[stamp_field] = stamps[message.slot]
+                if value_field:
+                    records[value_field] = values[i]
+        finally:
+            del records  # a view of ``buffer``: released (also on an error), so it can grow again
         # Index entries of all messages at once: (message, step) -> (log time, record offset).
         entries = np.empty((len(self.messages), n, 2), dtype="<u8")
         entries[:, :, 0] = logs[self._slots]
