@@ -2,8 +2,9 @@
 
 Why not ``mcap.writer.Writer``: it costs ~3.7 us per message, and an env step records five.
 Here records go straight into the chunk buffer (a ``bytearray``): single messages through
-``add_message``, and the messages of many steps at once through ``add_block`` (packed in bulk
-by :class:`bridge.recording.block.StepBlock`). Full chunks are compressed (zstd), indexed and
+``add_message``, and the messages of many steps at once through ``add_steps`` (packed in bulk
+into the chunk by :class:`bridge.recording.block.StepBlock`; ``add_block`` takes records packed
+elsewhere). Full chunks are compressed (zstd), indexed and
 appended by ``bridge.recording.sink``.
 
 The file is written as ``NAME.mcap.part`` and renamed to ``NAME.mcap`` when ``close()`` has
