@@ -39,6 +39,12 @@ class FixedMessage:
     layout: cdr.JointStateLayout | None = None
 
 
+# The fields a message record has after its constant prefix, grouped as they lie side by side:
+# sequence, log and publish time; then (a JointState) the header stamp. One assignment fills a group.
+_HEAD = np.dtype([("seq", "<u4"), ("log", "<u8"), ("pub", "<u8")])  # packed: 20 bytes
+_STAMP = np.dtype([("sec", "<i4"), ("nsec", "<u4")])
+
+
 class StepBlock:
     """Packs ``n`` steps' messages into contiguous MCAP message records."""
 
@@ -57,28 +63,27 @@ class StepBlock:
             template.extend(bytes(size))
 
         self.record_offsets = []
+        self._fields = []  # per message: the names of its head, stamp and value fields ("": none)
         for i, message in enumerate(messages):
             js = message.layout
             self.record_offsets.append(len(template))
             template += rec.message_prefix(message.channel_id, js.size if js is not None else 12)
-            field(f"seq{i}", "<u4", 4)
-            field(f"log{i}", "<u8", 8)
-            field(f"pub{i}", "<u8", 8)
+            field(f"head{i}", "V20", _HEAD.itemsize)
             template += cdr.ENCAPSULATION
             if js is None:
                 field(f"val{i}", "<f8", 8)
+                self._fields.append((f"head{i}", "", f"val{i}"))
                 continue
-            field(f"sec{i}", "<i4", 4)
-            field(f"nsec{i}", "<u4", 4)
+            field(f"stamp{i}", "<u8", _STAMP.itemsize)
             template += js.head
             if js.names:
                 field(f"val{i}", ("<f8", (len(js.names),)), 8 * len(js.names))
             template += js.tail
+            self._fields.append((f"head{i}", f"stamp{i}", f"val{i}" if js.names else ""))
         self.template = bytes(template)
-        self._fields = [  # per message: the names of its sequence, time, stamp and value fields
-            (f"seq{i}", f"log{i}", f"pub{i}", f"sec{i}", f"nsec{i}", f"val{i}" if f"val{i}" in names else "")
-            for i in range(len(messages))
-        ]
+        self._template_row = np.frombuffer(self.template, dtype=np.uint8)
+        self._slots = np.array([m.slot for m in messages], dtype=np.intp)
+        self._offsets = np.array(self.record_offsets, dtype=np.uint64)[:, None]
         self.size = len(template)
         self.dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": self.size})
 
@@ -95,33 +100,50 @@ class StepBlock:
 
         Index offsets are relative to the start of the block.
         """
-        n = len(times[0][0])
-        block = bytearray(self.template * n)
-        records = np.frombuffer(block, dtype=self.dtype)
-        sequence = (np.arange(self.count, self.count + n, dtype=np.uint64) & 0xFFFFFFFF).astype(np.uint32)
-        stamps = [np.divmod(stamp, _NS) for _, stamp in times]
-        slots = []  # per slot: (n, 2) of (log time, record start)
-        for log, _ in times:
-            pairs = np.empty((n, 2), dtype="<u8")
-            pairs[:, 0] = log
-            pairs[:, 1] = np.arange(0, n * self.size, self.size, dtype=np.uint64)
-            slots.append(pairs)
-        index: IndexEntries = []
-        for i, message in enumerate(self.messages):
-            seq, log_field, pub, sec_field, nsec_field, val = self._fields[i]
-            log = slots[message.slot][:, 0]
-            records[seq] = sequence
-            records[log_field] = log
-            records[pub] = log
-            if message.layout is not None:
-                sec, nsec = stamps[message.slot]
-                records[sec_field] = sec
-                records[nsec_field] = nsec
-            if val:
-                records[val] = values[i]
-            pairs = slots[message.slot].copy()
-            pairs[:, 1] += np.uint64(self.record_offsets[i])
-            index.append((message.channel_id, pairs))
-        self.count += n
-        bounds = (min(int(t.min()) for t, _ in times), max(int(t.max()) for t, _ in times))
+        block = bytearray(len(times[0][0]) * self.size)
+        index, bounds = self.pack_into(block, 0, times, values)
         return block, index, bounds
+
+    def pack_into(
+        self,
+        buffer: bytearray,
+        offset: int,
+        times: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]],
+        values: list[npt.NDArray[np.float64]],
+    ) -> tuple[IndexEntries, tuple[int, int]]:
+        """:meth:`pack`, with the records written into ``buffer`` at ``offset`` (which must hold
+        them): a writer packs straight into its chunk. Index offsets are relative to the start of
+        ``buffer``."""
+        n = len(times[0][0])
+        sequence = np.arange(self.count, self.count + n, dtype=np.uint64) & 0xFFFFFFFF
+        logs = np.stack([log for log, _ in times])  # (slot, step)
+        head = np.empty(logs.shape, dtype=_HEAD)
+        head["seq"] = sequence
+        head["log"] = logs
+        head["pub"] = logs
+        heads = head.view("V20")
+        sec, nsec = np.divmod(np.stack([stamp for _, stamp in times]), _NS)
+        pair = np.empty(logs.shape, dtype=_STAMP)
+        pair["sec"] = sec
+        pair["nsec"] = nsec
+        stamps = pair.view("<u8")
+        records = np.frombuffer(buffer, dtype=self.dtype, count=n, offset=offset)
+        try:
+            records.view(np.uint8).reshape(n, self.size)[:] = self._template_row
+            for i, message in enumerate(self.messages):
+                head_field, stamp_field, value_field = self._fields[i]
+                records[head_field] = heads[message.slot]
+                if stamp_field:
+                    records[stamp_field] = stamps[message.slot]
+                if value_field:
+                    records[value_field] = values[i]
+        finally:
+            del records  # a view of ``buffer``: released (also on an error), so it can grow again
+        # Index entries of all messages at once: (message, step) -> (log time, record offset).
+        entries = np.empty((len(self.messages), n, 2), dtype="<u8")
+        entries[:, :, 0] = logs[self._slots]
+        starts = np.arange(offset, offset + n * self.size, self.size, dtype=np.uint64)
+        entries[:, :, 1] = starts + self._offsets
+        index: IndexEntries = [(m.channel_id, entries[i]) for i, m in enumerate(self.messages)]
+        self.count += n
+        return index, (int(logs.min()), int(logs.max()))

@@ -19,8 +19,10 @@ import datetime
 import logging
 import os
 import re
+import struct
 import unicodedata
 import weakref
+from array import array
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, SupportsFloat
@@ -42,6 +44,15 @@ STEP_TOPICS = [meta.ACTIONS, meta.AGENT_ACTION, meta.OBSERVATIONS, meta.REWARD, 
 def _as_list(action: Any) -> Any:
     """A copy of a Box/MultiDiscrete action (the agent may reuse its array)."""
     return action.tolist() if action.__class__ is np.ndarray else np.asarray(action).tolist()
+
+
+def _float_rows(values: list[Any], n: int) -> Any:
+    """``n`` rows of float64 from a flat list of numbers (``np.asarray`` for anything else)."""
+    try:
+        flat = np.frombuffer(array("d", values))
+    except (TypeError, ValueError):  # not plain numbers (a 0-d array or such): numpy decides
+        flat = np.asarray(values, dtype=np.float64).reshape(-1)
+    return flat.reshape(n, -1)
 
 
 class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
@@ -95,6 +106,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         try:
             self.channels = ch = meta.open_channels(writer, [*topics, meta.SCENARIO, meta.EVENTS], names)
             self._layouts = {t: cdr.JointStateLayout.of(n) for t, n in names.items()}
+            self._scenario_layouts: dict[tuple[str, ...], cdr.JointStateLayout] = {}
             slot = {meta.ACTIONS: 0, meta.AGENT_ACTION: 0}
             self._block = StepBlock(
                 [FixedMessage(ch[t], slot.get(t, 1), self._layouts.get(t)) for t in topics]
@@ -105,8 +117,11 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             raise
         self._inputs = task.applied_inputs  # the list Task.action_to_inputs fills: the applied input values
         self._discrete = isinstance(env.action_space, gym.spaces.Discrete)
-        self._rows: list[tuple[Any, ...]] = []
-        self._rows_per_block = max(1, chunk_size // self._block.size)
+        self._rows: list[tuple[Any, ...]] = []  # per step: time, observation, reward, outputs, components
+        self._input_values: list[float] = []  # every step's applied inputs, one after the other
+        self._actions: list[Any] = []  # every step's action (its elements, for a Box or MultiDiscrete)
+        self._full_block = max(1, chunk_size // self._block.size)  # steps in a whole chunk
+        self._rows_per_block = self._full_block
         self._obs_dtype = np.dtype(np.float32)
         self._episode = -1
         self._in_episode = False
@@ -152,13 +167,34 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             event["values"] = spec.values
         w, ch, log = self.writer, self.channels, self._clock.next_start_ns
         w.add_message(ch[meta.EVENTS], log, cdr.encode_string(meta.to_json(event)))
-        w.add_message(ch[meta.SCENARIO], log, cdr.encode_joint_state(t_ns, list(drawn), list(drawn.values())))
+        w.add_message(ch[meta.SCENARIO], log, self._scenario(t_ns, drawn))
         messages = [(meta.OBSERVATIONS, obs), (meta.OUTPUTS, info["outputs"])]
         if self._component_topics:
             messages += zip(self._component_topics, self._components_now())
         for topic, values in messages:
             w.add_message(ch[topic], log, self._layouts[topic].pack(t_ns, np.ravel(values).tolist()))
+        self._plan_block()
         return obs, info
+
+    def _plan_block(self) -> None:
+        """Steps in the next block: as many as fill the current chunk, so an episode's first
+        block joins its start messages in one chunk; a whole chunk's worth when less than a
+        quarter of one is left (that block then starts the next chunk)."""
+        fit = self.writer.room // self._block.size
+        self._rows_per_block = fit if fit >= max(1, self._full_block // 4) else self._full_block
+
+    def _scenario(self, t_ns: int, drawn: dict[str, Any]) -> bytes:
+        """The scenario message: through the layout of its names (the same every episode,
+        mostly: built once by rosbags), or by rosbags itself for values that are not one float
+        per name."""
+        names = tuple(map(str, drawn))
+        layout = self._scenario_layouts.get(names)
+        if layout is None:
+            layout = self._scenario_layouts[names] = cdr.JointStateLayout.of(names)
+        try:
+            return layout.pack(t_ns, drawn.values())
+        except (struct.error, TypeError):
+            return cdr.encode_joint_state(t_ns, names, list(drawn.values()))
 
     def _components_now(self) -> list[Any]:
         """Each component's output values now (a system of FMUs), split from one flat array."""
@@ -166,48 +202,57 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         return np.split(np.asarray(values, dtype=np.float64), self._component_sizes)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        result = self.env.step(action)
+        obs, reward, terminated, truncated, info = result
         # Keep the step's values now (bytes, copies); pack them in bulk later (bridge.recording.block).
+        # Inputs and actions go into flat lists (the same count every step): a block turns those
+        # into arrays several times faster than a tuple of per-step lists.
         self._rows.append(
             (
                 info["time_s"],
-                self._inputs[:],
-                action if self._discrete else _as_list(action),
                 obs.tobytes(),
                 reward,
                 info["outputs"].tobytes(),
                 self._plant.component_values().tobytes() if self._component_topics else b"",
             )
         )
+        self._input_values += self._inputs
+        if self._discrete:
+            self._actions.append(action)
+        else:  # a copy (the agent may reuse its array)
+            self._actions += action.tolist() if action.__class__ is np.ndarray else _as_list(action)
         if terminated or truncated:
             self._end_episode(info.get("reason"), terminated, truncated, info)
         elif len(self._rows) >= self._rows_per_block:
             self._pack_rows()
-        return obs, reward, terminated, truncated, info
+        return result  # type: ignore[no-any-return]
 
     def _pack_rows(self) -> None:
-        rows, self._rows = self._rows, []
+        rows, inputs, actions = self._rows, self._input_values, self._actions
         if not rows:
             return
+        self._rows, self._input_values, self._actions = [], [], []
         n = len(rows)
-        times, inputs, actions, observations, rewards, outputs, components = zip(*rows)
-        t_ns = np.round(np.asarray(times, dtype=np.float64) * 1e9).astype(np.int64)
+        times, observations, rewards, outputs, components = zip(*rows)
+        # array("d", ...) turns Python numbers into a buffer several times faster than np.asarray
+        t_ns = np.round(np.frombuffer(array("d", times)) * 1e9).astype(np.int64)
         before = np.concatenate(([self._t_prev], t_ns[:-1]))  # actions are stamped at t_k
         self._t_prev = int(t_ns[-1])
         values = [
-            np.asarray(inputs, dtype=np.float64).reshape(n, -1),
-            np.asarray(actions, dtype=np.float64).reshape(n, -1),
+            np.frombuffer(array("d", inputs)).reshape(n, len(inputs) // n),
+            _float_rows(actions, n),
             np.frombuffer(b"".join(observations), dtype=self._obs_dtype).reshape(n, -1).astype(np.float64),
-            np.asarray(rewards, dtype=np.float64),
+            np.frombuffer(array("d", rewards)),
             np.frombuffer(b"".join(outputs), dtype=np.float64).reshape(n, -1),
         ]
         if self._component_topics:
             flat = np.frombuffer(b"".join(components), dtype=np.float64).reshape(n, -1)
             values += np.split(flat, self._component_sizes, axis=1)
         offset = self._offset
-        self.writer.add_block(*self._block.pack([(before + offset, before), (t_ns + offset, t_ns)], values))
+        self.writer.add_steps(self._block, [(before + offset, before), (t_ns + offset, t_ns)], values)
         self._steps += n
         self._return = float(sum(rewards, self._return))  # sequential, as a per-step sum would be
+        self._plan_block()
 
     def _end_episode(
         self, reason: str | None, terminated: bool, truncated: bool, info: dict[str, Any]

@@ -168,7 +168,7 @@ def package_versions() -> dict[str, str]:
 
 
 def to_json(value: Any) -> str:
-    return json.dumps(value, separators=(",", ":"), default=_jsonable, allow_nan=True)
+    return _ENCODER.encode(value)
 
 
 def _jsonable(value: Any) -> Any:
@@ -177,6 +177,10 @@ def _jsonable(value: Any) -> Any:
     if hasattr(value, "item"):
         return value.item()
     return str(value)
+
+
+# One encoder for every event (json.dumps with options builds a new one per call).
+_ENCODER = json.JSONEncoder(separators=(",", ":"), default=_jsonable, allow_nan=True)
 
 
 def config_yaml(experiment: Any) -> str:

@@ -7,7 +7,7 @@ inside the last one (the part a stream reader drops).
 
 Chunks are compressed in the recording thread. A background thread was measured and dropped:
 zstd releases the GIL, but handing the GIL back and forth around it cost the stepping loop as
-much as the compression it saved (~0.8 us per step, cart-pole, zstd level 1), and doing it
+much as the compression it saved (~0.8 us per step, cart-pole, zstd level 1 then), and doing it
 here means ``flush()`` has written the data to the OS when it returns.
 """
 

@@ -2,8 +2,9 @@
 
 Why not ``mcap.writer.Writer``: it costs ~3.7 us per message, and an env step records five.
 Here records go straight into the chunk buffer (a ``bytearray``): single messages through
-``add_message``, and the messages of many steps at once through ``add_block`` (packed in bulk
-by :class:`bridge.recording.block.StepBlock`). Full chunks are compressed (zstd), indexed and
+``add_message``, and the messages of many steps at once through ``add_steps`` (packed in bulk
+into the chunk by :class:`bridge.recording.block.StepBlock`; ``add_block`` takes records packed
+elsewhere). Full chunks are compressed (zstd), indexed and
 appended by ``bridge.recording.sink``.
 
 The file is written as ``NAME.mcap.part`` and renamed to ``NAME.mcap`` when ``close()`` has
@@ -26,6 +27,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+import numpy.typing as npt
 
 from bridge import __version__
 from bridge.errors import BridgeError
@@ -63,7 +67,9 @@ class McapWriter:
         profile: the MCAP profile (``ros2``: schemas ``ros2msg``, messages ``cdr``).
         chunk_size: uncompressed bytes per chunk; at most this much is lost if the process dies.
         compression: ``zstd`` or ``none``.
-        level: the zstd level (1: fast; the data are floats, higher levels gain little).
+        level: the zstd level. -1 (zstd's first "fast" level): cart-pole recordings' 128 KiB
+            chunks come out as small as at level 1 (0.1% to 1.4% smaller) and compress 8-15%
+            faster; at -2 they grow by 6-17%.
         work_path: the file written until ``close()`` (default ``path + ".part"``).
         overwrite: replace an existing file (else an existing recording is an error).
     """
@@ -76,7 +82,7 @@ class McapWriter:
         library: str = f"fmu-bridge {__version__}",
         chunk_size: int = DEFAULT_CHUNK_SIZE,
         compression: str = "zstd",
-        level: int = 1,
+        level: int = -1,
         work_path: str | Path | None = None,
         overwrite: bool = False,
     ) -> None:
@@ -156,12 +162,36 @@ class McapWriter:
         """Message records packed elsewhere (:class:`StepBlock`), with their index entries
         (offsets relative to ``data``) and (earliest, latest) log time; they go into one chunk."""
         pos = self._place(data)
+        for _, pairs in index:
+            pairs[:, 1] += pos
+        self._add_indexed(index, bounds)
+
+    def add_steps(
+        self,
+        block: StepBlock,
+        times: list[tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]],
+        values: list[npt.NDArray[np.float64]],
+    ) -> None:
+        """``add_block(*block.pack(times, values))`` without the copy: ``block`` packs the steps'
+        records straight into the chunk (one chunk; a new one when they do not fit in this one)."""
+        size = len(times[0][0]) * block.size
+        pos = self._reserve(size)
+        index, bounds = block.pack_into(self.chunk.buffer, pos, times, values)
+        self.chunk.pos = pos + size
+        self._add_indexed(index, bounds)
+
+    def _add_indexed(self, index: IndexEntries, bounds: tuple[int, int]) -> None:
+        """Index entries (offsets in the chunk) of records placed in it, and their time bounds."""
         chunk = self.chunk
         for channel_id, pairs in index:
-            pairs[:, 1] += pos
             chunk.blocks.append((channel_id, pairs.tobytes()))
             self._counts[channel_id] += len(pairs)
         self._extend(*bounds)
+
+    @property
+    def room(self) -> int:
+        """Bytes left in the current chunk; a larger record starts the next chunk."""
+        return self.chunk_size - self.chunk.pos
 
     def _extend(self, start: int, end: int) -> None:
         chunk = self.chunk
@@ -171,13 +201,21 @@ class McapWriter:
 
     def _place(self, record: bytes | bytearray) -> int:
         """Put a record into the current chunk; returns its position there."""
+        pos = self._reserve(len(record))
+        self.chunk.buffer[pos : pos + len(record)] = record
+        self.chunk.pos = pos + len(record)
+        return pos
+
+    def _reserve(self, size: int) -> int:
+        """Where ``size`` bytes go in the current chunk (the next chunk when they do not fit,
+        unless this one is empty; the buffer grows for a record larger than a chunk)."""
         self._check_open()
         chunk = self.chunk
-        if chunk.pos and chunk.pos + len(record) > self.chunk_size:
+        if chunk.pos and chunk.pos + size > self.chunk_size:
             self.rotate()
         pos = chunk.pos
-        chunk.buffer[pos : pos + len(record)] = record
-        chunk.pos = pos + len(record)
+        if pos + size > len(chunk.buffer):
+            chunk.buffer.extend(bytes(pos + size - len(chunk.buffer)))
         return pos
 
     def add_metadata(self, name: str, mapping: Mapping[str, str]) -> None:
