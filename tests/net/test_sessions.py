@@ -129,6 +129,49 @@ def test_a_peer_answering_first_or_replaying_the_holders_id_changes_nothing(loop
         assert refused["steps"] == steps and refused["rejected_not_holder"] >= seen
 
 
+def test_a_session_answering_on_the_reset_key_after_the_node_does_not_hide_the_node(
+    loopback: Loopback,
+) -> None:
+    """Every reply to a reset is read: Zenoh's default consolidation kept one reply per key, so an
+    answer from another session that came last hid the node's and the reset said the node died."""
+    import zenoh
+
+    keys = proto.Keys(loopback.prefix, "seen")
+    asked: list[int] = []
+
+    def late(query: Any) -> None:
+        asked.append(1)
+        time.sleep(0.3)  # after the node's reply
+        query.reply(keys.reset, proto.encode_values(proto.OUTPUTS, 1, 0, 0, [9.0] * 4))
+
+    with node_process(CARTPOLE, "seen", loopback):
+        peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+        queryable = peer.declare_queryable(keys.reset, late, complete=True)
+        try:
+            probe = {"target": zenoh.QueryTarget.ALL, "consolidation": zenoh.ConsolidationMode.NONE}
+            wait_until(  # the node refuses the empty request; the late session has been asked
+                lambda: (
+                    bool(list(loopback.session.get(keys.reset, payload=b"{}", timeout=2.0, **probe)))
+                    and bool(asked)
+                ),
+                30,
+                "the late session's queryable reachable",
+            )
+            with (
+                RemoteFmuEnv(CARTPOLE, "seen", session=loopback.session, prefix=loopback.prefix) as remote,
+                FmuEnv(CARTPOLE) as local,
+            ):
+                for seed in (1, 2):
+                    np.testing.assert_array_equal(remote.reset(seed=seed)[0], local.reset(seed=seed)[0])
+                    zero = np.zeros(1, dtype=np.float32)
+                    np.testing.assert_array_equal(remote.step(zero)[0], local.step(zero)[0])
+            # the probe and both resets reached it (its callbacks run one at a time, 0.3 s each)
+            wait_until(lambda: len(asked) >= 3, 30, "the resets reaching the late session")
+        finally:
+            queryable.undeclare()
+            peer.close()
+
+
 def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> None:
     with (
         node_process(CARTPOLE, "held", loopback),
@@ -146,11 +189,12 @@ def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> N
                 keys.outputs, lambda s: answers.append(proto.decode(s.payload.to_bytes()))
             )
             forged = proto.encode_values(proto.ACTION, 1, 2, client, [0.0])
-            deadline = time.monotonic() + 10  # sent again until the subscription has reached the node
+            deadline = time.monotonic() + 30  # sent again until the subscription has reached the node
             while not any(a.kind == proto.REJECT for a in answers) and time.monotonic() < deadline:
                 peer.put(keys.actions, forged)
                 time.sleep(0.05)
-            reject = next(a for a in answers if a.kind == proto.REJECT)
+            reject = next((a for a in answers if a.kind == proto.REJECT), None)
+            assert reject is not None, f"no REJECT within 30 s: {answers[-5:]}"
             assert reject.message.startswith("not_holder") and not reject.flags & proto.SIGNED
             assert reject.sim_time_ns == client
             sub.undeclare()
