@@ -34,7 +34,7 @@ schedule: {mode: fixed}
 
 
 def info(net: Loopback, node: str) -> dict[str, Any]:
-    return describe_nodes(net.session, [node], prefix=net.prefix)[0]
+    return describe_nodes(net.session, [node], prefix=net.prefix, timeout_s=10)[0]
 
 
 def test_one_client_holds_a_node_until_another_takes_over_or_it_leaves(loopback: Loopback) -> None:

@@ -82,7 +82,7 @@ class _RawClient:
 
 
 def _info(net: Loopback, node: str) -> dict[str, Any]:
-    return describe_nodes(net.session, [node], prefix=net.prefix)[0]
+    return describe_nodes(net.session, [node], prefix=net.prefix, timeout_s=10)[0]
 
 
 def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(loopback: Loopback) -> None:

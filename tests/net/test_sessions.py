@@ -26,7 +26,7 @@ from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
 from bridge.net.remote import answer, describe_nodes
 from bridge.net.transport import ZenohOptions, open_session
-from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_until
+from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_for, wait_until
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -125,7 +125,12 @@ def test_a_peer_answering_first_or_replaying_the_holders_id_changes_nothing(loop
                         break
             seen = hostile_count(hostile)
         assert seen > 0, f"the hostile peer saw none of {steps} actions"
-        refused = counters(loopback, "victim")
+        # the hostile's last forged actions may still be on their way to the node when it says "sent"
+        refused = wait_for(
+            lambda: (c := counters(loopback, "victim"))["rejected_not_holder"] >= seen and c,
+            30,
+            f"the node refusing {seen} forged actions",
+        )
         assert refused["steps"] == steps and refused["rejected_not_holder"] >= seen
 
 
@@ -179,7 +184,7 @@ def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> N
     ):
         env.reset(seed=0)
         env.step(np.zeros(1, dtype=np.float32))
-        holder = describe_nodes(loopback.session, ["held"], prefix=loopback.prefix)[0]["holder"]
+        holder = describe_nodes(loopback.session, ["held"], prefix=loopback.prefix, timeout_s=10)[0]["holder"]
         client = int(holder["client"], 16)
         peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
         try:
@@ -223,11 +228,14 @@ def test_a_forged_lease_is_refused_and_a_reset_with_the_holders_id_needs_its_ses
             request = {"episode": 1, "client": 0x1234567, "zid": "forged", "inputs": [0.0]}
             refusals = refused_resets(peer, keys, request)
             assert refusals and "no liveliness token" in refusals[0]
-            assert describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"] is None
+            assert describe_nodes(peer, ["lease"], prefix=loopback.prefix, timeout_s=10)[0]["holder"] is None
             with RemoteFmuEnv(CARTPOLE, "lease", session=loopback.session, prefix=loopback.prefix) as env:
                 env.reset(seed=0)
                 holder = int(
-                    describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"]["client"], 16
+                    describe_nodes(peer, ["lease"], prefix=loopback.prefix, timeout_s=10)[0]["holder"][
+                        "client"
+                    ],
+                    16,
                 )
                 stolen = {**request, "client": holder, "episode": 2}
                 refused = refused_resets(peer, keys, stolen)
