@@ -42,7 +42,7 @@ def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> No
         time.sleep(0.01)
 
 
-def wait_for(probe: Callable[[], Any], timeout_s: float = 5.0, what: str = "the condition") -> Any:
+def wait_for(probe: Callable[[], Any], timeout_s: float = 30.0, what: str = "the condition") -> Any:
     """:func:`wait_until` for a probe whose truthy value the caller wants: poll it until it is
     truthy and return that value; fail naming ``what`` and the last value after ``timeout_s``."""
     deadline = time.monotonic() + timeout_s
@@ -258,7 +258,7 @@ def node_process(
     )
     try:
         _wait_for_line(process, "serving", timeout_s=60)
-        _wait_for_node(net, name, timeout_s=10)
+        _wait_for_node(net, name, timeout_s=30)
         yield process
     finally:
         stop_process(process, timeout_s=10)

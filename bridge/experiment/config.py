@@ -184,7 +184,7 @@ class ActionSection(Strict):
         for name, levels in self.levels.items():
             if len(levels) < 2:
                 raise ValueError(f"levels of {name!r} need at least two values, got {levels}")
-        for name in set(self.low) & set(self.high):
+        for name in sorted(set(self.low) & set(self.high)):  # the same first error in every run
             check_ordered(f"low/high.{name}", self.low[name], self.high[name])
         return self
 

@@ -20,7 +20,7 @@ from typing import Any
 from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.net import protocol as proto
 from bridge.net.channel import EventWaiting, Waiting
-from bridge.net.discovery import query_info, query_target, replier
+from bridge.net.discovery import every_reply, query_info, query_target, replier
 from bridge.net.lease import NO_TOKEN, reset_proof
 from bridge.net.transport import undeclare
 from bridge.plant.base import Plant
@@ -165,7 +165,11 @@ class NodeClient:
             sent = time.monotonic()
             refusal = ""
             replies = self.session.get(
-                self.keys.reset, payload=payload, target=query_target(), timeout=self.timeout_s
+                self.keys.reset,
+                payload=payload,
+                target=query_target(),
+                consolidation=every_reply(),
+                timeout=self.timeout_s,
             )
             for reply in replies:
                 if self.node_zid and replier(reply) not in (None, self.node_zid):
@@ -212,7 +216,9 @@ class NodeClient:
 
     def _state_request(self, payload: bytes, what: str) -> dict[str, Any]:
         key, limit = self.keys.state, proto.MAX_REQUEST_BYTES
-        replies = self.session.get(key, payload=payload, target=query_target(), timeout=self.timeout_s)
+        replies = self.session.get(
+            key, payload=payload, target=query_target(), consolidation=every_reply(), timeout=self.timeout_s
+        )
         for reply in replies:
             if self.node_zid and replier(reply) not in (None, self.node_zid):
                 continue

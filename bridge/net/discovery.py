@@ -121,6 +121,15 @@ def query_target() -> Any:
     return zenoh.QueryTarget.ALL
 
 
+def every_reply() -> Any:
+    """Keep every reply: Zenoh's default consolidation keeps one reply per key, so another
+    session answering on the node's key could hide the node's own reply (it did, depending on
+    which reply came last)."""
+    import zenoh
+
+    return zenoh.ConsolidationMode.NONE
+
+
 def replier(reply: Any) -> str | None:
     rid = getattr(reply, "replier_id", None)
     return str(rid.zid) if rid is not None else None
@@ -136,7 +145,12 @@ def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, An
         remaining = deadline - time.monotonic()
         answers = [
             (reply.ok.payload.to_bytes(), replier(reply))
-            for reply in session.get(keys.info, target=query_target(), timeout=max(0.05, min(remaining, 1.0)))
+            for reply in session.get(
+                keys.info,
+                target=query_target(),
+                consolidation=every_reply(),
+                timeout=max(0.05, min(remaining, 1.0)),
+            )
             if reply.ok is not None
         ]
         sessions = {zid for _, zid in answers}

@@ -79,7 +79,7 @@ def closed_loop(
             deadline = time.monotonic() + 120
             while len([f for f in frames if f.episode == 9]) < samples + 20 and time.monotonic() < deadline:
                 time.sleep(0.05)
-            node = describe_nodes(net.session, ["plant"], prefix=net.prefix)[0]  # type: ignore[arg-type]
+            node = describe_nodes(net.session, ["plant"], prefix=net.prefix, timeout_s=10)[0]  # type: ignore[arg-type]
         finally:
             stats = agent.agent.stats.summary()
             agent.close()

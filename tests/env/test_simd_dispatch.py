@@ -45,6 +45,7 @@ def _disabled(group: str) -> list[str]:
 
 
 @pytest.mark.parametrize("group", ["avx512", "avx2"])
+@pytest.mark.timeout(1200)  # above the subprocess's 900 s (about 90 s at load average 7 on 2 cores)
 def test_bit_identity_holds_with_simd_groups_disabled(group: str, tmp_path: Path) -> None:
     names = _disabled(group)
     if not names:

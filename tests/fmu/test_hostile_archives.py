@@ -54,7 +54,7 @@ def test_a_fifo_or_a_device_as_the_fmu_is_refused_within_seconds(fifo: Path, com
         result, took_s = _cli(command, str(path), *extra, cwd=fifo.parent)
         assert result.returncode == 2, result.stderr
         assert f"is {kind}, not an FMU file" in result.stderr and "Traceback" not in result.stderr
-        assert took_s < 10, took_s
+        assert took_s < 30, took_s  # a new interpreter: about 2 s; a hang meets the 60 s timeout
     assert not (fifo.parent / "out.yaml").exists()
 
 
@@ -64,7 +64,7 @@ def test_check_with_a_fifo_as_model_fmu_ends_with_a_clear_error(fifo: Path) -> N
     experiment.write_text(source.read_text().replace("fmu: example:dcmotor", "fmu: model.fmu", 1))
     result, took_s = _cli("check", str(experiment), cwd=fifo.parent)
     assert result.returncode == 2, result.stderr
-    assert "a named pipe (FIFO), not an FMU file" in result.stderr and took_s < 10
+    assert "a named pipe (FIFO), not an FMU file" in result.stderr and took_s < 30  # as above
 
 
 def _zip_entry(name: str, raw: bytes, size: int, crc: int, offset: int) -> tuple[bytes, bytes]:

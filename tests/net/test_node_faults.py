@@ -34,7 +34,7 @@ schedule: {mode: fixed}
 
 
 def info(net: Loopback, node: str) -> dict[str, Any]:
-    return describe_nodes(net.session, [node], prefix=net.prefix)[0]
+    return describe_nodes(net.session, [node], prefix=net.prefix, timeout_s=10)[0]
 
 
 def test_one_client_holds_a_node_until_another_takes_over_or_it_leaves(loopback: Loopback) -> None:
@@ -78,11 +78,13 @@ def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
 ) -> None:
     isolate = bool(isolation)
     experiment = tmp_path / "typed.yaml"
-    by_file = ", isolation: {timeout: 1}}" if isolation == "file" else "}"
+    # a 5 s deadline: the hang at step 2 meets it, and the reset and steps around it (a fresh FMU
+    # process after the hang) keep well inside it on a loaded machine
+    by_file = ", isolation: {timeout: 5}}" if isolation == "file" else "}"
     experiment.write_text(TYPED.replace("episode_duration: 5.0}", "episode_duration: 5.0" + by_file))
     extra = [
         "--step-timeout",
-        "1" if isolation != "file" else "30",
+        "5" if isolation != "file" else "30",
         *(["--isolate"] if isolation == "flag" else []),
     ]
     with node_process(experiment, "stuck", loopback, *extra) as process:
@@ -95,11 +97,11 @@ def test_a_hung_fmu_is_reported_and_the_node_stops_on_sigterm(
             start = time.monotonic()
             with pytest.raises(StepTimeout, match=r"node 'stuck': the model hung at step 2"):
                 env.step(ZERO)
-            assert time.monotonic() - start < 15  # the node's deadline, not the client's 30 s
+            assert time.monotonic() - start < 20  # the node's 5 s deadline, not the client's 30 s
             described = info(loopback, "stuck")
             if isolate:  # the child was killed; the next reset starts a fresh one
                 assert described["health"] == "unusable" and described["counters"]["hung"] == 1
-                assert "no answer within 1 s" in described["health_detail"]
+                assert "no answer within 5 s" in described["health_detail"]
                 assert "the next reset() starts a fresh process" in described["health_detail"]
                 assert not list(
                     loopback.session.liveliness().get(  # type: ignore[attr-defined]
@@ -154,7 +156,7 @@ def test_a_dead_node_is_reported_while_a_stopped_one_still_times_out(loopback: L
             ["v-0", "v-1"],
             session=loopback.session,
             prefix=loopback.prefix,
-            timeout_s=8.0,
+            timeout_s=30.0,
             on_error="raise",
         )
         try:
@@ -168,7 +170,7 @@ def test_a_dead_node_is_reported_while_a_stopped_one_still_times_out(loopback: L
             start = time.monotonic()
             with pytest.raises(PlantDied, match="node 'v-1'"):
                 vec.step(np.zeros((2, 1), dtype=np.float32))
-            assert time.monotonic() - start < 7.0  # not after v-0's 8 s timeout
+            assert time.monotonic() - start < 20.0  # not after v-0's 30 s timeout
         finally:
             stopped.send_signal(signal.SIGCONT)
             vec.close()

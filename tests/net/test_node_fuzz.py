@@ -66,7 +66,7 @@ def logged_node(net: Loopback, name: str, *extra: str) -> Iterator[tuple[subproc
     threading.Thread(target=read, daemon=True).start()
     try:
         assert started.wait(90), "".join(lines)
-        _wait_for_node(net, name, timeout_s=10)
+        _wait_for_node(net, name, timeout_s=30)
         yield process, lines
     finally:
         process.terminate()
@@ -262,7 +262,10 @@ def test_malformed_requests_on_every_key_get_clear_answers_and_nodes_keep_servin
 
         def described() -> dict[str, Any]:
             return {
-                e["node"]: e for e in describe_nodes(loopback.session, ["lock", "rt"], prefix=loopback.prefix)
+                e["node"]: e
+                for e in describe_nodes(
+                    loopback.session, ["lock", "rt"], prefix=loopback.prefix, timeout_s=10
+                )
             }
 
         def all_counted() -> bool:  # the last puts may still be on their way
@@ -285,7 +288,9 @@ def test_malformed_requests_on_every_key_get_clear_answers_and_nodes_keep_servin
 
         def rt_now() -> int:
             return int(
-                describe_nodes(loopback.session, ["rt"], prefix=loopback.prefix)[0]["counters"]["steps"]
+                describe_nodes(loopback.session, ["rt"], prefix=loopback.prefix, timeout_s=10)[0]["counters"][
+                    "steps"
+                ]
             )
 
         wait_until(lambda: rt_now() > rt_steps, 30, "the real-time node advancing")

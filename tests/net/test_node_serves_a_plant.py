@@ -91,7 +91,7 @@ from bridge.net.transport import ZenohOptions
 file, node, endpoint, prefix, isolate = sys.argv[1:]
 component = served_experiments(load_experiment(file))[node]
 server = FmuNode(component.model, name=node, served=component.served, prefix=prefix,
-                 options=ZenohOptions(connect=(endpoint,)), step_timeout_s=1.0, isolate=isolate == "1")
+                 options=ZenohOptions(connect=(endpoint,)), step_timeout_s=5.0, isolate=isolate == "1")
 stop = threading.Event()
 signal.signal(signal.SIGTERM, lambda *_: stop.set())
 print("serving", flush=True)

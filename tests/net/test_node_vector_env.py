@@ -157,7 +157,7 @@ def test_a_dead_node_is_replaced_by_a_spare_under_next_step(loopback: Loopback) 
             session=loopback.session,
             prefix=loopback.prefix,
             replace_dead=True,
-            timeout_s=3.0,
+            timeout_s=10.0,  # the live node's steps keep well inside it on a loaded machine
             replace_wait_s=30.0,
         )
         try:

@@ -82,7 +82,7 @@ class _RawClient:
 
 
 def _info(net: Loopback, node: str) -> dict[str, Any]:
-    return describe_nodes(net.session, [node], prefix=net.prefix)[0]
+    return describe_nodes(net.session, [node], prefix=net.prefix, timeout_s=10)[0]
 
 
 def test_lockstep_rejects_stale_early_and_duplicate_actions_deterministically(loopback: Loopback) -> None:
@@ -199,7 +199,7 @@ def test_fmu_error_is_the_same_step_error_on_both_plants_and_the_node_stays_up(
 def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) -> None:
     with node_process(CARTPOLE, "victim", loopback) as process:
         env = RemoteFmuEnv(
-            CARTPOLE, "victim", session=loopback.session, prefix=loopback.prefix, timeout_s=3.0
+            CARTPOLE, "victim", session=loopback.session, prefix=loopback.prefix, timeout_s=10.0
         )
         try:
             env.reset(seed=0)
@@ -210,7 +210,7 @@ def test_killed_node_gives_a_clear_error_within_the_timeout(loopback: Loopback) 
             with pytest.raises((PlantDied, StepTimeout), match=r"^node 'victim': (the plant died|no answer)"):
                 for _ in range(100):
                     env.step(np.zeros(1, dtype=np.float32))
-            assert time.monotonic() - start < 10.0  # noticed or timed out once, not 100 timeouts
+            assert time.monotonic() - start < 60.0  # noticed or timed out once, not 100 timeouts
         finally:
             env.close()
 
@@ -260,7 +260,7 @@ def test_dead_node_is_replaced_by_a_spare_and_its_episode_truncated(loopback: Lo
             session=loopback.session,
             prefix=loopback.prefix,
             replace_dead=True,
-            timeout_s=3.0,
+            timeout_s=10.0,  # the live node's steps keep well inside it on a loaded machine
         )
         try:
             vec.reset()
@@ -315,17 +315,21 @@ def test_realtime_node_runs_on_the_wall_clock_and_holds_the_latest_action(loopba
         )
         try:
             loopback.session.put(keys.actions, proto.encode_values(proto.ACTION, 0, 0, 0, [10.0]))  # type: ignore[attr-defined]
-            wait_until(lambda: len(frames) >= 300, 60, "300 samples from the real-time node")
-            window, wall = frames[50:300], arrived[299] - arrived[50]  # past the first deliveries
+            # arrived is appended after frames: waiting on it, both hold 800
+            wait_until(lambda: len(arrived) >= 800, 120, "800 samples from the real-time node")
+            # past the first deliveries; 3 s of wall time, so that a late delivery at either end of
+            # the window (a loaded machine) has to be half a second late to push the figure past 6
+            window, wall = frames[50:800], arrived[799] - arrived[50]
             speed = (window[-1].sim_time_ns - window[0].sim_time_ns) / 1e9 / wall
             # paced at 5x real time (20 ms samples every 4 ms): never faster (20 % for delivery
-            # jitter); a loaded machine can only make it slower (an overrun restarts the schedule),
-            # and even then it keeps at least real time
-            assert 1.0 <= speed <= 6.0, speed
-            steps = [f.step for f in frames[:300]]
+            # jitter); a loaded machine can only make it slower (an overrun restarts the schedule).
+            # The floor is no speed claim (benchmarks/ measures speed): it tells pacing from a
+            # rate read upside down (0.2x) on a machine that a full CI run keeps busy
+            assert 0.5 <= speed <= 6.0, speed
+            steps = [f.step for f in frames[:800]]
             assert steps == list(range(steps[0], steps[0] + len(steps)))  # every sample, in order
             assert clock and clock[-1] > clock[0]
-            velocities = [f.values[1] for f in frames[:300]]
+            velocities = [f.values[1] for f in frames[:800]]
             assert velocities[-1] > velocities[0] + 1.0  # the held +10 N push keeps accelerating the cart
         finally:
             sub.undeclare()
@@ -350,14 +354,17 @@ def test_realtime_node_publishes_each_sample_at_its_deadline_stepped_with_the_ac
     )
     keys = proto.Keys(loopback.prefix, "rt_held")
     frames: list[proto.Frame] = []
-    with node_process(experiment, "rt_held", loopback, "--mode", "realtime", "--rate", "0.2"):  # 100 ms
+    with node_process(experiment, "rt_held", loopback, "--mode", "realtime", "--rate", "0.05"):  # 400 ms
         sub = loopback.session.declare_subscriber(
             keys.outputs, lambda s: frames.append(proto.decode(s.payload.to_bytes()))
         )  # type: ignore[attr-defined]
         try:
             wait_until(lambda: len(frames) >= 3, 60, "3 samples from the real-time node")
             sent_after = frames[-1].step
-            time.sleep(0.04)  # mid-period: the next sample was stepped 40 ms ago, its deadline is 60 ms away
+            # mid-period: the next sample was stepped right after the last one was published, 200 ms
+            # ago, its deadline is 200 ms away (wide on both sides: the node or this process may
+            # stall for a moment on a loaded machine; a later arrival only delays `first`)
+            time.sleep(0.2)
             loopback.session.put(keys.actions, proto.encode_values(proto.ACTION, 0, 0, 0, [1.0]))  # type: ignore[attr-defined]
             wait_until(lambda: any(f.values[0] == 1.0 for f in frames), 60, "the action's effect")
             first = next(f.step for f in frames if f.values[0] == 1.0)

@@ -119,7 +119,7 @@ def test_reset_service_and_actions_in_real_time(loopback: Loopback) -> None:
                 session.get(
                     f"0/rt/reset/{TRIGGER}",
                     payload=request,
-                    timeout=5.0,
+                    timeout=30.0,
                     attachment=struct.pack("<qqB16s", 1, time.time_ns(), 16, gid),
                 )
             )

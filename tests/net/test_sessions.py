@@ -26,7 +26,7 @@ from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
 from bridge.net.remote import answer, describe_nodes
 from bridge.net.transport import ZenohOptions, open_session
-from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_until
+from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_for, wait_until
 
 pytestmark = pytest.mark.integration
 CARTPOLE = example_experiment("cartpole_continuous")
@@ -125,8 +125,56 @@ def test_a_peer_answering_first_or_replaying_the_holders_id_changes_nothing(loop
                         break
             seen = hostile_count(hostile)
         assert seen > 0, f"the hostile peer saw none of {steps} actions"
-        refused = counters(loopback, "victim")
+        # the hostile's last forged actions may still be on their way to the node when it says "sent"
+        refused = wait_for(
+            lambda: (c := counters(loopback, "victim"))["rejected_not_holder"] >= seen and c,
+            30,
+            f"the node refusing {seen} forged actions",
+        )
         assert refused["steps"] == steps and refused["rejected_not_holder"] >= seen
+
+
+def test_a_session_answering_on_the_reset_key_after_the_node_does_not_hide_the_node(
+    loopback: Loopback,
+) -> None:
+    """Every reply to a reset is read: Zenoh's default consolidation kept one reply per key, so an
+    answer from another session that came last hid the node's and the reset said the node died."""
+    import zenoh
+
+    keys = proto.Keys(loopback.prefix, "seen")
+    asked: list[int] = []
+
+    def late(query: Any) -> None:
+        asked.append(1)
+        time.sleep(0.3)  # after the node's reply
+        query.reply(keys.reset, proto.encode_values(proto.OUTPUTS, 1, 0, 0, [9.0] * 4))
+
+    with node_process(CARTPOLE, "seen", loopback):
+        peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+        queryable = peer.declare_queryable(keys.reset, late, complete=True)
+        try:
+            probe = {"target": zenoh.QueryTarget.ALL, "consolidation": zenoh.ConsolidationMode.NONE}
+            wait_until(  # the node refuses the empty request; the late session has been asked
+                lambda: (
+                    bool(list(loopback.session.get(keys.reset, payload=b"{}", timeout=2.0, **probe)))
+                    and bool(asked)
+                ),
+                30,
+                "the late session's queryable reachable",
+            )
+            with (
+                RemoteFmuEnv(CARTPOLE, "seen", session=loopback.session, prefix=loopback.prefix) as remote,
+                FmuEnv(CARTPOLE) as local,
+            ):
+                for seed in (1, 2):
+                    np.testing.assert_array_equal(remote.reset(seed=seed)[0], local.reset(seed=seed)[0])
+                    zero = np.zeros(1, dtype=np.float32)
+                    np.testing.assert_array_equal(remote.step(zero)[0], local.step(zero)[0])
+            # the probe and both resets reached it (its callbacks run one at a time, 0.3 s each)
+            wait_until(lambda: len(asked) >= 3, 30, "the resets reaching the late session")
+        finally:
+            queryable.undeclare()
+            peer.close()
 
 
 def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> None:
@@ -136,7 +184,7 @@ def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> N
     ):
         env.reset(seed=0)
         env.step(np.zeros(1, dtype=np.float32))
-        holder = describe_nodes(loopback.session, ["held"], prefix=loopback.prefix)[0]["holder"]
+        holder = describe_nodes(loopback.session, ["held"], prefix=loopback.prefix, timeout_s=10)[0]["holder"]
         client = int(holder["client"], 16)
         peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
         try:
@@ -146,11 +194,12 @@ def test_a_peer_stamping_the_holders_id_gets_not_holder(loopback: Loopback) -> N
                 keys.outputs, lambda s: answers.append(proto.decode(s.payload.to_bytes()))
             )
             forged = proto.encode_values(proto.ACTION, 1, 2, client, [0.0])
-            deadline = time.monotonic() + 10  # sent again until the subscription has reached the node
+            deadline = time.monotonic() + 30  # sent again until the subscription has reached the node
             while not any(a.kind == proto.REJECT for a in answers) and time.monotonic() < deadline:
                 peer.put(keys.actions, forged)
                 time.sleep(0.05)
-            reject = next(a for a in answers if a.kind == proto.REJECT)
+            reject = next((a for a in answers if a.kind == proto.REJECT), None)
+            assert reject is not None, f"no REJECT within 30 s: {answers[-5:]}"
             assert reject.message.startswith("not_holder") and not reject.flags & proto.SIGNED
             assert reject.sim_time_ns == client
             sub.undeclare()
@@ -179,11 +228,14 @@ def test_a_forged_lease_is_refused_and_a_reset_with_the_holders_id_needs_its_ses
             request = {"episode": 1, "client": 0x1234567, "zid": "forged", "inputs": [0.0]}
             refusals = refused_resets(peer, keys, request)
             assert refusals and "no liveliness token" in refusals[0]
-            assert describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"] is None
+            assert describe_nodes(peer, ["lease"], prefix=loopback.prefix, timeout_s=10)[0]["holder"] is None
             with RemoteFmuEnv(CARTPOLE, "lease", session=loopback.session, prefix=loopback.prefix) as env:
                 env.reset(seed=0)
                 holder = int(
-                    describe_nodes(peer, ["lease"], prefix=loopback.prefix)[0]["holder"]["client"], 16
+                    describe_nodes(peer, ["lease"], prefix=loopback.prefix, timeout_s=10)[0]["holder"][
+                        "client"
+                    ],
+                    16,
                 )
                 stolen = {**request, "client": holder, "episode": 2}
                 refused = refused_resets(peer, keys, stolen)

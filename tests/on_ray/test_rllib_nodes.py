@@ -38,7 +38,7 @@ def experiment(tmp_path: Path, net: Loopback, timesteps: int) -> Path:
         "n_envs": K,
         "seed": 2,
         "vec": "remote",
-        "remote": {"nodes": "rl-*", "connect": [net.endpoint], "timeout_s": 5.0},
+        "remote": {"nodes": "rl-*", "connect": [net.endpoint], "timeout_s": 15.0},  # live steps: well inside
         "hyperparams": {"n_steps": 32, "batch_size": 64, "n_epochs": 1, "policy_kwargs": {"net_arch": [16]}},
     }
     path = tmp_path / "cartpole_nodes.yaml"

@@ -88,13 +88,15 @@ def test_a_failed_step_is_the_same_step_error_as_in_process(typed: Path) -> None
 
 
 def test_a_hung_fmu_times_out_and_the_next_reset_starts_a_fresh_process(typed: Path) -> None:
-    with isolated_env(typed, timeout_s=1.0) as env:
+    # 5 s: the hang meets it; the reset and the steps around it, in a fresh process after the
+    # hang, keep well inside it on a loaded machine
+    with isolated_env(typed, timeout_s=5.0) as env:
         start = time.monotonic()
         with pytest.raises(
-            StepTimeout, match=r"child process\): no answer within 1 s at step 3 of episode 1"
+            StepTimeout, match=r"child process\): no answer within 5 s at step 3 of episode 1"
         ):
             steps(env, "hangs", 5)
-        assert time.monotonic() - start < 20  # the deadline, not forever (generous: busy machines)
+        assert time.monotonic() - start < 30  # the deadline, not forever (generous: busy machines)
         with pytest.raises(BridgeError, match="call reset"):
             env.step(ZERO)
         assert len(steps(env, "fine", 10)) == 11  # restarted
@@ -116,7 +118,7 @@ def test_a_leaking_fmu_is_stopped_at_its_memory_limit(typed: Path) -> None:
 
 
 def test_vector_env_truncates_the_episode_of_a_hung_plant_and_goes_on(typed: Path) -> None:
-    envs = [isolated_env(typed, timeout_s=1.0) for _ in range(2)]
+    envs = [isolated_env(typed, timeout_s=5.0) for _ in range(2)]  # the fine one's steps: well inside
     vec = PlantVecEnv(envs, on_error="truncate")
     try:
         vec.set_options([{"scenario": "hangs"}, {"scenario": "fine"}])
@@ -126,7 +128,7 @@ def test_vector_env_truncates_the_episode_of_a_hung_plant_and_goes_on(typed: Pat
             _, _, dones, infos = vec.step(np.zeros((2, 1), dtype=np.float32))
             if dones[0]:
                 dones_at.append(k)
-                assert "no answer within 1 s" in infos[0]["plant_error"] and infos[0]["TimeLimit.truncated"]
+                assert "no answer within 5 s" in infos[0]["plant_error"] and infos[0]["TimeLimit.truncated"]
             assert not dones[1]
         assert dones_at == [2]
     finally:
@@ -136,9 +138,9 @@ def test_vector_env_truncates_the_episode_of_a_hung_plant_and_goes_on(typed: Pat
 def test_model_isolation_in_the_experiment_file_gives_the_isolated_plant(tmp_path: Path) -> None:
     path = tmp_path / "isolated.yaml"
     path.write_text(
-        TYPED.replace("episode_duration: 5.0}", "episode_duration: 5.0, isolation: {timeout: 1}}")
+        TYPED.replace("episode_duration: 5.0}", "episode_duration: 5.0, isolation: {timeout: 5}}")
     )
     with FmuEnv(path) as env:
-        assert isinstance(env.plant, IsolatedFmuPlant) and env.plant.timeout_s == 1.0
-        with pytest.raises(StepTimeout, match="no answer within 1 s"):
+        assert isinstance(env.plant, IsolatedFmuPlant) and env.plant.timeout_s == 5.0
+        with pytest.raises(StepTimeout, match="no answer within 5 s"):
             steps(env, "hangs", 5)

@@ -142,9 +142,9 @@ def counters_once(net: Loopback, own: Loopback, ready: Callable[[dict[str, int]]
     """The node's counters once ``ready`` says so (or as they are after 30 s)."""
     deadline = time.monotonic() + 30
     while True:
-        counters: dict[str, int] = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0][
-            "counters"
-        ]
+        counters: dict[str, int] = describe_nodes(
+            net.session, ["proto-motor"], prefix=own.prefix, timeout_s=10
+        )[0]["counters"]
         if ready(counters) or time.monotonic() > deadline:
             return counters
         time.sleep(0.05)
@@ -255,7 +255,9 @@ def test_a_recording_of_an_iterated_node_holds_the_accepted_pass_of_each_step(
             plant.master.step()
             taken.append(plant.master.outputs["motor"].copy())
             iterations.append(plant.master.last_iterations)
-        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix)[0]["counters"]
+        counters = describe_nodes(net.session, ["proto-motor"], prefix=own.prefix, timeout_s=10)[0][
+            "counters"
+        ]
         wanted = {"outputs": counters["steps"] + counters["resets"], "actions": counters["steps"]}
         deadline = time.monotonic() + 60
         while time.monotonic() < deadline and any(

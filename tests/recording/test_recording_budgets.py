@@ -55,7 +55,7 @@ def write_recording(path: Path, chunks: int, *, counting: bool, per_chunk: int =
 
 
 @pytest.mark.parametrize("command", ["info", "export"])
-def test_a_1_mb_file_declaring_gigabytes_of_tiny_messages_ends_within_10_s(
+def test_a_1_mb_file_declaring_gigabytes_of_tiny_messages_ends_in_seconds_not_minutes(
     tmp_path: Path, command: str
 ) -> None:
     bomb = tmp_path / "bomb.mcap"
@@ -73,7 +73,9 @@ def test_a_1_mb_file_declaring_gigabytes_of_tiny_messages_ends_within_10_s(
     )
     took_s = time.perf_counter() - started
     output = result.stdout + result.stderr
-    assert took_s < 10, f"{command} took {took_s:.1f} s"
+    # a new interpreter and a refusal: a few seconds, more on a loaded machine; reading the
+    # messages would take minutes
+    assert took_s < 30, f"{command} took {took_s:.1f} s"
     assert "Traceback" not in output and result.returncode in (0, 2), output
     assert "1000 to one): corrupt, or a decompression bomb" in output, output
 

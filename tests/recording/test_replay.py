@@ -228,7 +228,7 @@ def test_publish_plays_the_outputs_back_as_node_frames(recording: Path, loopback
         assert result.returncode == 0, result.stderr
         data = read_recording(recording)
         outputs = columns(data, data.series[meta.OUTPUTS])
-        deadline = time.monotonic() + 5
+        deadline = time.monotonic() + 30  # the last frames may still be on their way (a loaded machine)
         while len(frames) < len(outputs["x"]) and time.monotonic() < deadline:
             time.sleep(0.05)
     finally:
@@ -261,7 +261,7 @@ def test_publish_paces_by_the_recording_clock_and_answers_info(recording: Path, 
     started = time.monotonic()
     worker.start()
     try:
-        deadline = time.monotonic() + 10
+        deadline = time.monotonic() + 30  # the publisher's session and queryable (a loaded machine)
         info: dict[str, Any] = {}
         while time.monotonic() < deadline and "output_names" not in info:
             info = describe_nodes(loopback.session, ["paced"], prefix=loopback.prefix, timeout_s=0.5)[0]
@@ -271,4 +271,4 @@ def test_publish_paces_by_the_recording_clock_and_answers_info(recording: Path, 
         stop.set()
     elapsed = time.monotonic() - started
     assert sent == [first_episode.steps + 1]  # step 0 and every step of the episode
-    assert 0.8 < elapsed < 20.0  # paced (about 1 s), and it ends
+    assert 0.8 < elapsed < 60.0  # paced (about 1 s), and it ends

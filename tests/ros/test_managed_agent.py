@@ -85,7 +85,7 @@ def test_configure_fails_on_an_observation_mapping_that_lacks_a_joint(balancer: 
 
 def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: Path, probe: Probe) -> None:
     """-p runtime:=fmu: the policy FMU acts as the in-process policy does; cleanup frees it and a
-    second configure loads it again; Ctrl-C while active ends the node within a second."""
+    second configure loads it again; Ctrl-C while active ends the node promptly (well inside 3 s)."""
     args = [
         "agent", "run", str(exported_run), "--transport", "rclpy", "--managed", "--node", "cart",
         "--observation-topic", "/robot/joint_states", "--action-topic", "/robot/effort",
@@ -112,6 +112,6 @@ def test_managed_agent_deploys_the_policy_fmu_set_as_a_parameter(exported_run: P
                 assert probe.ask("lifecycle_change", node=node, transition="cleanup") == {"success": True}
         assert " ".join(agent.output.split()).count("configured: fmu policy") == 2
         elapsed = agent.stop(signal.SIGINT)
-        assert agent.process.returncode == 0 and elapsed < 1.0, (elapsed, agent.output)
+        assert agent.process.returncode == 0 and elapsed < 3.0, (elapsed, agent.output)  # room for load
         assert "Traceback" not in agent.output, agent.output
     assert len(set(expected)) == 2  # both levels: an agent stuck on one force would fail

@@ -74,7 +74,7 @@ def test_agent_closes_the_loop_over_dds(  # noqa: PLR0917
         assert len(actions) >= 150 and {a["position"][0] for a in actions} <= {-10.0, 10.0}
         elapsed = agent.stop(sig)
         assert agent.process.returncode == 0, agent.output
-        assert elapsed < 1.0, f"the agent took {elapsed:.2f} s to exit"
+        assert elapsed < 3.0, f"the agent took {elapsed:.2f} s to exit"  # a few tenths; room for load
         for noise in ("Traceback", "Exception"):
             assert noise not in agent.output, agent.output
         assert "observations" in agent.output  # its closing summary
@@ -148,7 +148,8 @@ def test_launch_file_with_the_zenoh_backend_closes_the_loop(
     exported_run: Path, loopback: Loopback, ros_domain: int
 ) -> None:
     """The launch file's command lines with ``backend:=zenoh router:=... runtime:=fmu``: node and
-    agent on the rmw_zenoh wire through a router, the policy FMU acting; both stop within a second."""
+    agent on the rmw_zenoh wire through a router, the policy FMU acting; both stop
+    promptly (well inside 3 s)."""
     import runpy
 
     from rosbags.typesys import Stores, get_typestore
@@ -174,7 +175,7 @@ def test_launch_file_with_the_zenoh_backend_closes_the_loop(
             assert "policy FMU export" in " ".join(agent.output.split())
             for process in (agent, node):
                 elapsed = process.stop(signal.SIGTERM)
-                assert process.process.returncode == 0 and elapsed < 1.0, (elapsed, process.output)
+                assert process.process.returncode == 0 and elapsed < 3.0, (elapsed, process.output)
     finally:
         sub.undeclare()
     jazzy = get_typestore(Stores.ROS2_JAZZY)

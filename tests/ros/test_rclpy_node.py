@@ -157,12 +157,14 @@ def test_domain_isolation(loopback: Loopback, probe: Probe, ros_domain: int) -> 
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
-def test_node_exits_cleanly_within_a_second(loopback: Loopback, probe: Probe, sig: int) -> None:
+def test_node_exits_cleanly_and_promptly(loopback: Loopback, probe: Probe, sig: int) -> None:
     with command(*node_args(CARTPOLE, "sim", loopback, "--mode", "realtime")) as node:
         wait_node(probe, "/sim")
         elapsed = node.stop(sig)
         assert node.process.returncode == 0, node.output
-    assert elapsed < 1.0, f"{elapsed:.2f} s"
+    # a clean exit takes a few tenths of a second; 3 s leaves room for a loaded machine, while a
+    # hang (killed after 10 s) or a wait on a timeout of its own still fails
+    assert elapsed < 3.0, f"{elapsed:.2f} s"
     for noise in ("Traceback", "Exception", "Error"):
         assert noise not in node.output, node.output
     probe.wait(lambda: "/sim" not in probe.ask("nodes"), what="the node gone from the graph")

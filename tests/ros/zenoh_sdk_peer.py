@@ -56,7 +56,14 @@ def main() -> None:
     time_type = get_message_class("builtin_interfaces/msg/Time")
     import numpy as np
 
-    for _ in range(5):  # the node holds the latest action: a few, in case the first meets no route yet
+    def moved() -> int | None:  # the index of the first sample with the cart moving (x_dot != 0)
+        with lock:
+            return next((i for i in range(before, len(received)) if received[i]["position"][1] != 0.0), None)
+
+    # The node holds the latest action, so the same push may go again: sent until the cart moves
+    # (the first ones may meet no route yet, for longer on a loaded machine), then `count` more
+    end = time.monotonic() + 60
+    while moved() is None and time.monotonic() < end:
         pub.publish(
             header=header_type(stamp=time_type(sec=0, nanosec=0), frame_id=""),
             name=["force"],
@@ -65,7 +72,8 @@ def main() -> None:
             effort=np.array([], dtype=np.float64),
         )
         time.sleep(0.05)
-    wait_for(before + count)
+    first = moved()
+    wait_for((before if first is None else first) + count)
     sub.close()
     pub.close()
     with lock:

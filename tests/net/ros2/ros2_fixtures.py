@@ -20,7 +20,7 @@ def _session(endpoint: str) -> Any:
     from bridge.net.transport import ZenohOptions, open_session, wait_connected
 
     session = open_session(ZenohOptions(connect=(endpoint,)))
-    assert wait_connected(session, timeout_s=5.0, settle_s=0.05), (
+    assert wait_connected(session, timeout_s=30.0, settle_s=0.05), (
         f"no connection to the test router at {endpoint}"
     )
     return session
@@ -46,7 +46,7 @@ def peer_session_fixture(loopback: Any) -> Iterator[Any]:
         session.close()
 
 
-def _eventually(probe: Callable[[], T], timeout_s: float = 5.0, what: str = "condition") -> T:
+def _eventually(probe: Callable[[], T], timeout_s: float = 30.0, what: str = "condition") -> T:
     """Poll ``probe`` until it returns something truthy (declarations take a moment to propagate)."""
     deadline = time.monotonic() + timeout_s
     while True:

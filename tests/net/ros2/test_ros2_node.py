@@ -43,9 +43,9 @@ def test_our_client_calls_our_service_across_sessions(
     with RosContext(ros_session, domain_id=5) as server_side, RosContext(peer_session, domain_id=5) as caller:
         service = server_side.create_node("sim").create_service("~/reset", TRIGGER, reset)
         client = caller.create_node("agent").create_client("/sim/reset", TRIGGER)
-        assert client.wait_for_service(timeout_s=5.0)
+        assert client.wait_for_service(timeout_s=30.0)
         request = interfaces.message_class(f"{TRIGGER}_Request")()
-        answers = [client.call_message(request, timeout_s=5.0) for _ in range(3)]
+        answers = [client.call_message(request, timeout_s=30.0) for _ in range(3)]
         assert [a.message for a in answers] == ["episode 1", "episode 2", "episode 3"]
         assert all(a.success for a in answers) and resets == [5, 5, 5]
         assert service.counters["served"] == 3
@@ -82,11 +82,11 @@ def test_slow_service_raises_step_timeout_and_failing_handler_an_error(
             agent.create_client("/slow", TRIGGER),
             agent.create_client("/broken", TRIGGER),
         )
-        assert slow_client.wait_for_service(5.0) and broken_client.wait_for_service(5.0)
+        assert slow_client.wait_for_service(30.0) and broken_client.wait_for_service(30.0)
         with pytest.raises(StepTimeout, match=r"did not answer within 0\.3 s"):
             slow_client.call(interfaces.empty_request(TRIGGER), timeout_s=0.3)
         with pytest.raises(TransportError, match="the FMU refused to reset"):
-            broken_client.call(interfaces.empty_request(TRIGGER), timeout_s=5.0)
+            broken_client.call(interfaces.empty_request(TRIGGER), timeout_s=30.0)
 
 
 def test_latched_publisher_serves_a_late_subscriber(
