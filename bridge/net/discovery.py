@@ -130,6 +130,13 @@ def every_reply() -> Any:
     return zenoh.ConsolidationMode.NONE
 
 
+def _impostor(name: str, sessions: set[str | None]) -> str:
+    return (
+        f"{len(sessions)} Zenoh sessions answer as node {name!r} ({sorted(map(str, sessions))}); "
+        "a node's name must be its own: stop the impostor, or use another name"
+    )
+
+
 def replier(reply: Any) -> str | None:
     rid = getattr(reply, "replier_id", None)
     return str(rid.zid) if rid is not None else None
@@ -155,11 +162,7 @@ def query_info(session: Any, keys: proto.Keys, timeout_s: float) -> dict[str, An
         ]
         sessions = {zid for _, zid in answers}
         if len(sessions) > 1:
-            raise TransportError(
-                f"{len(sessions)} Zenoh sessions answer as node {keys.node!r} "
-                f"({sorted(map(str, sessions))}); "
-                "a node's name must be its own: stop the impostor, or use another name"
-            )
+            raise TransportError(_impostor(keys.node, sessions))
         if answers:
             return checked_info(answers[0][0], keys.node, answers[0][1])
         if remaining <= 0:
@@ -195,12 +198,20 @@ def describe_nodes(
     for name in names:
         keys = proto.Keys(prefix, name)
         entry: dict[str, Any] = {"node": name, "error": f"no answer within {timeout_s:g} s"}
-        for reply in session.get(keys.info, timeout=timeout_s):
-            if reply.ok is not None:
-                try:
-                    entry = listed_info(reply.ok.payload.to_bytes(), name, replier(reply))
-                except TransportError as exc:
-                    entry = {"node": name, "error": str(exc)}
-                break
+        answers = [
+            (reply.ok.payload.to_bytes(), replier(reply))
+            for reply in session.get(
+                keys.info, target=query_target(), consolidation=every_reply(), timeout=timeout_s
+            )
+            if reply.ok is not None
+        ]
+        sessions = {zid for _, zid in answers}
+        if len(sessions) > 1:  # an impostor is listed as one, not shown as the node
+            entry["error"] = _impostor(name, sessions)
+        elif answers:
+            try:
+                entry = listed_info(answers[0][0], name, answers[0][1])
+            except TransportError as exc:
+                entry = {"node": name, "error": str(exc)}
         found.append(entry)
     return found

@@ -295,6 +295,37 @@ def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: L
         peer.close()
 
 
+def test_the_node_listing_names_an_impostor_instead_of_showing_one_node(loopback: Loopback) -> None:
+    """``fmu-bridge nodes`` asks every session that answers on a node's info key: a second one,
+    answering after the node with a well-formed info, is reported, not listed as the node."""
+    keys = proto.Keys(loopback.prefix, "listed")
+    forged = json.dumps({"node": "listed", "mode": "replay"}).encode()
+    asked: list[int] = []
+
+    def late(query: Any) -> None:
+        asked.append(1)
+        time.sleep(0.3)  # after the node's reply
+        query.reply(keys.info, forged)
+
+    with node_process(CARTPOLE, "listed", loopback):
+        listed = describe_nodes(loopback.session, ["listed"], prefix=loopback.prefix, timeout_s=10)[0]
+        assert "error" not in listed and listed["mode"] == "lockstep"
+        peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
+        queryable = peer.declare_queryable(keys.info, late, complete=True)
+        try:
+            wait_until(
+                lambda: "error" in describe_nodes(loopback.session, ["listed"], prefix=loopback.prefix)[0],
+                30,
+                "the impostor's info queryable reached",
+            )
+            listed = describe_nodes(loopback.session, ["listed"], prefix=loopback.prefix, timeout_s=10)[0]
+            assert asked and "2 Zenoh sessions answer as node 'listed'" in listed["error"], listed
+            assert "mode" not in listed  # neither answer is shown as the node's
+        finally:
+            queryable.undeclare()
+            peer.close()
+
+
 def test_an_outputs_frame_with_the_wrong_value_count_is_a_transport_error(tmp_path: Path) -> None:
     from bridge.experiment.config import load_experiment
     from bridge.plant.local import LocalFmuPlant
