@@ -220,7 +220,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
         if self._discrete:
             self._actions.append(action)
         else:  # a copy (the agent may reuse its array)
-            self._actions += action.tolist() if action.__class__ is np.ndarray else _as_list(action)
+            self._actions += _as_list(action)
         if terminated or truncated:
             self._end_episode(info.get("reason"), terminated, truncated, info)
         elif len(self._rows) >= self._rows_per_block:

@@ -93,9 +93,10 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         parameters = {**(old.parameters if old else {}), **spec.parameters}
         interface = spec.interface if spec.interface != "auto" or old is None else old.interface
         units = old.connector_units if old else {}
-        sizes = {**(old.structural_parameters if old else {}), **spec.structural_parameters}
-        intervals = {**(old.clock_intervals if old else {}), **spec.clock_intervals}
-        schedule = {**(old.clock_schedule if old else {}), **spec.clock_schedule}
+        sizes, intervals, schedule = (
+            {**(getattr(old, key) if old else {}), **getattr(spec, key)}  # the file's names win
+            for key in ("structural_parameters", "clock_intervals", "clock_schedule")
+        )
         components[name] = Component(
             name,
             fmu,
