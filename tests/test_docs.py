@@ -289,3 +289,16 @@ def _resolves(dotted: str) -> bool:
                 obj = getattr(obj, attr)
             return True
     return False
+
+
+# The README is the front door: short, the two set-up commands first, every link leading somewhere.
+
+
+def test_the_readme_is_a_short_front_door_whose_links_lead_somewhere() -> None:
+    text = (ROOT / "README.md").read_text()
+    assert len(text.splitlines()) <= 300, "README.md: at most 300 lines; move the details to a page in docs/"
+    first_two = [b.code for b in blocks_of(ROOT / "README.md")][:2]
+    assert all(code.startswith("python3 -m venv .venv && ") for code in first_two), first_two
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    broken = [t for t in targets if "://" not in t and not (ROOT / t).exists()]
+    assert targets and broken == [], f"README.md links to files that do not exist: {broken}"
