@@ -10,6 +10,7 @@ What each block gets is chosen by a marker, an HTML comment on the line before t
 - Every ``fmu-bridge`` command a shell block (bash, sh) names must exist. ``<!-- run -->`` runs the
   block with ``bash -e`` in such a folder (without ``experiment.yaml``: the commands start from the
   FMU), within a time bound, in the integration tier.
+- A YAML block must parse.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from types import CodeType
 
 import pytest
 import typer
+import yaml
 from markdown_it import MarkdownIt
 
 from bridge.cli.main import _load_plugins, app
@@ -223,6 +225,16 @@ def test_shell_block(block: Block, tmp_path: Path, cartpole_fmu: Path) -> None:
     except subprocess.TimeoutExpired as exc:
         raise AssertionError(f"{block.where}: still running after {SHELL_TIMEOUT_S} s") from exc
     assert result.returncode == 0, f"{block.where} failed ({result.returncode}):\n{result.stderr[-3000:]}"
+
+
+def test_every_yaml_block_parses() -> None:
+    wrong = []
+    for block in (b for b in ALL if b.lang in ("yaml", "yml")):
+        try:
+            yaml.safe_load(block.code)
+        except yaml.YAMLError as exc:
+            wrong.append(f"{block.where}: not YAML: {exc}")
+    assert wrong == []
 
 
 # The checker itself: a block that imports a module gone since the package move must fail.
