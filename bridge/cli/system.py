@@ -121,8 +121,47 @@ def summary(plant: Any) -> dict[str, Any]:
             for n, c in system.components.items()
         ],
         "connections": [str(c) for c in system.connections],
+        "links": [_link(plant, c) for c in system.connections],
+        "master": _master(plant),
         "warnings": plant.warnings,
     }
+
+
+def _link(plant: Any, c: Any) -> dict[str, Any]:
+    """A connection with its transformation, unit conversion and the map they compose."""
+    from bridge.plant.system.transform import connection_units, describe
+
+    source = plant.infos[c.source.component].element(c.source.variable)[0]
+    target = plant.infos[c.target.component].element(c.target.variable)[0]
+    units = connection_units(c, source, target, plant.system)
+    t = c.transform
+    return {
+        "connection": str(c),
+        "transformation": None
+        if t is None
+        else {
+            "kind": t.kind,
+            "factor": t.factor,
+            "offset": t.offset,
+            "entries": [list(e) for e in t.entries],
+        },
+        "units": None if units is None else {"from": units[0], "to": units[1]},
+        "map": describe(c, plant.couplings.get(c)),
+    }
+
+
+def _master(plant: Any) -> dict[str, str]:
+    """Which master steps the system, and why."""
+    from bridge.plant.system.native_master import python_master_reason
+
+    why = python_master_reason(plant.system, plant.plants, plant.couplings, plant.infos)
+    if why is None:
+        return {
+            "runs": "native",
+            "why": "every component an FMI 2.0/3.0 co-simulation FMU in this "
+            "process, Float64 connections, values unchanged or through an affine map",
+        }
+    return {"runs": "python", "why": why}
 
 
 @system_app.command("inspect")
@@ -161,10 +200,17 @@ def inspect_system(  # noqa: PLR0917 (typer options)
         row = (c["name"], c["model"], c["fmi"], f"{c['step_size_s']:g}", str(c["feedthrough"]), c["fmu"])
         table.add_row(*row)
     console.print(table)
-    connections = Table("connection", title=f"{data['algorithm']}, macro step {data['macro_step_s']:g} s")
-    for text in data["connections"]:
-        connections.add_row(text)
+    connections = Table(
+        "connection", "units", "value", title=f"{data['algorithm']}, macro step {data['macro_step_s']:g} s"
+    )
+    for link in data["links"]:
+        units = link["units"]
+        connections.add_row(
+            link["connection"], f"{units['from']} -> {units['to']}" if units else "", link["map"]
+        )
     console.print(connections)
+    master = data["master"]
+    console.print(f"master: {master['runs']} ({master['why']})", highlight=False)
     for w in data["warnings"]:
         console.print(f"warning: {w}", highlight=False)
 

@@ -138,9 +138,18 @@ class MasterComponent(ctypes.Structure):
 
 
 class MasterLink(ctypes.Structure):
-    """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``."""
+    """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``,
+    as it is or (``affine`` 1) as ``factor * value + offset``."""
 
-    _fields_ = [("source", ctypes.c_int), ("i", ctypes.c_int), ("target", ctypes.c_int), ("j", ctypes.c_int)]
+    _fields_ = [
+        ("source", ctypes.c_int),
+        ("i", ctypes.c_int),
+        ("target", ctypes.c_int),
+        ("j", ctypes.c_int),
+        ("factor", ctypes.c_double),
+        ("offset", ctypes.c_double),
+        ("affine", ctypes.c_int),
+    ]
 
 
 class MasterSample(ctypes.Structure):

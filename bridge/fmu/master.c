@@ -3,8 +3,9 @@
  * The same FMI calls as the Python master over each component's one-call native sample, in the same
  * order and with the same arguments: for each component, one fmi2SetReal / fmi3SetFloat64 of its
  * inputs, `steps` doStep calls at t = t0 + k*h (k its own integer step counter), one fmi2GetReal /
- * fmi3GetFloat64 of its outputs. Connected inputs take their source's output value as it is (no
- * transformation: connections with one are stepped by the Python master).
+ * fmi3GetFloat64 of its outputs. A connected input takes its source's output value as it is, or,
+ * for a link with `affine` set (a linear transformation and/or unit conversion), `factor * y +
+ * offset`: the one expression the Python master's `transform.Affine` computes.
  *
  * Jacobi: every connected input is gathered from the outputs of t, all inputs checked finite, then
  * the components step in order. Gauss-Seidel: each component gathers, checks and steps in order.
@@ -53,6 +54,9 @@ typedef struct {
     int i;       /* its output index */
     int target;
     int j;       /* the target's input index */
+    double factor;
+    double offset;
+    int affine;  /* 0: the value passes unchanged; 1: factor * value + offset */
 } Link;
 
 static int do_steps2(Component* c) {
@@ -105,7 +109,8 @@ static int sample(Component* c) {
 static void gather(Component* comps, const Link* links, int n_links, int target) {
     for (int l = 0; l < n_links; l++) {
         if (target < 0 || links[l].target == target) {
-            comps[links[l].target].u[links[l].j] = comps[links[l].source].y[links[l].i];
+            double y = comps[links[l].source].y[links[l].i];
+            comps[links[l].target].u[links[l].j] = links[l].affine ? links[l].factor * y + links[l].offset : y;
         }
     }
 }

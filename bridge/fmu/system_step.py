@@ -2,12 +2,13 @@
 
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
 co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
-carry values unchanged (no unit conversion or transformation), without fixed-point iteration
-and with ``feedthrough_outputs: held``. Everything else, or a machine without a C compiler, or
-``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` set, keeps the Python master, which stays
-the reference: the native call makes the FMI calls the Python master makes over each component's
-native sample, in the same order with the same arguments, so the trajectories are equal bit for
-bit (tests/plant/test_system_native_master.py). ctypes releases the GIL during the call.
+carry values unchanged or through an affine map (linear transformation, unit conversion),
+without fixed-point iteration and with ``feedthrough_outputs: held``. Everything else, or a
+machine without a C compiler, or ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` set,
+keeps the Python master, which stays the reference: the native call makes the FMI calls the
+Python master makes over each component's native sample, in the same order with the same
+arguments, so the trajectories are equal bit for bit (tests/plant/test_system_native_master.py).
+ctypes releases the GIL during the call.
 
 The library is built with gcc on first use and cached like the batch stepper's
 (``bridge.fmu.native``). Its inputs and outputs are the master's own arrays: the C code sets the
@@ -66,6 +67,15 @@ def can_step_natively(model: Model) -> bool:
     return True
 
 
+def _link(link: Any, position: dict[str, int]) -> MasterLink:
+    """A master's link as ``master.c`` reads it; its conversion is None or an affine map (both
+    with ``factor`` and ``offset``), which ``native_master`` checked."""
+    ends = (position[link.source], link.i, position[link.target], link.j)
+    if link.convert is None:
+        return _Link(*ends, 1.0, 0.0, 0)
+    return _Link(*ends, link.convert.factor, link.convert.offset, 1)
+
+
 def _ints(values: Sequence[int]) -> np.ndarray[Any, np.dtype[np.intc]]:
     return np.ascontiguousarray(np.array(list(values) or [0], dtype=np.intc))
 
@@ -91,7 +101,7 @@ class NativeMaster:
         self._names = list(master.order)
         self._plants: list[FmuComponent] = [master.plants[n] for n in self._names]  # type: ignore[misc]
         position = {n: p for p, n in enumerate(self._names)}
-        links = [_Link(position[k.source], k.i, position[k.target], k.j) for k in master.links]
+        links = [_link(k, position) for k in master.links]
         self._links = (_Link * max(1, len(links)))(*links)
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
