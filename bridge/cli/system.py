@@ -273,25 +273,56 @@ def simulate_system(  # noqa: PLR0917 (typer options)
 
     An .ssp/.ssd runs as it is: every numeric output observed, its DefaultExperiment's step and
     duration unless --step-size and --duration say otherwise."""
+    from bridge.errors import BridgeError
+
     exp = _experiment(experiment, step_size, duration, no_feedthrough, iterations)
+    names = list(exp.observations.outputs)
+    rows: list[list[float]] = []
     with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
-        names = list(exp.observations.outputs)
         inputs = list(exp.actions.inputs)
         plant.bind(inputs, names)
         held = _held(set_input or [], inputs)
         start = [held.get(n, float(plant.info.variables[n].start or 0.0)) for n in inputs]
-        rows = [[plant.time_s, *plant.reset({**exp.model.parameters, **exp.model.start_values}, start)]]
         total = round((duration or exp.model.episode_duration) / plant.timing.sampling_time_s)
-        for _ in range(total):
-            rows.append([plant.time_s + plant.timing.sampling_time_s, *plant.step(start)])
+        try:
+            rows.append(
+                [plant.time_s, *plant.reset({**exp.model.parameters, **exp.model.start_values}, start)]
+            )
+            for _ in range(total):
+                rows.append([plant.time_s + plant.timing.sampling_time_s, *plant.step(start)])
+        except BridgeError as exc:  # the rows done are the user's: written, and counted in the error
+            if csv is not None:
+                _write_csv(csv, names, rows)
+            raise BridgeError(f"{exc}\n{_kept(rows, plant.timing.steps_per_sample, total, csv)}") from exc
     if csv is not None:
-        csv.write_text(
-            "\n".join([",".join(["time", *names])] + [",".join(f"{v:.17g}" for v in r) for r in rows]) + "\n"
-        )
+        _write_csv(csv, names, rows)
     table = Table("t [s]", *names, title=f"{experiment}")
     for r in rows[::every] + ([rows[-1]] if (len(rows) - 1) % every else []):
         table.add_row(*(f"{v:.6g}" for v in r))
     console.print(table)
+
+
+def _write_csv(path: Path, names: list[str], rows: list[list[float]]) -> None:
+    lines = [",".join(["time", *names])] + [",".join(f"{v:.17g}" for v in r) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _kept(rows: list[list[float]], steps_per_sample: int, total: int, csv: Path | None) -> str:
+    """What a failed run leaves: the samples done of ``total``, and where their rows are."""
+    if not rows:
+        return "the run failed at its reset: no macro step was done" + (
+            f"; {csv} holds the header" if csv else ""
+        )
+    done = len(rows) - 1
+    where = (
+        f"{csv} holds their {len(rows)} rows (the start included)"
+        if csv
+        else "pass --csv FILE to keep their rows"
+    )
+    return (
+        f"the run stopped after {done * steps_per_sample} macro steps ({done} of {total} samples, "
+        f"t = {rows[-1][0]:g} s); {where}"
+    )
 
 
 def _held(items: list[str], inputs: list[str]) -> dict[str, float]:

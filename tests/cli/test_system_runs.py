@@ -1,0 +1,53 @@
+"""``fmu-bridge system simulate`` as a user runs it: paths from where the command runs, and a run
+that fails keeps the rows of every macro step done before it (and says how many)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from bridge.cli.main import _load_plugins, app
+from bridge.errors import BridgeError
+from tests.plant.ssp_semantics import motor_load, write
+
+runner = CliRunner()
+_load_plugins()
+
+
+def test_simulate_takes_a_path_relative_to_where_it_runs(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: `'sys/dahl.ssp' does not exist (looked at sys/sys/dahl.ssp)`."""
+    (tmp_path / "sys").mkdir()
+    write(tmp_path / "sys" / "dahl.ssp", motor_load())
+    monkeypatch.chdir(tmp_path)
+    args = ["system", "simulate", "sys/dahl.ssp", "--no-feedthrough", "motor", "--duration", "0.01"]
+    result = runner.invoke(app, [*args, "--csv", "out.csv"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, (result.output, result.exception)
+    assert len((tmp_path / "out.csv").read_text().splitlines()) == 1 + 11  # the header, t0 and 10 steps
+
+
+def test_a_failed_run_keeps_its_rows_and_says_how_many(tmp_path: Path) -> None:
+    """The motor's speed reaches the load through a factor of 1e308: the load's torque overflows
+    and the motor refuses it a few steps in; the CSV holds every macro step done before that."""
+    huge = '<ssc:LinearTransformation factor="1e308"/>'
+    ssp = write(tmp_path / "overflow.ssp", motor_load(omega=huge))
+    out = tmp_path / "out.csv"
+    args = ["system", "simulate", str(ssp), "--no-feedthrough", "motor", "--csv", str(out)]
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert isinstance(result.exception, BridgeError), result.output
+    with out.open() as f:
+        rows = list(csv.DictReader(f))
+    done = len(rows) - 1  # the start row is not a step
+    message = str(result.exception)
+    assert 0 < done < 400 and f"the run stopped after {done} macro steps ({done} of 400 samples" in message
+    assert f"{out} holds their {len(rows)} rows" in message
+    assert "component 'motor' (dcmotor.fmu) failed" in message and "load_torque=nan" in message
+    omega = np.array([float(r["motor.omega"]) for r in rows])
+    assert np.all(np.isfinite(omega[:-1])) and omega[1] > 0.0
+    times = np.array([float(r["time"]) for r in rows])
+    np.testing.assert_allclose(times, np.arange(len(rows)) * 1e-3, rtol=0, atol=1e-12)
