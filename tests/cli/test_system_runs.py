@@ -51,3 +51,29 @@ def test_a_failed_run_keeps_its_rows_and_says_how_many(tmp_path: Path) -> None:
     assert np.all(np.isfinite(omega[:-1])) and omega[1] > 0.0
     times = np.array([float(r["time"]) for r in rows])
     np.testing.assert_allclose(times, np.arange(len(rows)) * 1e-3, rtol=0, atol=1e-12)
+
+
+def test_an_open_loop_yaml_system_needs_no_reward_section(tmp_path: Path) -> None:
+    """Before: `reward: Field required` for a system simulated as it is (no actions)."""
+    text = """
+model: {step_size: 0.001, episode_duration: 0.005}
+system:
+  components:
+    motor: {fmu: "example:dcmotor", feedthrough: false, parameters: {voltage: 12.0}}
+    load: {fmu: "example:gearload"}
+  connections: [motor.omega -> load.omega_in, load.torque -> motor.load_torque]
+observations: {outputs: [load.omega]}
+"""
+    path = tmp_path / "open_loop.yaml"
+    path.write_text(text)
+    out = tmp_path / "out.csv"
+    result = runner.invoke(app, ["system", "simulate", str(path), "--csv", str(out)], env={"COLUMNS": "200"})
+    assert result.exit_code == 0, (result.output, result.exception)
+    omega = [float(r["load.omega"]) for r in csv.DictReader(out.open())]
+    assert len(omega) == 6 and omega[-1] > 0.0  # the motor drove the load
+    with_actions = (
+        text + "actions: {inputs: [load.tau_ext], low: {load.tau_ext: -1}, high: {load.tau_ext: 1}}\n"
+    )
+    path.write_text(with_actions)
+    result = runner.invoke(app, ["system", "simulate", str(path)], env={"COLUMNS": "200"})
+    assert "reward" in str(result.exception) and "Field required" in str(result.exception)
