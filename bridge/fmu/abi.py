@@ -21,6 +21,7 @@ SET_FAILED: Final = 16  # + the status of the failed set
 GET_FAILED: Final = 32  # + the status of the failed get
 INACTIVE: Final = -1  # the instance was not stepped
 NONFINITE: Final = 64  # master.c: a component's input was NaN or infinite (nothing called)
+SETTLING: Final = 128  # master.c: added to the status of a failure while settling (not stepping)
 
 # -- fixed_step.c: why the integration loop returned ---------------------------------------------------
 END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE = 0, 1, 2, 3, 4
@@ -173,6 +174,8 @@ class MasterSample(ctypes.Structure):
         ("obs", ctypes.c_void_p),
         ("done", ctypes.c_int),
         ("stopped", ctypes.c_int),
+        ("n_settle", ctypes.c_int),
+        ("settle", ctypes.c_void_p),
     ]
 
 

@@ -13,6 +13,11 @@
  * MASTER_NONFINITE for an input that is NaN or infinite, which the Python path then reports; the
  * FMI status of a failed doStep; MASTER_SET / MASTER_GET plus the status of a failed set or get).
  * A component that asks to stop (MASTER_TERMINATED) does not stop the others.
+ *
+ * With `feedthrough_outputs: updated`, after every macro step the components of `settle` (sources
+ * before consumers) gather their connected inputs of t + H, check them finite, set them and get
+ * their outputs again without a step: the Python master's `settle`, with the same calls. A failure
+ * there is its status plus MASTER_SETTLING.
  */
 #include <math.h>
 #include <stddef.h>
@@ -27,6 +32,7 @@
 #define MASTER_SET 16
 #define MASTER_GET 32
 #define MASTER_NONFINITE 64
+#define MASTER_SETTLING 128 /* added to a status when it came from settling, not from the step */
 
 typedef struct {
     int major;          /* 2 or 3 */
@@ -122,7 +128,23 @@ static int finite_inputs(const Component* c) {
     return 1;
 }
 
-int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status) {
+static int settle(Component* comps, const Link* links, int n_links, int c) {
+    Component* s = &comps[c];
+    gather(comps, links, n_links, c);
+    if (!finite_inputs(s)) return MASTER_NONFINITE;
+    int st;
+    if (s->n_in > 0) {
+        st = s->major == 3 ? ((fmi3SetFloat64TYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u, s->nv_in)
+                           : ((fmi2SetRealTYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u);
+        if (st > MASTER_WARNING) return MASTER_SET + st;
+    }
+    st = s->major == 3 ? ((fmi3GetFloat64TYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y, s->nv_out)
+                       : ((fmi2GetRealTYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y);
+    return st > MASTER_WARNING ? MASTER_GET + st : MASTER_OK;
+}
+
+int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                int n_settle, const int* settle_order) {
     for (int c = 0; c < n; c++) status[c] = MASTER_OK;
     if (!gauss_seidel) {
         gather(comps, links, n_links, -1);
@@ -144,6 +166,14 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
         status[c] = sample(&comps[c]);
         if (status[c] > MASTER_WARNING && status[c] != MASTER_TERMINATED) return c + 1;
     }
+    for (int i = 0; i < n_settle; i++) {
+        int c = settle_order[i];
+        int st = settle(comps, links, n_links, c);
+        if (st > MASTER_WARNING) {
+            status[c] = MASTER_SETTLING + st;
+            return c + 1;
+        }
+    }
     return 0;
 }
 
@@ -151,10 +181,10 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
  * component asked to stop, or at a failure (master_step's return). `done` counts the macro steps
  * completed, the one with the stop request included, the failed one not. */
 int master_run(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status, int count,
-               int* done) {
+               int* done, int n_settle, const int* settle_order) {
     *done = 0;
     for (int r = 0; r < count; r++) {
-        int failed = master_step(comps, n, links, n_links, gauss_seidel, status);
+        int failed = master_step(comps, n, links, n_links, gauss_seidel, status, n_settle, settle_order);
         if (failed) return failed;
         *done = r + 1;
         for (int c = 0; c < n; c++) {
@@ -184,6 +214,8 @@ typedef struct {
     double* obs;
     int done;             /* macro steps completed by the last call */
     int stopped;          /* 1 if a component asked to stop in the last call */
+    int n_settle;         /* feedthrough_outputs: updated: the components settled after each step */
+    const int* settle;
 } Sample;
 
 /* Returns master_run's failure (1 + position), else -1 if a component asked to stop, else 0 (every
@@ -192,7 +224,8 @@ int master_sample(Sample* s, int count, int with_inputs) {
     if (with_inputs) {
         for (int e = 0; e < s->n_ext; e++) s->comps[s->ext_comp[e]].u[s->ext_j[e]] = s->ext[e];
     }
-    int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done);
+    int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done,
+                            s->n_settle, s->settle);
     s->stopped = 0;
     for (int c = 0; c < s->n; c++) {
         if (s->status[c] == MASTER_TERMINATED) s->stopped = 1;

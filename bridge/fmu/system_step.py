@@ -3,7 +3,8 @@
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
 co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
 carry values unchanged or through an affine map (linear transformation, unit conversion),
-without fixed-point iteration and with ``feedthrough_outputs: held``. Everything else, or a
+without fixed-point iteration, with ``feedthrough_outputs`` held or updated (the feedthrough
+components settled in the same call, as the Python master settles them). Everything else, or a
 machine without a C compiler, or ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` set,
 keeps the Python master, which stays the reference: the native call makes the FMI calls the
 Python master makes over each component's native sample, in the same order with the same
@@ -31,7 +32,7 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError
 from bridge.fmu import native as native_build
-from bridge.fmu.abi import NONFINITE, TERMINATED, Clock, MasterComponent, MasterLink, MasterSample
+from bridge.fmu.abi import NONFINITE, SETTLING, TERMINATED, Clock, MasterComponent, MasterLink, MasterSample
 from bridge.fmu.model import Model
 from bridge.fmu.signals import SignalGroup
 
@@ -127,6 +128,8 @@ class NativeMaster:
         spec.ext_comp, spec.ext_j = self._ext_comp.ctypes.data, self._ext_j.ctypes.data
         spec.n_obs, spec.obs = len(observed), self._obs_buffer.ctypes.data
         spec.obs_comp, spec.obs_i = self._obs_comp.ctypes.data, self._obs_i.ctypes.data
+        self._settle = _ints([position[n] for n in master.settle_order])
+        spec.n_settle, spec.settle = len(master.settle_order), self._settle.ctypes.data
         self._spec_ref = ctypes.byref(spec)
         self._n_obs, self._n_ext = len(observed), len(external)
         self.done = 0  # macro steps the last call completed
@@ -216,7 +219,7 @@ class NativeMaster:
     def _finish(self, failed: int, done: int) -> None:
         plants, status = self._plants, self._status
         stepped = len(plants)  # components that took part in the last macro step tried
-        if failed:
+        if failed and status[failed - 1] < SETTLING:  # a settling failure: every component stepped
             stepped = failed - 1
             if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
@@ -229,6 +232,10 @@ class NativeMaster:
 
     def _fail(self, plant: FmuComponent, status: int, k: int) -> None:
         name = self._names[self._plants.index(plant)]
+        inputs = self.master.inputs[name].tolist()
+        if status >= SETTLING:  # set or get while settling: the Python path's own call says why
+            plant.settle(inputs)
+            status -= SETTLING
         if status == NONFINITE:  # the Python path's own check names the input
-            plant.step(self.master.inputs[name].tolist())
+            plant.step(inputs)
         plant.native_failed(status, k)

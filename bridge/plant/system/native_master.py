@@ -3,8 +3,8 @@
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
 co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
 carry values unchanged or through an affine map (linear transformation and/or unit conversion,
-:class:`~bridge.plant.system.transform.Affine`), without fixed-point iteration and with
-``feedthrough_outputs: held``; ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` keep the
+:class:`~bridge.plant.system.transform.Affine`), without fixed-point iteration, with
+``feedthrough_outputs`` held or updated; ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` keep the
 Python master. :func:`python_master_reason` says why the Python master runs (``system inspect``
 shows it). The native call itself, like every FMU call, is made in ``bridge.fmu``.
 """
@@ -42,8 +42,6 @@ def python_master_reason(
         return "FMU_BRIDGE_NO_NATIVE or FMU_BRIDGE_NO_NATIVE_MASTER is set"
     if system.max_iterations > 1:
         return "fixed-point iteration (system.iteration) rolls FMU states back"
-    if system.feedthrough_outputs != "held":
-        return "feedthrough_outputs: updated reads outputs again between steps"
     for name, plant in plants.items():
         if not isinstance(plant, FmuComponent):
             node = system.components[name].node
@@ -63,7 +61,7 @@ def python_master_reason(
 
 def native_master(master: Master) -> NativeMaster | None:
     """The native macro step of ``master``, or None where only the Python master serves it."""
-    if master.iterations > 1 or master.system.feedthrough_outputs != "held":
+    if master.iterations > 1:
         return None
     if os.environ.get("FMU_BRIDGE_NO_NATIVE") or os.environ.get("FMU_BRIDGE_NO_NATIVE_MASTER"):
         return None
