@@ -89,3 +89,28 @@ def test_the_python_master_is_named_for_a_table_mapping(tmp_path: Path) -> None:
     assert python_master_reason(system, {}, {c: table}, {}) == (
         "connection a.k -> b.n maps values through a table (IntegerMappingTransformation)"
     )
+
+
+@pytest.mark.parametrize("native", [True, False])
+def test_a_connected_input_is_observed_as_the_value_it_held(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, native: bool
+) -> None:
+    """Before: `'load.omega_in' is an input of the FMU` (refused). Now it reads what the component
+    was given for the macro step just done: its source's output of the step before, through the
+    connection's map (rad/s -> rpm, 0.5 x + 0.01), on either master."""
+    if not native:
+        monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    names = ["motor.omega", "load.omega_in", "load.torque", "motor.load_torque"]
+    data: dict[str, Any] = {
+        "model": {"fmu": str(transformed(tmp_path)), "step_size": H, "episode_duration": 1.0},
+        "observations": {"outputs": names},
+        "system": {"components": {"motor": {"feedthrough": False}}},
+    }
+    with SystemPlant(parse_experiment(data, source=tmp_path / "e.yaml")) as plant:
+        plant.bind([], names)
+        rows = np.array([plant.reset({}, None)] + [plant.step(None) for _ in range(50)])
+        assert (plant.master.native is not None) == native
+    rpm = 1 / (2 * math.pi / 60)
+    np.testing.assert_allclose(rows[1:, 1], rpm * rows[:-1, 0], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(rows[1:, 3], 0.5 * rows[:-1, 2] + 0.01, rtol=1e-15, atol=0)
+    assert rows[-1, 1] > 10.0  # the motor turned

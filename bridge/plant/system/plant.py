@@ -144,7 +144,7 @@ class SystemPlant(Plant):
             _add(ins, c.target)
         for e in external:
             _add(ins, e)
-        for e in observed:
+        for e in observed:  # a connected input too: read from its FMU, the value it held for the step
             _add(outs, e)
         for name, plant in self.plants.items():
             plant.bind(ins[name], outs[name])
@@ -372,9 +372,13 @@ def system_timing(exp: Experiment, system: SystemDescription) -> Timing:
 def system_info(
     exp: Experiment, system: SystemDescription, infos: Mapping[str, ModelInfo], t: Timing
 ) -> ModelInfo:
-    """The system as one model: every component's variables as ``component.variable``."""
+    """The system as one model: every component's variables as ``component.variable``; a
+    connected input is the system's own (causality local): observable, not the task's to drive."""
+    driven = {str(c.target) for c in system.connections}
     variables = {
-        f"{n}.{v.name}": dataclasses.replace(v, name=f"{n}.{v.name}")
+        f"{n}.{v.name}": dataclasses.replace(
+            v, name=f"{n}.{v.name}", causality="local" if f"{n}.{v.name}" in driven else v.causality
+        )
         for n, info in infos.items()
         for v in info.variables.values()
     }
