@@ -77,3 +77,27 @@ observations: {outputs: [load.omega]}
     path.write_text(with_actions)
     result = runner.invoke(app, ["system", "simulate", str(path)], env={"COLUMNS": "200"})
     assert "reward" in str(result.exception) and "Field required" in str(result.exception)
+
+
+def test_a_failed_run_keeps_its_recording(tmp_path: Path) -> None:
+    """`fmu-bridge simulate` of a system that fails: the MCAP holds every sample before the
+    failure (read back with the mcap package's own reader)."""
+    from collections import Counter
+
+    from mcap.reader import make_reader
+
+    write(tmp_path / "overflow.ssp", motor_load(omega='<ssc:LinearTransformation factor="1e308"/>'))
+    (tmp_path / "overflow.yaml").write_text(
+        "model: {fmu: overflow.ssp, step_size: 0.001, episode_duration: 0.4}\n"
+        "system: {components: {motor: {feedthrough: false}}}\n"
+        "observations: {outputs: [motor.omega, load.omega]}\n"
+    )
+    recordings = tmp_path / "recs"
+    args = ["simulate", str(tmp_path / "overflow.yaml"), "--episodes", "1", "--recordings", str(recordings)]
+    result = runner.invoke(app, args, env={"COLUMNS": "200"})
+    assert isinstance(result.exception, BridgeError) and "at step 3 of episode 1" in str(result.exception)
+    (path,) = recordings.glob("*.mcap")
+    with path.open("rb") as stream:
+        topics = Counter(channel.topic for _, channel, _ in make_reader(stream).iter_messages())
+    # the reset and the two samples before the one whose outputs were not finite
+    assert topics["/outputs"] == 3 and topics["/components/motor/outputs"] == 3 and topics["/actions"] == 2
