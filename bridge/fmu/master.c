@@ -18,6 +18,12 @@
  * before consumers) gather their connected inputs of t + H, check them finite, set them and get
  * their outputs again without a step: the Python master's `settle`, with the same calls. A failure
  * there is its status plus MASTER_SETTLING.
+ *
+ * With max_iterations > 1 (fixed-point iteration), as the Python master iterates: every FMU state
+ * and step counter saved, then passes of the macro step, each followed by gathering the connected
+ * inputs again from the new outputs, until no input changed by more than tolerance * (1 + |new|)
+ * or max_iterations passes were made (then `unconverged` counts the step); between passes every
+ * component goes back to the saved state and counter. The states are freed after the step.
  */
 #include <math.h>
 #include <stddef.h>
@@ -33,6 +39,7 @@
 #define MASTER_GET 32
 #define MASTER_NONFINITE 64
 #define MASTER_SETTLING 128 /* added to a status when it came from settling, not from the step */
+#define MASTER_STATE 256    /* + the status of a failed get or set of the FMU state (iteration) */
 
 typedef struct {
     int major;          /* 2 or 3 */
@@ -53,7 +60,20 @@ typedef struct {
     long long* k;       /* the model's own step counter, advanced in place */
     int nv_in;          /* values of u (FMI 3.0 arrays count every element) */
     int nv_out;         /* values of y */
+    void* get_state;    /* fmi2GetFMUstate or fmi3GetFMUState (iteration only) */
+    void* set_state;
+    void* free_state;
+    double* used;       /* iteration: the inputs of the last pass (nv_in values) */
 } Component;
+
+typedef struct {
+    int max_iterations;  /* 1: no iteration */
+    double tolerance;
+    int last;            /* passes made in the last macro step */
+    int unconverged;     /* macro steps that did not converge, added up */
+    void** states;       /* one slot per component */
+    long long* saved_k;  /* one per component */
+} Iteration;
 
 typedef struct {
     int source;  /* position of the source component */
@@ -143,12 +163,20 @@ static int settle(Component* comps, const Link* links, int n_links, int c) {
     return st > MASTER_WARNING ? MASTER_GET + st : MASTER_OK;
 }
 
-int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
-                int n_settle, const int* settle_order) {
+static void keep_used(Component* c, int iterating) {
+    if (iterating) {
+        for (int j = 0; j < c->nv_in; j++) c->used[j] = c->u[j];
+    }
+}
+
+/* Every component stepped once from the current inputs: 0, or 1 + the position that failed. */
+static int pass(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                int iterating) {
     for (int c = 0; c < n; c++) status[c] = MASTER_OK;
     if (!gauss_seidel) {
         gather(comps, links, n_links, -1);
         for (int c = 0; c < n; c++) {
+            keep_used(&comps[c], iterating);
             if (!finite_inputs(&comps[c])) {
                 status[c] = MASTER_NONFINITE;
                 return c + 1;
@@ -158,6 +186,7 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
     for (int c = 0; c < n; c++) {
         if (gauss_seidel) {
             gather(comps, links, n_links, c);
+            keep_used(&comps[c], iterating);
             if (!finite_inputs(&comps[c])) {
                 status[c] = MASTER_NONFINITE;
                 return c + 1;
@@ -166,6 +195,80 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
         status[c] = sample(&comps[c]);
         if (status[c] > MASTER_WARNING && status[c] != MASTER_TERMINATED) return c + 1;
     }
+    return 0;
+}
+
+static int converged(const Component* comps, int n, double tolerance) {
+    for (int c = 0; c < n; c++) {
+        for (int j = 0; j < comps[c].nv_in; j++) {
+            double after = comps[c].u[j];
+            if (!(fabs(after - comps[c].used[j]) <= tolerance * (1.0 + fabs(after)))) return 0;
+        }
+    }
+    return 1;
+}
+
+static int get_state(Component* c, void** state) {
+    *state = NULL;
+    return c->major == 3 ? ((fmi3GetFMUStateTYPE*)c->get_state)(c->component, state)
+                         : ((fmi2GetFMUstateTYPE*)c->get_state)(c->component, state);
+}
+
+static int set_state(Component* c, void* state) {
+    return c->major == 3 ? ((fmi3SetFMUStateTYPE*)c->set_state)(c->component, state)
+                         : ((fmi2SetFMUstateTYPE*)c->set_state)(c->component, state);
+}
+
+static void free_states(Component* comps, int n, void** states) {
+    for (int c = 0; c < n; c++) {
+        if (states[c] == NULL) continue;
+        if (comps[c].major == 3) ((fmi3FreeFMUStateTYPE*)comps[c].free_state)(comps[c].component, &states[c]);
+        else ((fmi2FreeFMUstateTYPE*)comps[c].free_state)(comps[c].component, &states[c]);
+        states[c] = NULL;
+    }
+}
+
+static int iterate(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                   Iteration* it) {
+    int failed = 0;
+    for (int c = 0; c < n; c++) it->states[c] = NULL;
+    for (int c = 0; c < n && !failed; c++) {
+        int st = get_state(&comps[c], &it->states[c]);
+        if (st > MASTER_WARNING) {
+            status[c] = MASTER_STATE + st;
+            failed = c + 1;
+        }
+        it->saved_k[c] = *comps[c].k;
+    }
+    for (int pass_no = 1; !failed && pass_no <= it->max_iterations; pass_no++) {
+        failed = pass(comps, n, links, n_links, gauss_seidel, status, 1);
+        if (failed) break;
+        it->last = pass_no;
+        gather(comps, links, n_links, -1);
+        if (converged(comps, n, it->tolerance)) break;
+        if (pass_no == it->max_iterations) {
+            it->unconverged += 1;
+            break;
+        }
+        for (int c = 0; c < n; c++) {  /* back to t; the outputs stay those at t + H */
+            int st = set_state(&comps[c], it->states[c]);
+            if (st > MASTER_WARNING) {
+                status[c] = MASTER_STATE + st;
+                failed = c + 1;
+                break;
+            }
+            *comps[c].k = it->saved_k[c];
+        }
+    }
+    free_states(comps, n, it->states);
+    return failed;
+}
+
+int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                int n_settle, const int* settle_order, Iteration* it) {
+    int failed = it->max_iterations > 1 ? iterate(comps, n, links, n_links, gauss_seidel, status, it)
+                                        : pass(comps, n, links, n_links, gauss_seidel, status, 0);
+    if (failed) return failed;
     for (int i = 0; i < n_settle; i++) {
         int c = settle_order[i];
         int st = settle(comps, links, n_links, c);
@@ -181,10 +284,10 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
  * component asked to stop, or at a failure (master_step's return). `done` counts the macro steps
  * completed, the one with the stop request included, the failed one not. */
 int master_run(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status, int count,
-               int* done, int n_settle, const int* settle_order) {
+               int* done, int n_settle, const int* settle_order, Iteration* it) {
     *done = 0;
     for (int r = 0; r < count; r++) {
-        int failed = master_step(comps, n, links, n_links, gauss_seidel, status, n_settle, settle_order);
+        int failed = master_step(comps, n, links, n_links, gauss_seidel, status, n_settle, settle_order, it);
         if (failed) return failed;
         *done = r + 1;
         for (int c = 0; c < n; c++) {
@@ -216,6 +319,7 @@ typedef struct {
     int stopped;          /* 1 if a component asked to stop in the last call */
     int n_settle;         /* feedthrough_outputs: updated: the components settled after each step */
     const int* settle;
+    Iteration iteration;
 } Sample;
 
 /* Returns master_run's failure (1 + position), else -1 if a component asked to stop, else 0 (every
@@ -225,7 +329,7 @@ int master_sample(Sample* s, int count, int with_inputs) {
         for (int e = 0; e < s->n_ext; e++) s->comps[s->ext_comp[e]].u[s->ext_j[e]] = s->ext[e];
     }
     int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done,
-                            s->n_settle, s->settle);
+                            s->n_settle, s->settle, &s->iteration);
     s->stopped = 0;
     for (int c = 0; c < s->n; c++) {
         if (s->status[c] == MASTER_TERMINATED) s->stopped = 1;

@@ -60,6 +60,7 @@ def test_transformations_and_units_run_natively_equal_to_python_and_libcosim(
 
 def test_inspect_shows_each_links_map_and_which_master_runs(tmp_path: Path) -> None:
     from bridge.cli.system import _experiment, summary
+    from bridge.plant.system.native_master import python_master_reason
 
     with SystemPlant(_experiment(transformed(tmp_path), no_feedthrough=["motor"])) as plant:
         data = summary(plant)
@@ -70,10 +71,10 @@ def test_inspect_shows_each_links_map_and_which_master_runs(tmp_path: Path) -> N
     assert torque["map"] == "0.5 * value + 0.01"
     assert data["master"]["runs"] == "native"
     with SystemPlant(_experiment(transformed(tmp_path), iterations=3)) as plant:
-        assert summary(plant)["master"] == {
-            "runs": "python",
-            "why": "fixed-point iteration (system.iteration) rolls FMU states back",
-        }
+        assert summary(plant)["master"]["runs"] == "native"  # iteration too
+    with SystemPlant(_experiment(transformed(tmp_path), no_feedthrough=["motor"])) as plant:
+        reason = python_master_reason(plant.system, {**plant.plants, "load": object()}, {}, plant.infos)
+    assert reason == "component 'load' runs in a child process"
 
 
 def test_the_python_master_is_named_for_a_table_mapping(tmp_path: Path) -> None:
@@ -114,3 +115,30 @@ def test_a_connected_input_is_observed_as_the_value_it_held(
     np.testing.assert_allclose(rows[1:, 1], rpm * rows[:-1, 0], rtol=1e-15, atol=0)
     np.testing.assert_allclose(rows[1:, 3], 0.5 * rows[:-1, 2] + 0.01, rtol=1e-15, atol=0)
     assert rows[-1, 1] > 10.0  # the motor turned
+
+
+def test_an_algebraic_loop_iterated_natively_equals_the_python_master(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Both FMUs feedthrough (no --no-feedthrough): the loop through the unit conversion and the
+    transformation is solved by fixed-point iteration, states saved and restored in the native
+    call; the trajectory, the passes of the last step and the unconverged steps as in Python."""
+
+    def iterated() -> tuple[np.ndarray, bool, int, int]:
+        data: dict[str, Any] = {
+            "model": {"fmu": str(transformed(tmp_path)), "step_size": H, "episode_duration": 1.0},
+            "observations": {"outputs": NAMES},
+            "system": {"iteration": {"max_iterations": 6, "tolerance": 1e-12}},
+        }
+        with SystemPlant(parse_experiment(data, source=tmp_path / "e.yaml")) as plant:
+            plant.bind([], NAMES)
+            rows = np.array([plant.reset({}, None)] + [plant.step(None) for _ in range(60)])
+            master = plant.master
+            return rows, master.native is not None, master.last_iterations, master.unconverged_steps
+
+    native = iterated()
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    python = iterated()
+    assert native[1] and not python[1]  # before, iteration always selected the Python master
+    np.testing.assert_array_equal(native[0], python[0])
+    assert native[2:] == python[2:] and native[2] > 1

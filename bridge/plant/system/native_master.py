@@ -3,7 +3,7 @@
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
 co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
 carry values unchanged or through an affine map (linear transformation and/or unit conversion,
-:class:`~bridge.plant.system.transform.Affine`), without fixed-point iteration, with
+:class:`~bridge.plant.system.transform.Affine`), with or without fixed-point iteration, with
 ``feedthrough_outputs`` held or updated; ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` keep the
 Python master. :func:`python_master_reason` says why the Python master runs (``system inspect``
 shows it). The native call itself, like every FMU call, is made in ``bridge.fmu``.
@@ -40,8 +40,6 @@ def python_master_reason(
     master serves it (given a C compiler and instances that hand out their native handles)."""
     if os.environ.get("FMU_BRIDGE_NO_NATIVE") or os.environ.get("FMU_BRIDGE_NO_NATIVE_MASTER"):
         return "FMU_BRIDGE_NO_NATIVE or FMU_BRIDGE_NO_NATIVE_MASTER is set"
-    if system.max_iterations > 1:
-        return "fixed-point iteration (system.iteration) rolls FMU states back"
     for name, plant in plants.items():
         if not isinstance(plant, FmuComponent):
             node = system.components[name].node
@@ -61,8 +59,6 @@ def python_master_reason(
 
 def native_master(master: Master) -> NativeMaster | None:
     """The native macro step of ``master``, or None where only the Python master serves it."""
-    if master.iterations > 1:
-        return None
     if os.environ.get("FMU_BRIDGE_NO_NATIVE") or os.environ.get("FMU_BRIDGE_NO_NATIVE_MASTER"):
         return None
     if any(k.convert is not None and not isinstance(k.convert, Affine) for k in master.links):
@@ -72,6 +68,9 @@ def native_master(master: Master) -> NativeMaster | None:
         if not isinstance(plant, FmuComponent) or plant.model.interface != "cs" or not plant.output_names:
             return None
         if not can_step_natively(plant.model):
+            return None
+        handles = plant.model._native_handles()
+        if master.iterations > 1 and not all(handles[k] for k in ("get_state", "set_state", "free_state")):
             return None
         try:
             inputs = plant.model.signals(plant.input_names, writable=True) if plant.input_names else None
