@@ -2,10 +2,13 @@
 
 In this process: the DC motor and the gearbox load (two FMUs, two connections, Jacobi): the
 native master (one native call per macro step), the Python master (over each component's
-native sample), a raw FMPy loop doing the same work (per macro step and component: setReal of
+native sample), the same system written as an SSP whose speed connection converts rad/s to rpm
+(``ssd:Units``) and whose torque passes a ``LinearTransformation`` (native and Python master),
+a raw FMPy loop doing the same work (per macro step and component: setReal of
 the connected input, doStep, getReal of the outputs), and Ecos's own C++ loop (``ecospy``) on
 the same two FMUs and connections, called once per macro step and once for all of them. Target:
-at most 1.3x the raw loop; the native master no slower than Ecos's loop. Ecos needs
+at most 1.3x the raw loop; the native master no slower than Ecos's loop; with transformations and
+units, the native master within 1.2x of the plain one and no slower than Ecos's plain ``step(1)``. Ecos needs
 ``libtbb.so.12`` (Debian: ``apt-get install libtbb12``); without it that row says why.
 
 Across nodes on loopback: N = 1..4 DC motors in a chain (``c_i.omega -> c_{i+1}.load_torque``),
@@ -29,6 +32,7 @@ import argparse
 import os
 import tempfile
 import time
+import zipfile
 from pathlib import Path
 
 from benchmarks.common import RawFmpyLoop, fmt_us, interleaved, table
@@ -39,16 +43,65 @@ from bridge.plant.system.plant import SystemPlant
 H = 1e-3
 
 
-def system_plant(directory: Path, *, native: bool = True, sample: int = 1) -> SystemPlant:
+_SSD = """<?xml version="1.0" encoding="UTF-8"?>
+<ssd:SystemStructureDescription version="1.0" name="bench"
+    xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription"
+    xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon">
+  <ssd:System name="bench">
+    <ssd:Elements>
+      <ssd:Component name="motor" source="resources/dcmotor.fmu"><ssd:Connectors>
+        <ssd:Connector name="load_torque" kind="input"><ssc:Real/></ssd:Connector>
+        <ssd:Connector name="omega" kind="output"><ssc:Real unit="rad/s"/></ssd:Connector>
+      </ssd:Connectors></ssd:Component>
+      <ssd:Component name="load" source="resources/gearload.fmu"><ssd:Connectors>
+        <ssd:Connector name="omega_in" kind="input"><ssc:Real unit="rpm"/></ssd:Connector>
+        <ssd:Connector name="torque" kind="output"><ssc:Real/></ssd:Connector>
+      </ssd:Connectors></ssd:Component>
+    </ssd:Elements>
+    <ssd:Connections>
+      <ssd:Connection startElement="motor" startConnector="omega" endElement="load" endConnector="omega_in"/>
+      <ssd:Connection startElement="load" startConnector="torque"
+          endElement="motor" endConnector="load_torque">
+        <ssc:LinearTransformation factor="0.5" offset="0.01"/>
+      </ssd:Connection>
+    </ssd:Connections>
+  </ssd:System>
+  <ssd:Units>
+    <ssc:Unit name="rad/s"><ssc:BaseUnit rad="1" s="-1"/></ssc:Unit>
+    <ssc:Unit name="rpm"><ssc:BaseUnit rad="1" s="-1" factor="0.10471975511965977"/></ssc:Unit>
+  </ssd:Units>
+</ssd:SystemStructureDescription>
+"""
+
+
+def transformed_ssp(directory: Path) -> Path:
+    """The motor and load as an SSP: rad/s -> rpm on the speed, 0.5 x + 0.01 on the torque."""
+    path = directory / "transformed.ssp"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("SystemStructure.ssd", _SSD)
+        archive.write(example_fmu("dcmotor", "2.0", "cs"), "resources/dcmotor.fmu")
+        archive.write(example_fmu("gearload", "2.0", "cs"), "resources/gearload.fmu")
+    return path
+
+
+def system_plant(
+    directory: Path, *, native: bool = True, sample: int = 1, transformed: bool = False
+) -> SystemPlant:
+    motor: dict[str, object] = {"feedthrough": False, "parameters": {"voltage": 12.0}}
+    system: dict[str, object] = {
+        "components": {"motor": {"fmu": "example:dcmotor", **motor}, "load": {"fmu": "example:gearload"}},
+        "connections": ["motor.omega -> load.omega_in", "load.torque -> motor.load_torque"],
+    }
+    if transformed:
+        system = {"components": {"motor": motor}}
     data = {
-        "model": {"step_size": H, "sampling_time": sample * H, "episode_duration": 1e4},
-        "system": {
-            "components": {
-                "motor": {"fmu": "example:dcmotor", "feedthrough": False, "parameters": {"voltage": 12.0}},
-                "load": {"fmu": "example:gearload"},
-            },
-            "connections": ["motor.omega -> load.omega_in", "load.torque -> motor.load_torque"],
+        "model": {
+            "step_size": H,
+            "sampling_time": sample * H,
+            "episode_duration": 1e4,
+            **({"fmu": str(transformed_ssp(directory))} if transformed else {}),
         },
+        "system": system,
         "actions": {"inputs": ["load.tau_ext"], "low": {"load.tau_ext": -1}, "high": {"load.tau_ext": 1}},
         "observations": {"outputs": ["load.omega"]},
         "reward": {"terms": [{"alive": 0.0}]},
@@ -113,6 +166,8 @@ def in_process(args: argparse.Namespace) -> None:
         plant = system_plant(Path(tmp))
         python_plant = system_plant(Path(tmp), native=False)
         plant10 = system_plant(Path(tmp), sample=10)
+        transformed = system_plant(Path(tmp), transformed=True)
+        transformed_python = system_plant(Path(tmp), native=False, transformed=True)
         motor, load = raw_pair()
         ecos, why = ecos_simulation()
         state = {"omega": 0.0, "torque": 0.0, "t": 0.0}
@@ -129,6 +184,14 @@ def in_process(args: argparse.Namespace) -> None:
             for _ in range(steps):
                 python_plant.step([0.0])
 
+        def units(steps: int) -> None:
+            for _ in range(steps):
+                transformed.step([0.0])
+
+        def units_python(steps: int) -> None:
+            for _ in range(steps):
+                transformed_python.step([0.0])
+
         def raw(steps: int) -> None:
             m, g = motor.fmu, load.fmu
             m_in, m_out, g_in, g_out = motor._in, motor._out, load._in, load._out
@@ -144,6 +207,7 @@ def in_process(args: argparse.Namespace) -> None:
             state.update(omega=omega, torque=torque, t=t)
 
         candidates = {"system": system, "system10": system10, "python": python_master, "raw": raw}
+        candidates.update(units=units, units_python=units_python)
         if ecos is not None:
             step = ecos.step  # type: ignore[attr-defined]
 
@@ -157,7 +221,7 @@ def in_process(args: argparse.Namespace) -> None:
             candidates.update(ecos_each=ecos_each, ecos_all=ecos_all)
         clock = time.thread_time if args.cpu_time else time.perf_counter
         rates = interleaved(candidates, args.steps, args.repeats, clock)
-        for closable in (plant, plant10, python_plant, motor, load):
+        for closable in (plant, plant10, python_plant, transformed, transformed_python, motor, load):
             closable.close()
         if ecos is not None:
             ecos.terminate()  # type: ignore[attr-defined]
@@ -171,6 +235,8 @@ def report(rates: dict[str, float], ecos_missing: str) -> None:
         ("SystemPlant, Jacobi, native master", "system"),
         ("native master, samples of 10 macro steps", "system10"),
         ("SystemPlant, Jacobi, Python master", "python"),
+        ("units and a transformation, native master", "units"),
+        ("units and a transformation, Python master", "units_python"),
     )
     rows = [("raw FMPy loop (2 FMUs)", fmt_us(raw_rate), "1.00", "")]
     rows += [(label, fmt_us(rates[key]), f"{raw_rate / rates[key]:.2f}", "") for label, key in named]
@@ -186,9 +252,16 @@ def report(rates: dict[str, float], ecos_missing: str) -> None:
     )
     ratio = raw_rate / rates["system"]
     print(f"target <= 1.3x raw: {'met' if ratio <= 1.3 else 'NOT met'}")
+    cost = rates["system"] / rates["units"]
+    print(
+        f"target: units and a transformation <= 1.2x the plain native master: {cost:.2f}x, "
+        f"{'met' if cost <= 1.2 else 'NOT met'}"
+    )
     if ecos_missing:
         print(f"Ecos: {ecos_missing}")
     else:
+        met = "met" if rates["units"] >= rates["ecos_each"] else "NOT met"
+        print(f"target: units and a transformation, native, no slower than Ecos's plain step(1): {met}")
         for ours, theirs, what in (
             ("system", "ecos_each", "a macro step a call"),
             ("system10", "ecos_all", "many a call"),

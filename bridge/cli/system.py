@@ -121,8 +121,47 @@ def summary(plant: Any) -> dict[str, Any]:
             for n, c in system.components.items()
         ],
         "connections": [str(c) for c in system.connections],
+        "links": [_link(plant, c) for c in system.connections],
+        "master": _master(plant),
         "warnings": plant.warnings,
     }
+
+
+def _link(plant: Any, c: Any) -> dict[str, Any]:
+    """A connection with its transformation, unit conversion and the map they compose."""
+    from bridge.plant.system.transform import connection_units, describe
+
+    source = plant.infos[c.source.component].element(c.source.variable)[0]
+    target = plant.infos[c.target.component].element(c.target.variable)[0]
+    units = connection_units(c, source, target, plant.system)
+    t = c.transform
+    return {
+        "connection": str(c),
+        "transformation": None
+        if t is None
+        else {
+            "kind": t.kind,
+            "factor": t.factor,
+            "offset": t.offset,
+            "entries": [list(e) for e in t.entries],
+        },
+        "units": None if units is None else {"from": units[0], "to": units[1]},
+        "map": describe(c, plant.couplings.get(c)),
+    }
+
+
+def _master(plant: Any) -> dict[str, str]:
+    """Which master steps the system, and why."""
+    from bridge.plant.system.native_master import python_master_reason
+
+    why = python_master_reason(plant.system, plant.plants, plant.couplings, plant.infos)
+    if why is None:
+        return {
+            "runs": "native",
+            "why": "every component an FMI 2.0/3.0 co-simulation FMU in this "
+            "process, Float64 connections, values unchanged or through an affine map",
+        }
+    return {"runs": "python", "why": why}
 
 
 @system_app.command("inspect")
@@ -161,10 +200,17 @@ def inspect_system(  # noqa: PLR0917 (typer options)
         row = (c["name"], c["model"], c["fmi"], f"{c['step_size_s']:g}", str(c["feedthrough"]), c["fmu"])
         table.add_row(*row)
     console.print(table)
-    connections = Table("connection", title=f"{data['algorithm']}, macro step {data['macro_step_s']:g} s")
-    for text in data["connections"]:
-        connections.add_row(text)
+    connections = Table(
+        "connection", "units", "value", title=f"{data['algorithm']}, macro step {data['macro_step_s']:g} s"
+    )
+    for link in data["links"]:
+        units = link["units"]
+        connections.add_row(
+            link["connection"], f"{units['from']} -> {units['to']}" if units else "", link["map"]
+        )
     console.print(connections)
+    master = data["master"]
+    console.print(f"master: {master['runs']} ({master['why']})", highlight=False)
     for w in data["warnings"]:
         console.print(f"warning: {w}", highlight=False)
 
@@ -227,25 +273,56 @@ def simulate_system(  # noqa: PLR0917 (typer options)
 
     An .ssp/.ssd runs as it is: every numeric output observed, its DefaultExperiment's step and
     duration unless --step-size and --duration say otherwise."""
+    from bridge.errors import BridgeError
+
     exp = _experiment(experiment, step_size, duration, no_feedthrough, iterations)
+    names = list(exp.observations.outputs)
+    rows: list[list[float]] = []
     with _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix)) as plant:
-        names = list(exp.observations.outputs)
         inputs = list(exp.actions.inputs)
         plant.bind(inputs, names)
         held = _held(set_input or [], inputs)
         start = [held.get(n, float(plant.info.variables[n].start or 0.0)) for n in inputs]
-        rows = [[plant.time_s, *plant.reset({**exp.model.parameters, **exp.model.start_values}, start)]]
         total = round((duration or exp.model.episode_duration) / plant.timing.sampling_time_s)
-        for _ in range(total):
-            rows.append([plant.time_s + plant.timing.sampling_time_s, *plant.step(start)])
+        try:
+            rows.append(
+                [plant.time_s, *plant.reset({**exp.model.parameters, **exp.model.start_values}, start)]
+            )
+            for _ in range(total):
+                rows.append([plant.time_s + plant.timing.sampling_time_s, *plant.step(start)])
+        except BridgeError as exc:  # the rows done are the user's: written, and counted in the error
+            if csv is not None:
+                _write_csv(csv, names, rows)
+            raise BridgeError(f"{exc}\n{_kept(rows, plant.timing.steps_per_sample, total, csv)}") from exc
     if csv is not None:
-        csv.write_text(
-            "\n".join([",".join(["time", *names])] + [",".join(f"{v:.17g}" for v in r) for r in rows]) + "\n"
-        )
+        _write_csv(csv, names, rows)
     table = Table("t [s]", *names, title=f"{experiment}")
     for r in rows[::every] + ([rows[-1]] if (len(rows) - 1) % every else []):
         table.add_row(*(f"{v:.6g}" for v in r))
     console.print(table)
+
+
+def _write_csv(path: Path, names: list[str], rows: list[list[float]]) -> None:
+    lines = [",".join(["time", *names])] + [",".join(f"{v:.17g}" for v in r) for r in rows]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _kept(rows: list[list[float]], steps_per_sample: int, total: int, csv: Path | None) -> str:
+    """What a failed run leaves: the samples done of ``total``, and where their rows are."""
+    if not rows:
+        return "the run failed at its reset: no macro step was done" + (
+            f"; {csv} holds the header" if csv else ""
+        )
+    done = len(rows) - 1
+    where = (
+        f"{csv} holds their {len(rows)} rows (the start included)"
+        if csv
+        else "pass --csv FILE to keep their rows"
+    )
+    return (
+        f"the run stopped after {done * steps_per_sample} macro steps ({done} of {total} samples, "
+        f"t = {rows[-1][0]:g} s); {where}"
+    )
 
 
 def _held(items: list[str], inputs: list[str]) -> dict[str, float]:

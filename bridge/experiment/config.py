@@ -312,6 +312,17 @@ class Experiment(Strict):
     system: SystemSection | None = None
     source: Path | None = Field(default=None, exclude=True)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _open_loop_reward(cls, data: Any) -> Any:
+        """An open-loop experiment (no actions: a system simulated as it is) may leave out the
+        reward, which is then 0; one with actions must say what it rewards."""
+        if isinstance(data, dict) and "reward" not in data:
+            actions = data.get("actions")
+            if not (isinstance(actions, dict) and actions.get("inputs")):
+                return {**data, "reward": {"terms": [{"alive": 0.0}]}}
+        return data
+
     @model_validator(mode="after")
     def _references(self) -> Experiment:
         versions = set(self.versions) | {"v0"}

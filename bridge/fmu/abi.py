@@ -21,6 +21,8 @@ SET_FAILED: Final = 16  # + the status of the failed set
 GET_FAILED: Final = 32  # + the status of the failed get
 INACTIVE: Final = -1  # the instance was not stepped
 NONFINITE: Final = 64  # master.c: a component's input was NaN or infinite (nothing called)
+SETTLING: Final = 128  # master.c: added to the status of a failure while settling (not stepping)
+STATE: Final = 256  # master.c: + the status of a failed get or set of an FMU state (iteration)
 
 # -- fixed_step.c: why the integration loop returned ---------------------------------------------------
 END, STATE_EVENT, TIME_EVENT, STEP_EVENT, TERMINATE = 0, 1, 2, 3, 4
@@ -134,13 +136,39 @@ class MasterComponent(ctypes.Structure):
         ("k", ctypes.c_void_p),  # long long*: the model's own clock
         ("nv_in", ctypes.c_int),  # values of u (arrays count every element); n_in counts value references
         ("nv_out", ctypes.c_int),
+        ("get_state", ctypes.c_void_p),  # fixed-point iteration: the FMU state functions
+        ("set_state", ctypes.c_void_p),
+        ("free_state", ctypes.c_void_p),
+        ("used", ctypes.c_void_p),  # double*: the inputs of the last pass (nv_in values)
+    ]
+
+
+class MasterIteration(ctypes.Structure):
+    """``master.c``'s ``Iteration``: fixed-point iteration of each macro step (max_iterations > 1)."""
+
+    _fields_ = [
+        ("max_iterations", ctypes.c_int),
+        ("tolerance", ctypes.c_double),
+        ("last", ctypes.c_int),  # passes made in the last macro step
+        ("unconverged", ctypes.c_int),  # macro steps that did not converge, added up
+        ("states", ctypes.c_void_p),  # void*[n]
+        ("saved_k", ctypes.c_void_p),  # long long[n]
     ]
 
 
 class MasterLink(ctypes.Structure):
-    """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``."""
+    """``master.c``'s ``Link``: output ``i`` of component ``source`` feeds input ``j`` of ``target``,
+    as it is or (``affine`` 1) as ``factor * value + offset``."""
 
-    _fields_ = [("source", ctypes.c_int), ("i", ctypes.c_int), ("target", ctypes.c_int), ("j", ctypes.c_int)]
+    _fields_ = [
+        ("source", ctypes.c_int),
+        ("i", ctypes.c_int),
+        ("target", ctypes.c_int),
+        ("j", ctypes.c_int),
+        ("factor", ctypes.c_double),
+        ("offset", ctypes.c_double),
+        ("affine", ctypes.c_int),
+    ]
 
 
 class MasterSample(ctypes.Structure):
@@ -164,6 +192,9 @@ class MasterSample(ctypes.Structure):
         ("obs", ctypes.c_void_p),
         ("done", ctypes.c_int),
         ("stopped", ctypes.c_int),
+        ("n_settle", ctypes.c_int),
+        ("settle", ctypes.c_void_p),
+        ("iteration", MasterIteration),
     ]
 
 

@@ -3,8 +3,9 @@
  * The same FMI calls as the Python master over each component's one-call native sample, in the same
  * order and with the same arguments: for each component, one fmi2SetReal / fmi3SetFloat64 of its
  * inputs, `steps` doStep calls at t = t0 + k*h (k its own integer step counter), one fmi2GetReal /
- * fmi3GetFloat64 of its outputs. Connected inputs take their source's output value as it is (no
- * transformation: connections with one are stepped by the Python master).
+ * fmi3GetFloat64 of its outputs. A connected input takes its source's output value as it is, or,
+ * for a link with `affine` set (a linear transformation and/or unit conversion), `factor * y +
+ * offset`: the one expression the Python master's `transform.Affine` computes.
  *
  * Jacobi: every connected input is gathered from the outputs of t, all inputs checked finite, then
  * the components step in order. Gauss-Seidel: each component gathers, checks and steps in order.
@@ -12,6 +13,17 @@
  * MASTER_NONFINITE for an input that is NaN or infinite, which the Python path then reports; the
  * FMI status of a failed doStep; MASTER_SET / MASTER_GET plus the status of a failed set or get).
  * A component that asks to stop (MASTER_TERMINATED) does not stop the others.
+ *
+ * With `feedthrough_outputs: updated`, after every macro step the components of `settle` (sources
+ * before consumers) gather their connected inputs of t + H, check them finite, set them and get
+ * their outputs again without a step: the Python master's `settle`, with the same calls. A failure
+ * there is its status plus MASTER_SETTLING.
+ *
+ * With max_iterations > 1 (fixed-point iteration), as the Python master iterates: every FMU state
+ * and step counter saved, then passes of the macro step, each followed by gathering the connected
+ * inputs again from the new outputs, until no input changed by more than tolerance * (1 + |new|)
+ * or max_iterations passes were made (then `unconverged` counts the step); between passes every
+ * component goes back to the saved state and counter. The states are freed after the step.
  */
 #include <math.h>
 #include <stddef.h>
@@ -26,6 +38,8 @@
 #define MASTER_SET 16
 #define MASTER_GET 32
 #define MASTER_NONFINITE 64
+#define MASTER_SETTLING 128 /* added to a status when it came from settling, not from the step */
+#define MASTER_STATE 256    /* + the status of a failed get or set of the FMU state (iteration) */
 
 typedef struct {
     int major;          /* 2 or 3 */
@@ -46,13 +60,29 @@ typedef struct {
     long long* k;       /* the model's own step counter, advanced in place */
     int nv_in;          /* values of u (FMI 3.0 arrays count every element) */
     int nv_out;         /* values of y */
+    void* get_state;    /* fmi2GetFMUstate or fmi3GetFMUState (iteration only) */
+    void* set_state;
+    void* free_state;
+    double* used;       /* iteration: the inputs of the last pass (nv_in values) */
 } Component;
+
+typedef struct {
+    int max_iterations;  /* 1: no iteration */
+    double tolerance;
+    int last;            /* passes made in the last macro step */
+    int unconverged;     /* macro steps that did not converge, added up */
+    void** states;       /* one slot per component */
+    long long* saved_k;  /* one per component */
+} Iteration;
 
 typedef struct {
     int source;  /* position of the source component */
     int i;       /* its output index */
     int target;
     int j;       /* the target's input index */
+    double factor;
+    double offset;
+    int affine;  /* 0: the value passes unchanged; 1: factor * value + offset */
 } Link;
 
 static int do_steps2(Component* c) {
@@ -105,7 +135,8 @@ static int sample(Component* c) {
 static void gather(Component* comps, const Link* links, int n_links, int target) {
     for (int l = 0; l < n_links; l++) {
         if (target < 0 || links[l].target == target) {
-            comps[links[l].target].u[links[l].j] = comps[links[l].source].y[links[l].i];
+            double y = comps[links[l].source].y[links[l].i];
+            comps[links[l].target].u[links[l].j] = links[l].affine ? links[l].factor * y + links[l].offset : y;
         }
     }
 }
@@ -117,11 +148,35 @@ static int finite_inputs(const Component* c) {
     return 1;
 }
 
-int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status) {
+static int settle(Component* comps, const Link* links, int n_links, int c) {
+    Component* s = &comps[c];
+    gather(comps, links, n_links, c);
+    if (!finite_inputs(s)) return MASTER_NONFINITE;
+    int st;
+    if (s->n_in > 0) {
+        st = s->major == 3 ? ((fmi3SetFloat64TYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u, s->nv_in)
+                           : ((fmi2SetRealTYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u);
+        if (st > MASTER_WARNING) return MASTER_SET + st;
+    }
+    st = s->major == 3 ? ((fmi3GetFloat64TYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y, s->nv_out)
+                       : ((fmi2GetRealTYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y);
+    return st > MASTER_WARNING ? MASTER_GET + st : MASTER_OK;
+}
+
+static void keep_used(Component* c, int iterating) {
+    if (iterating) {
+        for (int j = 0; j < c->nv_in; j++) c->used[j] = c->u[j];
+    }
+}
+
+/* Every component stepped once from the current inputs: 0, or 1 + the position that failed. */
+static int pass(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                int iterating) {
     for (int c = 0; c < n; c++) status[c] = MASTER_OK;
     if (!gauss_seidel) {
         gather(comps, links, n_links, -1);
         for (int c = 0; c < n; c++) {
+            keep_used(&comps[c], iterating);
             if (!finite_inputs(&comps[c])) {
                 status[c] = MASTER_NONFINITE;
                 return c + 1;
@@ -131,6 +186,7 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
     for (int c = 0; c < n; c++) {
         if (gauss_seidel) {
             gather(comps, links, n_links, c);
+            keep_used(&comps[c], iterating);
             if (!finite_inputs(&comps[c])) {
                 status[c] = MASTER_NONFINITE;
                 return c + 1;
@@ -142,14 +198,96 @@ int master_step(Component* comps, int n, const Link* links, int n_links, int gau
     return 0;
 }
 
+static int converged(const Component* comps, int n, double tolerance) {
+    for (int c = 0; c < n; c++) {
+        for (int j = 0; j < comps[c].nv_in; j++) {
+            double after = comps[c].u[j];
+            if (!(fabs(after - comps[c].used[j]) <= tolerance * (1.0 + fabs(after)))) return 0;
+        }
+    }
+    return 1;
+}
+
+static int get_state(Component* c, void** state) {
+    *state = NULL;
+    return c->major == 3 ? ((fmi3GetFMUStateTYPE*)c->get_state)(c->component, state)
+                         : ((fmi2GetFMUstateTYPE*)c->get_state)(c->component, state);
+}
+
+static int set_state(Component* c, void* state) {
+    return c->major == 3 ? ((fmi3SetFMUStateTYPE*)c->set_state)(c->component, state)
+                         : ((fmi2SetFMUstateTYPE*)c->set_state)(c->component, state);
+}
+
+static void free_states(Component* comps, int n, void** states) {
+    for (int c = 0; c < n; c++) {
+        if (states[c] == NULL) continue;
+        if (comps[c].major == 3) ((fmi3FreeFMUStateTYPE*)comps[c].free_state)(comps[c].component, &states[c]);
+        else ((fmi2FreeFMUstateTYPE*)comps[c].free_state)(comps[c].component, &states[c]);
+        states[c] = NULL;
+    }
+}
+
+static int iterate(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                   Iteration* it) {
+    int failed = 0;
+    for (int c = 0; c < n; c++) it->states[c] = NULL;
+    for (int c = 0; c < n && !failed; c++) {
+        int st = get_state(&comps[c], &it->states[c]);
+        if (st > MASTER_WARNING) {
+            status[c] = MASTER_STATE + st;
+            failed = c + 1;
+        }
+        it->saved_k[c] = *comps[c].k;
+    }
+    for (int pass_no = 1; !failed && pass_no <= it->max_iterations; pass_no++) {
+        failed = pass(comps, n, links, n_links, gauss_seidel, status, 1);
+        if (failed) break;
+        it->last = pass_no;
+        gather(comps, links, n_links, -1);
+        if (converged(comps, n, it->tolerance)) break;
+        if (pass_no == it->max_iterations) {
+            it->unconverged += 1;
+            break;
+        }
+        for (int c = 0; c < n; c++) {  /* back to t; the outputs stay those at t + H */
+            int st = set_state(&comps[c], it->states[c]);
+            if (st > MASTER_WARNING) {
+                status[c] = MASTER_STATE + st;
+                failed = c + 1;
+                break;
+            }
+            *comps[c].k = it->saved_k[c];
+        }
+    }
+    free_states(comps, n, it->states);
+    return failed;
+}
+
+int master_step(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
+                int n_settle, const int* settle_order, Iteration* it) {
+    int failed = it->max_iterations > 1 ? iterate(comps, n, links, n_links, gauss_seidel, status, it)
+                                        : pass(comps, n, links, n_links, gauss_seidel, status, 0);
+    if (failed) return failed;
+    for (int i = 0; i < n_settle; i++) {
+        int c = settle_order[i];
+        int st = settle(comps, links, n_links, c);
+        if (st > MASTER_WARNING) {
+            status[c] = MASTER_SETTLING + st;
+            return c + 1;
+        }
+    }
+    return 0;
+}
+
 /* Up to `count` macro steps (one sample of several): stops after a macro step in which a
  * component asked to stop, or at a failure (master_step's return). `done` counts the macro steps
  * completed, the one with the stop request included, the failed one not. */
 int master_run(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status, int count,
-               int* done) {
+               int* done, int n_settle, const int* settle_order, Iteration* it) {
     *done = 0;
     for (int r = 0; r < count; r++) {
-        int failed = master_step(comps, n, links, n_links, gauss_seidel, status);
+        int failed = master_step(comps, n, links, n_links, gauss_seidel, status, n_settle, settle_order, it);
         if (failed) return failed;
         *done = r + 1;
         for (int c = 0; c < n; c++) {
@@ -179,6 +317,9 @@ typedef struct {
     double* obs;
     int done;             /* macro steps completed by the last call */
     int stopped;          /* 1 if a component asked to stop in the last call */
+    int n_settle;         /* feedthrough_outputs: updated: the components settled after each step */
+    const int* settle;
+    Iteration iteration;
 } Sample;
 
 /* Returns master_run's failure (1 + position), else -1 if a component asked to stop, else 0 (every
@@ -187,7 +328,8 @@ int master_sample(Sample* s, int count, int with_inputs) {
     if (with_inputs) {
         for (int e = 0; e < s->n_ext; e++) s->comps[s->ext_comp[e]].u[s->ext_j[e]] = s->ext[e];
     }
-    int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done);
+    int failed = master_run(s->comps, s->n, s->links, s->n_links, s->gauss_seidel, s->status, count, &s->done,
+                            s->n_settle, s->settle, &s->iteration);
     s->stopped = 0;
     for (int c = 0; c < s->n; c++) {
         if (s->status[c] == MASTER_TERMINATED) s->stopped = 1;

@@ -721,7 +721,8 @@ class Model:
 
         Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
         ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
-        fmi2GetBooleanStatus; 0 where absent). Valid while the model is open and initialised; the
+        fmi2GetBooleanStatus; 0 where absent), ``get_state``, ``set_state``, ``free_state`` (the
+        FMU state functions; 0 where absent). Valid while the model is open and initialised; the
         same dict while the instance is the same (a reset by restore or fmi reset keeps it).
         In model exchange (fixed-step solvers only) :attr:`_fixed_stepper` integrates.
         """
@@ -746,6 +747,10 @@ class Model:
             "get_real": address(functions.get(f"{v}Get{real}")),
             "do_step": address(functions.get(f"{v}DoStep")),
             "bool_status": address(functions.get("fmi2GetBooleanStatus")) if b.major == 2 else 0,
+            # a system's fixed-point iteration saves and restores the state natively
+            "get_state": address(functions.get("fmi2GetFMUstate" if b.major == 2 else "fmi3GetFMUState")),
+            "set_state": address(functions.get("fmi2SetFMUstate" if b.major == 2 else "fmi3SetFMUState")),
+            "free_state": address(functions.get("fmi2FreeFMUstate" if b.major == 2 else "fmi3FreeFMUState")),
         }
         self._handles = (b.component, handles)
         return handles

@@ -2,12 +2,16 @@
 
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
 co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
-carry values unchanged (no unit conversion or transformation), without fixed-point iteration
-and with ``feedthrough_outputs: held``. Everything else, or a machine without a C compiler, or
-``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` set, keeps the Python master, which stays
-the reference: the native call makes the FMI calls the Python master makes over each component's
-native sample, in the same order with the same arguments, so the trajectories are equal bit for
-bit (tests/plant/test_system_native_master.py). ctypes releases the GIL during the call.
+carry values unchanged or through an affine map (linear transformation, unit conversion),
+with or without fixed-point iteration (FMU states saved, restored and freed in the call, as the
+Python master does through each component), with ``feedthrough_outputs`` held or updated (the
+feedthrough components settled in the same call, as the Python master settles them). Everything
+else, or a
+machine without a C compiler, or ``FMU_BRIDGE_NO_NATIVE`` / ``FMU_BRIDGE_NO_NATIVE_MASTER`` set,
+keeps the Python master, which stays the reference: the native call makes the FMI calls the
+Python master makes over each component's native sample, in the same order with the same
+arguments, so the trajectories are equal bit for bit (tests/plant/test_system_native_master.py).
+ctypes releases the GIL during the call.
 
 The library is built with gcc on first use and cached like the batch stepper's
 (``bridge.fmu.native``). Its inputs and outputs are the master's own arrays: the C code sets the
@@ -30,7 +34,16 @@ import numpy as np
 
 from bridge.errors import BridgeError, FmuError
 from bridge.fmu import native as native_build
-from bridge.fmu.abi import NONFINITE, TERMINATED, Clock, MasterComponent, MasterLink, MasterSample
+from bridge.fmu.abi import (
+    NONFINITE,
+    SETTLING,
+    STATE,
+    TERMINATED,
+    Clock,
+    MasterComponent,
+    MasterLink,
+    MasterSample,
+)
 from bridge.fmu.model import Model
 from bridge.fmu.signals import SignalGroup
 
@@ -66,6 +79,15 @@ def can_step_natively(model: Model) -> bool:
     return True
 
 
+def _link(link: Any, position: dict[str, int]) -> MasterLink:
+    """A master's link as ``master.c`` reads it; its conversion is None or an affine map (both
+    with ``factor`` and ``offset``), which ``native_master`` checked."""
+    ends = (position[link.source], link.i, position[link.target], link.j)
+    if link.convert is None:
+        return _Link(*ends, 1.0, 0.0, 0)
+    return _Link(*ends, link.convert.factor, link.convert.offset, 1)
+
+
 def _ints(values: Sequence[int]) -> np.ndarray[Any, np.dtype[np.intc]]:
     return np.ascontiguousarray(np.array(list(values) or [0], dtype=np.intc))
 
@@ -91,7 +113,7 @@ class NativeMaster:
         self._names = list(master.order)
         self._plants: list[FmuComponent] = [master.plants[n] for n in self._names]  # type: ignore[misc]
         position = {n: p for p, n in enumerate(self._names)}
-        links = [_Link(position[k.source], k.i, position[k.target], k.j) for k in master.links]
+        links = [_link(k, position) for k in master.links]
         self._links = (_Link * max(1, len(links)))(*links)
         self._comps = (_Component * len(self._names))()
         self._status = (ctypes.c_int * len(self._names))()
@@ -117,6 +139,16 @@ class NativeMaster:
         spec.ext_comp, spec.ext_j = self._ext_comp.ctypes.data, self._ext_j.ctypes.data
         spec.n_obs, spec.obs = len(observed), self._obs_buffer.ctypes.data
         spec.obs_comp, spec.obs_i = self._obs_comp.ctypes.data, self._obs_i.ctypes.data
+        self._settle = _ints([position[n] for n in master.settle_order])
+        spec.n_settle, spec.settle = len(master.settle_order), self._settle.ctypes.data
+        n = len(self._names)
+        self._states = (ctypes.c_void_p * n)()
+        self._saved_k = np.zeros(n, dtype=np.int64)
+        self._used: list[np.ndarray[Any, np.dtype[np.float64]]] = []
+        self._iterating = master.iterations > 1
+        iteration = spec.iteration
+        iteration.max_iterations, iteration.tolerance = master.iterations, master.system.tolerance
+        iteration.states, iteration.saved_k = ctypes.addressof(self._states), self._saved_k.ctypes.data
         self._spec_ref = ctypes.byref(spec)
         self._n_obs, self._n_ext = len(observed), len(external)
         self.done = 0  # macro steps the last call completed
@@ -125,6 +157,7 @@ class NativeMaster:
     def refresh(self) -> None:
         """Re-read the instances' addresses and the master's arrays (after a reset)."""
         master, self.stopped = self.master, False
+        self._used = []
         for position, (c, name, plant) in enumerate(zip(self._comps, self._names, self._plants)):
             model, (inputs, outputs) = plant.model, self._groups[name]
             h = model._native_handles()
@@ -141,6 +174,9 @@ class NativeMaster:
             master.outputs[name] = y = np.ascontiguousarray(master.outputs[name], dtype=np.float64).copy()
             c.u, c.y = u.ctypes.data, y.ctypes.data
             c.out_vr, c.n_out, c.nv_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0, 0)
+            c.get_state, c.set_state, c.free_state = h["get_state"], h["set_state"], h["free_state"]
+            self._used.append(used := np.zeros(max(1, len(u))))  # alive while C writes into it
+            c.used = used.ctypes.data
 
     def sample(self, inputs: Sequence[float] | None, count: int) -> np.ndarray[Any, np.dtype[np.float64]]:
         """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
@@ -164,6 +200,8 @@ class NativeMaster:
                 self._refused(with_inputs)
             plant.sample += count
         code = self._call(self._spec_ref, count, with_inputs)
+        if self._iterating:
+            self._count_iterations()
         if not code:  # every component stepped `count` macro steps with OK
             self.done = count
             return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
@@ -183,6 +221,8 @@ class NativeMaster:
             if not m._steppable:
                 self._refused(0)
         code = self._call(self._spec_ref, count, 0)
+        if self._iterating:
+            self._count_iterations()
         self.done = done = self._spec.done
         if code:
             self.stopped = bool(self._spec.stopped)
@@ -190,6 +230,13 @@ class NativeMaster:
             return
         for plant in self._plants:
             plant.sample += done
+
+    def _count_iterations(self) -> None:
+        """The master's iteration counts, as its Python loop keeps them."""
+        iteration = self._spec.iteration
+        self.master.last_iterations = iteration.last
+        self.master.unconverged_steps += iteration.unconverged
+        iteration.unconverged = 0
 
     def _refused(self, with_inputs: int) -> None:
         """The Python path raises the model's own refusal (terminated, failed, closed)."""
@@ -206,7 +253,7 @@ class NativeMaster:
     def _finish(self, failed: int, done: int) -> None:
         plants, status = self._plants, self._status
         stepped = len(plants)  # components that took part in the last macro step tried
-        if failed:
+        if failed and status[failed - 1] < SETTLING:  # a settling failure: every component stepped
             stepped = failed - 1
             if status[stepped] == NONFINITE and not self._gauss_seidel:
                 stepped = 0  # Jacobi checks every input before any component steps
@@ -219,6 +266,20 @@ class NativeMaster:
 
     def _fail(self, plant: FmuComponent, status: int, k: int) -> None:
         name = self._names[self._plants.index(plant)]
+        inputs = self.master.inputs[name].tolist()
+        if status >= STATE:  # the FMU refused to save or restore its state: its own call says why
+            state = plant.save()
+            plant.restore(state)
+            plant.discard(state)
+            raise plant._failed(
+                FmuError(
+                    f"{plant.name}: the FMU state could not be saved or restored "
+                    f"(status {status - STATE}) during fixed-point iteration"
+                )
+            )
+        if status >= SETTLING:  # set or get while settling: the Python path's own call says why
+            plant.settle(inputs)
+            status -= SETTLING
         if status == NONFINITE:  # the Python path's own check names the input
-            plant.step(self.master.inputs[name].tolist())
+            plant.step(inputs)
         plant.native_failed(status, k)

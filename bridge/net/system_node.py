@@ -22,7 +22,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from bridge.errors import ConfigError
+from bridge.errors import ConfigError, TransportError
 from bridge.experiment.config import Experiment, parse_experiment
 from bridge.experiment.validate import Timing, with_elements
 from bridge.fmu.vocab import ModelInfo, info_from_summary
@@ -318,15 +318,19 @@ class NodeComponents:
         return self._session
 
     def __call__(self, component: Component, step_size_s: float, start_time_s: float, where: str) -> Plant:
-        return RemotePlant.for_component(
-            component,
-            step_size_s,
-            start_time_s,
-            session=self._open(),
-            prefix=self.prefix,
-            timeout_s=self.timeout_s,
-            where=where,
-        )
+        session = self._open()
+        try:
+            return RemotePlant.for_component(
+                component,
+                step_size_s,
+                start_time_s,
+                session=session,
+                prefix=self.prefix,
+                timeout_s=self.timeout_s,
+                where=where,
+            )
+        except TransportError as exc:
+            raise self._missing(component, exc) from exc
 
     def describe(self, component: Component) -> ModelInfo:
         """The component's model as its node reports it (the FMU need not be on this machine)."""
@@ -341,8 +345,33 @@ class NodeComponents:
 
         node = component.node or component.name
         if node not in self._infos:
-            self._infos[node] = query_info(self._open(), proto.Keys(self.prefix, node), self.timeout_s)
+            session = self._open()
+            try:
+                self._infos[node] = query_info(session, proto.Keys(self.prefix, node), self.timeout_s)
+            except TransportError as exc:
+                raise self._missing(component, exc) from exc
         return self._infos[node]
+
+    def _missing(self, component: Component, exc: TransportError) -> TransportError:
+        """A component's node not found, said for a system: how to serve it, and the Zenoh mode."""
+        if "no FMU node named" not in str(exc):
+            return exc
+        node, options = component.node or component.name, self._options
+        hint = ""
+        if options is not None and options.mode == "client" and len(options.connect) > 1:
+            hint = (
+                f"; this session runs in Zenoh client mode (--connect without --listen), which "
+                f"reaches one router, not each of {list(options.connect)}: add --zenoh-mode peer to "
+                f"connect to every endpoint"
+            )
+        elif options is not None and options.mode == "client":
+            hint = f"; this session is a Zenoh client of {list(options.connect)}: the node must reach it too"
+        return TransportError(
+            f"system component {component.name!r}: no node {node!r} answers within {self.timeout_s:g} s "
+            f"(prefix {self.prefix!r}); serve it with `fmu-bridge system serve EXPERIMENT --component "
+            f"{component.name}` where its FMU is, and check the Zenoh endpoints{hint} "
+            f"(`fmu-bridge nodes` lists the live ones)"
+        )
 
     def close(self) -> None:
         if self._own and self._session is not None:

@@ -139,9 +139,10 @@ def test_a_dead_component_node_is_named(net: Loopback, tmp_path: Path) -> None:
 
 def test_a_component_node_that_is_not_running_is_a_clear_error(net: Loopback, tmp_path: Path) -> None:
     file = system_file(tmp_path, "absent", {"motor": "nobody-home"})
-    with pytest.raises(Exception, match=r"no FMU node named 'nobody-home'"):
+    with pytest.raises(Exception, match=r"no node 'nobody-home' answers") as info:
         remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=1.0)
         SystemPlant(load_experiment(file), remote=remote)
+    assert "`fmu-bridge system serve EXPERIMENT --component motor`" in str(info.value)
 
 
 def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:

@@ -23,8 +23,12 @@ from bridge.plant.system.description import Component
 def steps_per_macro(component: Component, macro_step_s: float, default_s: float | None, where: str) -> int:
     """How many steps of the component's own size make one macro step (must be whole)."""
     h = component.step_size_s or default_s or macro_step_s
-    if h > macro_step_s * (1 + 1e-12):
-        h = macro_step_s
+    if h > macro_step_s * (1 + 1e-9):
+        raise ConfigError(
+            f"system.components.{component.name}.step_size: {h:g} s is longer than the macro step "
+            f"{macro_step_s:g} s; a component steps whole steps inside each macro step, so the macro "
+            f"step must be its step or a multiple of it (e.g. {h:g}){where}"
+        )
     ratio = macro_step_s / h
     n = round(ratio)
     if n < 1 or not math.isclose(ratio, n, rel_tol=1e-9):

@@ -97,14 +97,15 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
             {**(getattr(old, key) if old else {}), **getattr(spec, key)}  # the file's names win
             for key in ("structural_parameters", "clock_intervals", "clock_schedule")
         )
+        # a key the section leaves out keeps the file's value (its step size above all)
         components[name] = Component(
             name,
             fmu,
             parameters,
-            spec.step_size,
+            spec.step_size if spec.step_size is not None else (old.step_size_s if old else None),
             interface,
-            spec.feedthrough,
-            spec.node,
+            spec.feedthrough if spec.feedthrough is not None or old is None else old.feedthrough,
+            spec.node if spec.node is not None or old is None else old.node,
             units,
             sizes,
             intervals,
@@ -128,6 +129,9 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
         source=experiment.source,
         units=base.units if base else {},
         ssp=base.source if base else None,
+        duration_s=base.duration_s if base else None,
+        start_time_s=base.start_time_s if base else None,
+        warnings=base.warnings if base else (),
     )
 
 

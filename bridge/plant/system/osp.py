@@ -6,11 +6,21 @@ as libcosim orients it: from the end that is an output or calculated parameter),
 ``LinearTransformation`` functions wired by one ``SignalConnection`` into ``in`` and one or more out
 of ``out`` (each becomes a connection with that transformation, as SSP's). Refused by name: ``Sum``
 and ``VectorSum`` functions, variable and signal group connections (they need the FMUs'
-``OspModelDescription.xml``), simulators whose source is not a file.
+``OspModelDescription.xml``), simulators whose source is not a file, any ``Algorithm`` but
+``fixedStep`` (ECCO's adaptive step) and power bonds.
+
+Decimation, as libcosim's fixed-step algorithm: a simulator with ``stepSize`` steps every
+``d = floor(stepSize / BaseStepSize)`` base steps (at least 1; a step that is not a whole number of
+base steps is rounded down with a warning naming both, as libcosim's integer division of the two
+durations does). The macro step is the largest
+step, ``max(d) * BaseStepSize``; every simulator does ``max(d) / d`` steps of its own inside it (so
+every ``d`` must divide the largest, else the file is refused naming the two simulators).
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -47,12 +57,65 @@ def read_osp(path: Path) -> SystemDescription:
                 f"{kind} is not supported: variable groups come from each FMU's OspModelDescription.xml, "
                 f"which is not read; connect the variables one by one (VariableConnection) [{path}]"
             )
+    _refuse_ecco(root, path)
+    base = _number(root, "BaseStepSize", path)
+    components, macro, warnings = decimate(components, base, path)
     return SystemDescription(
         components=components,
         connections=tuple(connections),
-        step_size_s=_number(root, "BaseStepSize", path),
+        step_size_s=macro,
         source=path,
+        start_time_s=_number(root, "StartTime", path),
+        warnings=tuple(warnings),
     )
+
+
+def _refuse_ecco(root: ET.Element, path: Path) -> None:
+    """ECCO (adaptive step from power bonds) is not built here: refused by name, not run as Jacobi."""
+    algorithm = root.find("{*}Algorithm")
+    name = (algorithm.text or "").strip() if algorithm is not None else "fixedStep"
+    if name.lower() != "fixedstep":
+        raise ConfigError(
+            f"Algorithm {name!r} is not supported: only fixedStep (libcosim's fixed-step algorithm) is "
+            f"built here; ECCO's adaptive step is not; use <Algorithm>fixedStep</Algorithm> [{path}]"
+        )
+    for element in root.iter():
+        bonds = [k for k in (_local(element.tag), *element.attrib) if "powerbond" in k.lower()]
+        if bonds:
+            raise ConfigError(
+                f"power bonds ({bonds[0]} in {_local(element.tag)}) are not supported: they serve ECCO's "
+                f"adaptive step, which is not built here; connect the variables with plain "
+                f"VariableConnection elements [{path}]"
+            )
+
+
+def decimate(
+    components: dict[str, Component], base_s: float | None, path: Path
+) -> tuple[dict[str, Component], float | None, list[str]]:
+    """The components with their steps as whole numbers of base steps, the macro step (the largest
+    step) and a warning for each step rounded (module docstring)."""
+    if base_s is None or not any(c.step_size_s for c in components.values()):
+        return components, base_s, []
+    warnings, factor = [], {}
+    for name, c in components.items():
+        given = c.step_size_s or base_s
+        factor[name] = d = max(1, math.floor(given / base_s * (1 + 1e-9)))
+        if not math.isclose(d * base_s, given, rel_tol=1e-9):
+            warnings.append(
+                f"simulator {name!r}: stepSize {given:g} s is not a whole number of BaseStepSize "
+                f"{base_s:g} s; it steps every {d} base steps ({d * base_s:g} s), as libcosim does [{path}]"
+            )
+    largest = max(factor, key=lambda n: factor[n])
+    for name, d in factor.items():
+        if factor[largest] % d:
+            raise ConfigError(
+                f"simulators {name!r} (every {d} base steps, {d * base_s:g} s) and {largest!r} (every "
+                f"{factor[largest]} base steps, {factor[largest] * base_s:g} s): the macro step is the "
+                f"largest step and {name!r}'s does not divide it; give stepSizes that divide the "
+                f"largest one [{path}]"
+            )
+    stepped = {n: dataclasses.replace(c, step_size_s=factor[n] * base_s) for n, c in components.items()}
+    return stepped, factor[largest] * base_s, warnings
 
 
 def _local(tag: str) -> str:

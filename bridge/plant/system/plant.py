@@ -91,7 +91,7 @@ class SystemPlant(Plant):
         }
         self.system = system = expand_arrays(system, self.infos)  # whole arrays: element by element
         self.couplings: dict[Connection, Convert | None] = {}
-        self.warnings = check_system(system, self.infos, self.couplings)
+        self.warnings = [*system.warnings, *check_system(system, self.infos, self.couplings)]
         self.feedthrough = {n: has_feedthrough(c, self.infos[n]) for n, c in system.components.items()}
         loop = find_loop(system, self.feedthrough)
         if loop and system.max_iterations <= 1:
@@ -144,7 +144,7 @@ class SystemPlant(Plant):
             _add(ins, c.target)
         for e in external:
             _add(ins, e)
-        for e in observed:
+        for e in observed:  # a connected input too: read from its FMU, the value it held for the step
             _add(outs, e)
         for name, plant in self.plants.items():
             plant.bind(ins[name], outs[name])
@@ -354,22 +354,31 @@ def _start(info: ModelInfo, name: str) -> float:
 
 
 def system_timing(exp: Experiment, system: SystemDescription) -> Timing:
-    """Macro step ``model.step_size`` (or the SSP's), samples of whole macro steps."""
+    """Macro step ``model.step_size`` (or the SSP's), samples of whole macro steps; the start time
+    ``model.start_time`` where the experiment sets it, else the system file's (SSP ``startTime``,
+    OSP ``StartTime``), else 0."""
     h = exp.model.step_size or system.step_size_s
     if h is None:
         raise ConfigError(
             f"model.step_size: a system needs its macro step (seconds); set model.step_size{system.where}"
         )
     n = sampling_ratio(exp.model.sampling_time or h, h)
-    return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=exp.model.start_time)
+    start = exp.model.start_time
+    if "start_time" not in exp.model.model_fields_set and system.start_time_s is not None:
+        start = system.start_time_s
+    return Timing(step_size_s=h, steps_per_sample=n, sampling_time_s=n * h, start_time_s=start)
 
 
 def system_info(
     exp: Experiment, system: SystemDescription, infos: Mapping[str, ModelInfo], t: Timing
 ) -> ModelInfo:
-    """The system as one model: every component's variables as ``component.variable``."""
+    """The system as one model: every component's variables as ``component.variable``; a
+    connected input is the system's own (causality local): observable, not the task's to drive."""
+    driven = {str(c.target) for c in system.connections}
     variables = {
-        f"{n}.{v.name}": dataclasses.replace(v, name=f"{n}.{v.name}")
+        f"{n}.{v.name}": dataclasses.replace(
+            v, name=f"{n}.{v.name}", causality="local" if f"{n}.{v.name}" in driven else v.causality
+        )
         for n, info in infos.items()
         for v in info.variables.values()
     }

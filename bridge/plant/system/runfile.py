@@ -45,7 +45,8 @@ def ssp_experiment(
     duration = duration_s or description.duration_s or step
     data: dict[str, Any] = {
         "name": path.stem,
-        "model": {"fmu": str(path), "step_size": step, "episode_duration": _whole(duration, step)},
+        # absolute: model.fmu resolves against the experiment's folder, which is the file's own
+        "model": {"fmu": str(path.absolute()), "step_size": step, "episode_duration": _whole(duration, step)},
         "observations": {"outputs": outputs, "scale": "none"},
         "reward": {"terms": [{"alive": 0.0}]},
     }

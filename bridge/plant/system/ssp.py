@@ -109,16 +109,17 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
     components: dict[str, Component] = {}
     connections = tuple(_read_system(system, "", root, origin, found, bus, components) + bus.routed(origin))
     _convert_bound_values(components, found, origin)
-    step, duration = None, None
+    step, duration, start = None, None, None
     experiment = top.find(f"{SSD}DefaultExperiment")
     if experiment is not None:
         for annotation in experiment.iter():  # a tool's annotation (OSP: baseStepSize)
             for key in ("stepSize", "baseStepSize"):
                 if key in annotation.attrib:
                     step = _float(annotation.attrib[key], key, origin)
+        if "startTime" in experiment.attrib:
+            start = _float(experiment.attrib["startTime"], "startTime", origin)
         if "stopTime" in experiment.attrib:
-            start = _float(experiment.attrib.get("startTime", "0"), "startTime", origin)
-            duration = _float(experiment.attrib["stopTime"], "stopTime", origin) - start
+            duration = _float(experiment.attrib["stopTime"], "stopTime", origin) - (start or 0.0)
     return SystemDescription(
         components=components,
         connections=connections,
@@ -126,6 +127,7 @@ def _read_ssd(ssd: Path, root: Path, origin: Path) -> SystemDescription:
         source=origin,
         units=found.definitions,
         duration_s=duration,
+        start_time_s=start,
     )
 
 

@@ -101,6 +101,8 @@ class SystemDescription:
     units: dict[str, Unit] = field(default_factory=dict)  # an SSD's unit definitions by name
     ssp: Path | None = None  # the .ssp/.ssd the components and connections came from, if any
     duration_s: float | None = None  # an SSP's stopTime - startTime, if it gives one
+    start_time_s: float | None = None  # an SSP's startTime or OSP's StartTime, if it gives one
+    warnings: tuple[str, ...] = ()  # what the file asked for and was mapped with a change
 
     @property
     def where(self) -> str:

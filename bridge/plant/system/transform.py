@@ -32,6 +32,23 @@ _BASE = ("kg", "m", "s", "A", "K", "mol", "cd", "rad")
 
 
 @dataclass(frozen=True)
+class Affine:
+    """A linear transformation and/or unit conversion as one map, ``factor * value + offset``: the
+    expression the native master's C loop computes for the link too (``master.c``), so both
+    masters give the same value bit for bit."""
+
+    factor: float
+    offset: float = 0.0
+
+    def __call__(self, value: float) -> float:
+        return self.factor * value + self.offset
+
+    def then(self, other: Affine) -> Affine:
+        """``other`` applied after this map, as one map."""
+        return Affine(other.factor * self.factor, other.factor * self.offset + other.offset)
+
+
+@dataclass(frozen=True)
 class Coupling:
     """How one connection carries its value: ``convert`` None passes it unchanged."""
 
@@ -53,6 +70,8 @@ def coupling(
         return Coupling(transform, warning)
     if transform is None:
         return Coupling(units, warning)
+    if isinstance(units, Affine) and isinstance(transform, Affine):
+        return Coupling(units.then(transform), warning)
     first, then = units, transform
     return Coupling(lambda y: then(first(y)), warning)
 
@@ -61,6 +80,24 @@ def _where(system: SystemDescription) -> str:
     if system.ssp is not None and system.ssp != system.source:
         return f" [{system.ssp}; {system.source}]"
     return system.where
+
+
+def connection_units(
+    c: Connection, source: Variable, target: Variable, system: SystemDescription
+) -> tuple[str, str] | None:
+    """The units a connection converts between (source's, target's), None where it converts none."""
+    a, b = _unit_name(c, "source", source, system), _unit_name(c, "target", target, system)
+    return None if not a or not b or a == b or c.suppress_units else (a, b)
+
+
+def describe(c: Connection, convert: Convert | None) -> str:
+    """What a value undergoes on ``c``, for a person: unchanged, an affine map, or a table."""
+    if convert is None:
+        return "unchanged"
+    if isinstance(convert, Affine):
+        return f"{convert.factor!r} * value + {convert.offset!r}"
+    t = c.transform
+    return f"table ({t.kind}, {len(t.entries)} entries)" if t else "a mapping"
 
 
 def _unit_name(c: Connection, end: str, var: Variable, system: SystemDescription) -> str | None:
@@ -139,8 +176,8 @@ def _unit_conversion(
         )
     if ua.factor == ub.factor and ua.offset == ub.offset:
         return None, ""
-    fa, oa, fb, ob = ua.factor, ua.offset, ub.factor, ub.offset
-    return (lambda y: (fa * y + oa - ob) / fb), ""
+    # value_SI = fa * y + oa = fb * u + ob, solved for u
+    return Affine(ua.factor / ub.factor, (ua.offset - ub.offset) / ub.factor), ""
 
 
 def _dimension(unit: Unit) -> str:
@@ -157,8 +194,7 @@ def _transformation(
     where = _where(system)
     if t.kind == "LinearTransformation":
         _require(c, t, (source, target), _FLOATS, "continuous (Float) connectors", where)
-        factor, offset = t.factor, t.offset
-        return lambda y: factor * y + offset
+        return Affine(t.factor, t.offset)
     if t.kind == "BooleanMappingTransformation":
         _require(c, t, (source, target), ("Boolean",), "Boolean connectors", where)
         flags = {_boolean(s, c, t, where): _boolean(v, c, t, where) for s, v in t.entries}
