@@ -12,20 +12,18 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import sparse
 
 from bridge.control.controller import LinearController, _Blended
+from bridge.control.deps import require
 from bridge.control.design import PointDesign
 from bridge.control.linear import Matrix
-from bridge.errors import ConfigError, DependencyMissing
+from bridge.errors import ConfigError
 
 
 class _Qp:
     def __init__(self, d: PointDesign, horizon: int, rate: Matrix, dt: float) -> None:
-        try:
-            import osqp
-        except ImportError as exc:
-            raise DependencyMissing("osqp", "the mpc baseline", 'pip install "fmu-bridge[control]"') from exc
+        sparse = require("scipy.sparse", "the mpc baseline")
+        osqp = require("osqp", "the mpc baseline")
         a, b, q, r, p = d.a, d.b, d.q, d.r, d.p
         ns, m, n = a.shape[0], b.shape[1], d.model.a.shape[0]
         powers = [np.eye(ns)]
