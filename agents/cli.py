@@ -645,6 +645,23 @@ def compare_cmd(
             for r in rows
         ]  # fmt: skip
         print_rows(console, columns, cells, "training runs")
+        from agents.compare import over_seeds
+        from agents.stats import interval_text
+
+        spread = over_seeds(rows, [r["setup"] for r in rows])
+        if spread:
+            spread_cells = [
+                [g["runs"], g["algo"], g["seeds"], f"{g['last_mean']:.1f}",
+                 interval_text(g["last_low"], g["last_high"]), f"{g['last_std']:.1f}",
+                 f"{g['last_min']:.1f} .. {g['last_max']:.1f}"]
+                for g in spread
+            ]  # fmt: skip
+            print_rows(
+                console,
+                ["runs", "algo", "seeds", "last eval mean", "95% CI", "std", "range"],
+                spread_cells,
+                "the same configuration over seeds",
+            )
     if plot is not None:
         from agents.compare import plot_curves
 
