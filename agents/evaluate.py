@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from agents.metrics import MetricSpec, Trace, compute
-from agents.policies import Policy, make_policy
+from agents.policies import Policy, episode_stats, make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
@@ -91,6 +91,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
         reason=reason,
         terminated=terminated,
         scenario=name,
+        extra=episode_stats(policy),
     )
 
 

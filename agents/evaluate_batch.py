@@ -15,7 +15,7 @@ import numpy as np
 
 from agents.evaluate import Cell, baseline_settings, metric_spec
 from agents.metrics import Trace, compute
-from agents.policies import Policy, Sb3Policy, make_policy
+from agents.policies import Policy, Sb3Policy, episode_stats, make_policy
 from bridge.env.batch import BatchEnv
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.task.core import ExactAction
@@ -98,7 +98,7 @@ def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenari
                 active=engine.active,
                 previous=actions,
             )
-    return _traces(
+    traces = _traces(
         engine,
         infos,
         times=times,
@@ -108,6 +108,10 @@ def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenari
         reasons=reasons,
         terminated=ended_terminated,
     )
+    if len(policies) == len(traces):  # one policy object per env: its own counts
+        for trace, policy in zip(traces, policies):
+            trace.extra.update(episode_stats(policy))
+    return traces
 
 
 def _act(

@@ -89,6 +89,7 @@ class LinearController:
                 ]
         given = {**(limits or {}), **self.spec.limits}
         self._limits = [given.get(name, (-np.inf, np.inf)) for name in self.spec.inputs]
+        self._rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
         self._steps = preview_samples(self.spec, self.dt)
 
     def check_signals(self, signal_names: tuple[str, ...] | list[str]) -> None:
@@ -109,6 +110,7 @@ class LinearController:
         self._x = np.zeros(n)  # predicted state deviation
         self._z = np.zeros(len(self.spec.integral))
         self._u_prev: Matrix | None = None
+        self.rate_limited = 0  # samples of this episode whose command the rate limit held back
 
     def _at(self, signals: Mapping[str, float]) -> _Blended:
         value = signals[self.spec.schedule.signal] if self.spec.schedule else 0.0
@@ -165,7 +167,10 @@ class LinearController:
         u = m.u0 + u_star[0] + nu
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
-        applied = np.clip(u, low, high)
+        step = self._rate * self.dt  # the actuator's rate limit, for every design (the mpc plans with it)
+        limited = np.clip(u, u_prev - step, u_prev + step)
+        self.rate_limited += int(np.any(np.abs(limited - u) > 1e-9 * np.maximum(1.0, np.abs(u))))
+        applied = np.clip(limited, low, high)
         span = 1e-6 * np.maximum(1.0, np.abs(applied))
         saturated = np.any((applied <= low + span) | (applied >= high - span))
         if len(self._z) and not saturated:  # integrate only while no input is at a limit (anti-windup)
@@ -176,6 +181,11 @@ class LinearController:
         return [float(v) for v in applied]
 
     def horizon_samples(self) -> int:
+        return 0
+
+    @property
+    def failures(self) -> int:
+        """Samples where an optimiser gave no answer (none here: the LQR law is closed form)."""
         return 0
 
     def _law(self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix) -> Matrix:

@@ -17,7 +17,6 @@ from bridge.control.controller import LinearController, _Blended
 from bridge.control.deps import require
 from bridge.control.design import PointDesign
 from bridge.control.linear import Matrix
-from bridge.errors import ConfigError
 
 
 class _Qp:
@@ -83,13 +82,7 @@ class Mpc(LinearController):
 
     def build(self, limits: Any = None) -> None:
         super().build(limits)
-        rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
-        unknown = sorted(set(self.spec.rate_limits) - set(self.spec.inputs))
-        if unknown:
-            raise ConfigError(
-                f"baseline {self.name}: rate_limits {unknown} are not inputs {self.spec.inputs}"
-            )
-        self._qps = [_Qp(d, self.spec.horizon, rate, self.dt) for d in self.designs]
+        self._qps = [_Qp(d, self.spec.horizon, self._rate, self.dt) for d in self.designs]
         self._nearest = 0
 
     def horizon_samples(self) -> int:

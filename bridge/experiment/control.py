@@ -57,7 +57,9 @@ class ControlDesign(Strict):
     )
     horizon: Annotated[int, Field(ge=1, le=500)] = 20
     rate_limits: dict[str, PositiveFloat] = Field(
-        default={}, description="mpc: |du/dt| per input, physical units per second"
+        default={},
+        description="|du/dt| per input, physical units per second: the mpc's constraint, the lqr's "
+        "command limiter (both keep the command within what the actuator can follow)",
     )
     limits: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
         default={}, description="input limits; default the action space's"
@@ -78,4 +80,7 @@ class ControlDesign(Strict):
         for name, (low, high) in self.limits.items():
             if not low < high:
                 raise ValueError(f"limits.{name}: low {low} must be below high {high}")
+        stray = sorted(set(self.rate_limits) - set(self.inputs))
+        if stray:
+            raise ValueError(f"rate_limits {stray} must be inputs too (inputs: {self.inputs})")
         return self

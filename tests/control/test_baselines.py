@@ -170,3 +170,23 @@ def test_design_errors_name_what_is_wrong(vehicle: FmuEnv) -> None:
         ControlDesign.model_validate({**VEHICLE_DESIGN, "integral": {"heading_error": 1.0}})
     with pytest.raises(ValueError, match="preview"):
         ControlDesign.model_validate({**VEHICLE_DESIGN, "disturbances": {}})
+
+
+def test_lqr_keeps_its_command_within_the_rate_limit_and_counts_the_samples(vehicle: FmuEnv) -> None:
+    free = run_episode(vehicle, ModelBased("lqr", VEHICLE_DESIGN, "lqr"), 0, "hairpin")
+    dt = 0.05
+    assert np.max(np.abs(np.diff(free.inputs["steer_cmd"]))) > 0.2 * dt  # the limit below binds
+    policy = ModelBased("lqr", {**VEHICLE_DESIGN, "rate_limits": {"steer_cmd": 0.2}}, "lqr")
+    trace = run_episode(vehicle, policy, 0, "hairpin")
+    u = trace.inputs["steer_cmd"]
+    assert np.max(np.abs(np.diff(u))) <= 0.2 * dt * (1 + 1e-5)  # the action is float32 on its way
+    assert trace.extra["rate_limited"] > 0
+    assert "solver_fallbacks" not in trace.extra  # an lqr has no solver
+
+
+def test_mpc_reports_its_solver_fallbacks_per_episode(vehicle: FmuEnv) -> None:
+    design = {**VEHICLE_DESIGN, "horizon": 10, "rate_limits": {"steer_cmd": 0.8}}
+    policy = ModelBased("mpc", design, "mpc")
+    trace = run_episode(vehicle, policy, 0, "s_bend")
+    assert trace.extra["solver_fallbacks"] == policy.controller.failures  # first episode: all of them
+    assert "rate_limited" in trace.extra
