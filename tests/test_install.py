@@ -20,7 +20,7 @@ def _name(requirement: str) -> str:
 def test_constraints_pin_every_dependency_of_every_extra() -> None:
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     wanted = {_name(r) for r in project["dependencies"]}
-    for extra in ("train", "viz", "dev"):
+    for extra in ("train", "viz", "dev", "docs"):
         wanted |= {_name(r) for r in project["optional-dependencies"][extra]}
     pins = {}
     for line in (ROOT / "constraints.txt").read_text().splitlines():
@@ -38,5 +38,5 @@ def test_the_readme_commands_and_ci_install_through_the_constraints() -> None:
     commands = re.findall(r"```bash\n(python3 -m venv .*)\n```", readme)[:2]
     assert len(commands) == 2 and all("pip install -c constraints.txt -e" in c for c in commands), commands
     ci = (ROOT / ".ci" / "run").read_text()
-    assert 'pip install -q -c constraints.txt -e ".[train,viz,dev]"' in ci
+    assert 'pip install -q -c constraints.txt -e ".[train,viz,dev,docs]"' in ci
     assert "--upgrade-strategy eager" in ci  # and once more with the newest allowed versions

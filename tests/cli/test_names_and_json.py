@@ -113,10 +113,10 @@ def test_the_commands_init_suggests_for_an_observation_only_experiment_run(tmp_p
     assert result.returncode == 0, result.stderr[-2000:]
 
 
-def test_every_module_the_readme_names_exists() -> None:
-    readme = (ROOT / "README.md").read_text()
+def test_every_module_the_readme_and_the_docs_name_exists() -> None:
+    readme = "\n".join(p.read_text() for p in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))])
     names = set(re.findall(r"`((?:bridge|agents)(?:\.[a-z_0-9]+)+)`", readme))
-    assert names, "the README names modules"
+    assert names, "the README and the docs name modules"
     missing = []
     for name in sorted(names):
         parts = name.split(".")
@@ -142,5 +142,5 @@ def test_every_module_the_readme_names_exists() -> None:
             if obj is None:
                 missing.append(name)
                 break
-    assert missing == [], f"the README names modules that do not exist: {missing}"
+    assert missing == [], f"the README or the docs name modules that do not exist: {missing}"
     assert "evaluate --policy" not in readme
