@@ -555,6 +555,18 @@ def evaluate_cmd(
             [paired_cells(p) for p in pairs],
             f"{metric}, paired by seed: agent - {pairs[0]['reference']}",
         )
+    import json
+
+    from agents.report import MARGIN_COLUMNS, margin_cells
+
+    margins = json.loads(paths["json"].read_text()).get("margins", [])
+    if margins:
+        print_rows(
+            console,
+            MARGIN_COLUMNS,
+            [margin_cells(m) for m in margins],
+            "stability margins of the model-based designs (Kalman filter included)",
+        )
     console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
     for recording in result.recordings:
         console.print(f"recording: {recording}")

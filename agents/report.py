@@ -98,6 +98,47 @@ SPREAD_COLUMNS = ["median", "median 95% CI", "mean 95% CI"]
 PAIRED_COLUMNS = ["agent", "scenario", "episodes", "difference", "95% CI", "wins/losses/ties", "verdict"]
 
 
+MARGIN_COLUMNS = ["baseline", "point", "radius", "gain margin [dB]", "phase margin [deg]", "stability margin"]
+
+
+def design_margins(experiment: Experiment, agents: list[str]) -> list[dict[str, Any]]:
+    """Stability margins (``bridge.control.margins``) of every lqr/mpc baseline among ``agents``,
+    one row per design point: the loop that runs, Kalman filter included."""
+    baselines = experiment.evaluation.baselines
+    chosen = [a for a in agents if a in baselines and baselines[a].type in ("lqr", "mpc")]
+    if not chosen:
+        return []
+    from agents.evaluate import baseline_settings
+    from agents.policies import make_policy
+    from bridge.control.margins import margins
+    from bridge.env.fmu_env import FmuEnv
+
+    rows = []
+    env = FmuEnv(experiment)
+    try:
+        for name in chosen:
+            policy: Any = make_policy(name, baseline_settings(experiment))
+            policy.reset(env.task, None)
+            controller = policy.controller
+            for point, design in zip(controller.points, controller.designs):
+                label = f"{controller.spec.schedule.signal}={point:g}" if controller.spec.schedule else "-"
+                rows.append({"baseline": name, "point": label, **margins(design).row()})
+    finally:
+        env.close()
+    return rows
+
+
+def margin_cells(row: dict[str, Any]) -> list[str]:
+    return [
+        row["baseline"],
+        row["point"],
+        _fmt(row["closed_loop_radius"]),
+        f"{_fmt(row['gain_margin_low_db'])} .. {_fmt(row['gain_margin_high_db'])}",
+        _fmt(row["phase_margin_deg"]),
+        _fmt(row["stability_margin"]),
+    ]
+
+
 def _seeds(seeds: list[int]) -> str:
     """``1000-1019`` for consecutive seeds, else the list."""
     if not seeds:
@@ -142,12 +183,33 @@ def write(
         "report": out_dir / "report.md",
     }
     _write_csv(paths["csv"], result.rows)
+    margins = design_margins(experiment, result.agents) if experiment is not None else []
     paths["json"].write_text(
-        json.dumps({"episodes": result.rows, "summary": rows, "paired": pairs}, indent=2, default=_json)
+        json.dumps(
+            {"episodes": result.rows, "summary": rows, "paired": pairs, "margins": margins},
+            indent=2,
+            default=_json,
+        )
     )
     plots = _plots(result, rows, out_dir, PlotSpec.of(experiment, result))
     note = _signals_note(experiment)
-    paths["report"].write_text(_markdown(title, rows, plots, result, pairs=pairs, metric=metric, note=note))
+    text = _markdown(title, rows, plots, result, pairs=pairs, metric=metric, note=note)
+    if margins:
+        text += "\n".join(
+            [
+                "",
+                "## Stability margins of the model-based designs",
+                "",
+                "The loop that runs (the LQR with its Kalman filter; the mpc without active limits), "
+                "broken at the plant input, per design point: the closed loop's spectral radius, the gain "
+                "interval over which it stays stable, the phase margin and the Nyquist curve's least "
+                "distance from -1.",
+                "",
+                *_table(MARGIN_COLUMNS, [margin_cells(m) for m in margins]),
+                "",
+            ]
+        )
+    paths["report"].write_text(text)
     return paths
 
 
