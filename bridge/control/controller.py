@@ -87,6 +87,11 @@ class LinearController:
                 self.designs = [
                     design_point(fmu, self.spec, self.dt, noise, {schedule.input: v}) for v in self.points
                 ]
+        if self.spec.output_limits and self.kind != "mpc":
+            raise ConfigError(
+                f"baseline {self.name}: design.output_limits {sorted(self.spec.output_limits)} need a "
+                "controller that plans ahead: use type: mpc (an lqr cannot keep outputs within limits)"
+            )
         given = {**(limits or {}), **self.spec.limits}
         self._limits = [given.get(name, (-np.inf, np.inf)) for name in self.spec.inputs]
         self._rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
@@ -163,7 +168,7 @@ class LinearController:
         n = len(x_hat)
         x_star, u_star = targets[:, :n], targets[:, n:]
         state = np.concatenate([x_hat - x_star[0], self._z])
-        nu = self._law(m, state, x_star, u_star, u_prev)
+        nu = self._law(m, state, x_star, u_star, u_prev, w=w)
         u = m.u0 + u_star[0] + nu
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
@@ -188,8 +193,10 @@ class LinearController:
         """Samples where an optimiser gave no answer (none here: the LQR law is closed form)."""
         return 0
 
-    def _law(self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix) -> Matrix:
-        """nu = -K s - sum_j F_j (x*_j - x*_j+1)."""
+    def _law(
+        self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix, *, w: Matrix
+    ) -> Matrix:
+        """nu = -K s - sum_j F_j (x*_j - x*_j+1) (``w``, the disturbances ahead, serves the mpc)."""
         j = min(len(x_star) - 1, len(m.preview))
         changes = x_star[:j] - x_star[1 : j + 1]
         feedforward = np.einsum("jmn,jn->m", m.preview[:j], changes) if j else 0.0
