@@ -467,14 +467,38 @@ def evaluate_cmd(
     ray_address: Annotated[
         str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
     ] = None,
+    reference: Annotated[
+        str | None,
+        typer.Option("--reference", help="Agent the others are compared with, paired (default: the first)."),
+    ] = None,
+    metric: Annotated[
+        str, typer.Option("--metric", help="Metric of the intervals and paired differences.")
+    ] = "return",
 ) -> None:
-    """Evaluate agents and baselines over scenarios: metrics table, results.csv/json, report."""
+    """Evaluate agents and baselines over scenarios: metrics table with bootstrap intervals, paired
+    differences against a reference agent, results.csv/json, report."""
     import time
 
-    from agents.evaluate import evaluate
+    from agents.evaluate import agent_names, evaluate
     from agents.progress import episode_bar
-    from agents.report import headline_columns, summary, write
+    from agents.report import (
+        PAIRED_COLUMNS,
+        SPREAD_COLUMNS,
+        headline_columns,
+        paired,
+        paired_cells,
+        spread_cells,
+        summary,
+        write,
+    )
 
+    names = agent_names(agents)
+    if reference is not None and reference not in names:
+        from bridge.errors import ConfigError
+
+        raise ConfigError(
+            f"--reference {reference!r} is not one of the evaluated agents {names}; name one of them"
+        )
     out = out or Path("runs") / f"eval-{time.strftime('%Y%m%d-%H%M%S')}"
     with episode_bar() as progress:
         result = evaluate(
@@ -494,8 +518,15 @@ def evaluate_cmd(
         )
     from bridge.experiment.config import load_experiment
 
-    paths = write(result, out, title=f"Evaluation of {config.stem}", experiment=load_experiment(config))
-    rows = summary(result)
+    paths = write(
+        result,
+        out,
+        title=f"Evaluation of {config.stem}",
+        experiment=load_experiment(config),
+        reference=reference,
+        metric=metric,
+    )
+    rows = summary(result, metric)
     columns = headline_columns(rows)
     from bridge.cli.inspect import print_rows
 
@@ -510,6 +541,32 @@ def evaluate_cmd(
         cells,
         f"evaluation ({config.name})",
     )
+    print_rows(
+        console,
+        ["agent", "scenario", "episodes", *SPREAD_COLUMNS],
+        [[r["agent"], r["scenario"], str(r["episodes"]), *spread_cells(r, metric)] for r in rows],
+        f"{metric}: median and 95% bootstrap intervals",
+    )
+    pairs = paired(result, reference, metric)
+    if pairs:
+        print_rows(
+            console,
+            PAIRED_COLUMNS,
+            [paired_cells(p) for p in pairs],
+            f"{metric}, paired by seed: agent - {pairs[0]['reference']}",
+        )
+    import json
+
+    from agents.report import MARGIN_COLUMNS, margin_cells
+
+    margins = json.loads(paths["json"].read_text()).get("margins", [])
+    if margins:
+        print_rows(
+            console,
+            MARGIN_COLUMNS,
+            [margin_cells(m) for m in margins],
+            "stability margins of the model-based designs (Kalman filter included)",
+        )
     console.print(f"results: {paths['csv']}, {paths['json']}\nreport: {paths['report']}")
     for recording in result.recordings:
         console.print(f"recording: {recording}")
@@ -600,6 +657,23 @@ def compare_cmd(
             for r in rows
         ]  # fmt: skip
         print_rows(console, columns, cells, "training runs")
+        from agents.compare import over_seeds
+        from agents.stats import interval_text
+
+        spread = over_seeds(rows, [r["setup"] for r in rows])
+        if spread:
+            spread_cells = [
+                [g["runs"], g["algo"], g["seeds"], f"{g['last_mean']:.1f}",
+                 interval_text(g["last_low"], g["last_high"]), f"{g['last_std']:.1f}",
+                 f"{g['last_min']:.1f} .. {g['last_max']:.1f}"]
+                for g in spread
+            ]  # fmt: skip
+            print_rows(
+                console,
+                ["runs", "algo", "seeds", "last eval mean", "95% CI", "std", "range"],
+                spread_cells,
+                "the same configuration over seeds",
+            )
     if plot is not None:
         from agents.compare import plot_curves
 

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import json
 import math
+from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from agents.run_state import read_run
+from agents.stats import describe
 from bridge.errors import ConfigError
 
 
@@ -21,7 +24,54 @@ def load_evaluations(run_dir: Path) -> tuple[np.ndarray, np.ndarray]:
     return data["timesteps"], data["results"].mean(axis=1)
 
 
+def same_setup(info: dict[str, Any]) -> str:
+    """What makes two runs repeats of one configuration: everything in run.json but the seed."""
+    settings = {k: v for k, v in (info.get("settings") or {}).items() if k != "seed"}
+    return json.dumps(
+        {
+            "experiment": info.get("experiment"),
+            "algo": info.get("algo"),
+            "settings": settings,
+            "residual": info.get("residual"),
+        },
+        sort_keys=True,
+        default=str,
+    )
+
+
+def over_seeds(rows: list[dict[str, Any]], setups: list[str]) -> list[dict[str, Any]]:
+    """One row per configuration trained with more than one seed: the spread of the final and best
+    evaluation returns over its seeds (mean, its bootstrap interval, standard deviation, range)."""
+    groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
+    for row, setup in zip(rows, setups):
+        groups[setup].append(row)
+    out = []
+    for members in groups.values():
+        if len(members) < 2:
+            continue
+        last = [float(r["last_eval"]) for r in members]
+        best = [float(r["best_eval"]) for r in members]
+        stats = describe(last)
+        out.append(
+            {
+                "runs": ",".join(r["run"] for r in members),
+                "algo": members[0]["algo"],
+                "seeds": ",".join(str(r["seed"]) for r in members),
+                "n": len(members),
+                "last_mean": stats["mean"],
+                "last_low": stats["mean_low"],
+                "last_high": stats["mean_high"],
+                "last_std": stats["std"],
+                "last_min": float(np.nanmin(last)) if not all(math.isnan(v) for v in last) else math.nan,
+                "last_max": float(np.nanmax(last)) if not all(math.isnan(v) for v in last) else math.nan,
+                "best_mean": describe(best)["mean"],
+            }
+        )
+    return out
+
+
 def compare_runs(runs: list[Path]) -> tuple[list[dict[str, Any]], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """One row per run (settings, time, evaluation returns) and each run's learning curve."""
     rows, curves = [], {}
     for run in runs:
         info_file = run / "run.json"
@@ -43,6 +93,7 @@ def compare_runs(runs: list[Path]) -> tuple[list[dict[str, Any]], dict[str, tupl
                 "best_eval": float(returns.max()) if returns.size else math.nan,
                 "last_eval": float(returns[-1]) if returns.size else math.nan,
                 "status": info.get("status", "?"),
+                "setup": same_setup(info),
             }
         )
     return rows, curves

@@ -189,7 +189,7 @@ class DeployedAgent:
             else:
                 self._sample = self._sample + 1 if step is None else step
             obs = self.task.observe(values, self._sample, self._rng)
-            action = self.policy.act(obs, self.task.signal_dict())
+            action = self.policy.act(obs, self.task.controller_signals())
             # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
             inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))
             self._last_inputs, self._last_time = inputs, time.monotonic()

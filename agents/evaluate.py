@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from agents.metrics import MetricSpec, Trace, compute
-from agents.policies import Policy, make_policy
+from agents.policies import Policy, episode_stats, make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
@@ -73,7 +73,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
     times, rows, inputs, rewards = [info["time_s"]], [list(task.signal_dict().values())], [], []
     terminated, reason = False, None
     while True:
-        obs, reward, terminated, truncated, info = env.step(policy.act(obs, task.signal_dict()))
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, task.controller_signals()))
         inputs.append(list(task.applied_inputs[: len(task.action_inputs)]))
         rewards.append(float(reward))
         times.append(info["time_s"])
@@ -91,6 +91,7 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
         reason=reason,
         terminated=terminated,
         scenario=name,
+        extra=episode_stats(policy),
     )
 
 
@@ -271,6 +272,11 @@ def _map(
             results.append(result)
             tick(len(c.seeds))
         return results
+
+
+def agent_names(agents: Sequence[str]) -> list[str]:
+    """The names the agents get in tables and plots (``NAME=SPEC``, the run or model, the word)."""
+    return _named(agents)[1]
 
 
 def _named(agents: Sequence[str]) -> tuple[list[str], list[str]]:

@@ -15,7 +15,7 @@ import numpy as np
 
 from agents.evaluate import Cell, baseline_settings, metric_spec
 from agents.metrics import Trace, compute
-from agents.policies import Policy, Sb3Policy, make_policy
+from agents.policies import Policy, Sb3Policy, episode_stats, make_policy
 from bridge.env.batch import BatchEnv
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.task.core import ExactAction
@@ -75,7 +75,7 @@ def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenari
     obs, infos = engine.reset_all(list(seeds), [scenario] * n)
     for i, policy in enumerate(policies):
         policy.reset(task.tasks[i], seeds[i])
-    signals = np.array([list(t.signal_dict().values()) for t in task.tasks])
+    signals = np.array([list(t.controller_signals().values()) for t in task.tasks])
     timing = plant.timing
     times, rows, inputs, rewards = [timing.start_time_s + plant.k * timing.step_size_s], [signals], [], []
     reasons: list[Any] = [None] * n
@@ -86,14 +86,19 @@ def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenari
         inputs.append(task.inputs[:, : len(task.action_inputs)].copy())
         rewards.append(reward.copy())
         times.append(timing.start_time_s + plant.k * timing.step_size_s)
-        rows.append(task.signals.copy())
+        rows.append(task.signals.copy())  # the exact signals: metrics score the true plant
         for i, end in ended.items():
             reasons[i], ended_terminated[i] = end["final_info"]["reason"], bool(terminated[i])
         if engine.active.any():
             actions = _act(
-                policies, obs, task.signals, names=task.signal_names, active=engine.active, previous=actions
+                policies,
+                obs,
+                task.controller_signals(),
+                names=task.signal_names,
+                active=engine.active,
+                previous=actions,
             )
-    return _traces(
+    traces = _traces(
         engine,
         infos,
         times=times,
@@ -103,6 +108,10 @@ def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenari
         reasons=reasons,
         terminated=ended_terminated,
     )
+    if len(policies) == len(traces):  # one policy object per env: its own counts
+        for trace, policy in zip(traces, policies):
+            trace.extra.update(episode_stats(policy))
+    return traces
 
 
 def _act(

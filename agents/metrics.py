@@ -31,7 +31,7 @@ class Trace:
     reason: str | None
     terminated: bool
     scenario: str = ""
-    extra: dict[str, Any] = field(default_factory=dict)
+    extra: dict[str, Any] = field(default_factory=dict)  # the policy's own counts (``episode_stats``)
 
     @property
     def dt(self) -> float:
@@ -171,6 +171,7 @@ def compute(trace: Trace, spec: MetricSpec) -> dict[str, Any]:
     for name, (low, high) in spec.constraints.items():
         for key, value in constraint_metrics(trace.signals[name][1:], low, high, dt).items():
             row[f"{name}.{key}"] = value
+    row.update({k: v for k, v in trace.extra.items() if isinstance(v, int | float)})  # e.g. solver fallbacks
     for fn in spec.user:
         result = fn(trace)
         name = getattr(fn, "__name__", "user")

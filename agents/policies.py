@@ -37,6 +37,13 @@ class Policy(Protocol):
     def act(self, obs: Any, signals: Mapping[str, float]) -> Any: ...
 
 
+def episode_stats(policy: Policy) -> dict[str, float]:
+    """A policy's own counts over the episode since its reset (an mpc's solver fallbacks, samples a
+    command limiter held back); they join the episode's metrics. Empty for most policies."""
+    stats = getattr(policy, "episode_stats", None)
+    return dict(stats()) if callable(stats) else {}
+
+
 class PidSpec(BaseModel):
     """A discrete PID controller on one output/reference pair driving one input."""
 
@@ -160,6 +167,15 @@ class ModelBased:
         self._task = task
         self._index = [task.action_inputs.index(n) for n in self.design.inputs]
         self.controller.reset()
+        self._failures_at_reset = self.controller.failures
+
+    def episode_stats(self) -> dict[str, float]:
+        """``rate_limited``: samples whose command the rate limit held back; an mpc's
+        ``solver_fallbacks``: samples where OSQP gave no solution and the lqr law acted."""
+        stats = {"rate_limited": float(self.controller.rate_limited)}
+        if self.kind == "mpc":
+            stats["solver_fallbacks"] = float(self.controller.failures - self._failures_at_reset)
+        return stats
 
     def inputs(self, signals: Mapping[str, float]) -> list[float]:
         inputs = [signals[name] for name in self._task.action_inputs]

@@ -19,14 +19,16 @@ import numpy as np
 
 from agents.evaluate import EvaluationResult, metric_spec
 from agents.metrics import aggregate
+from agents.stats import describe, interval_text, paired_differences
 from bridge.experiment.config import Experiment
 from bridge.recording.replay_signals import REFERENCE_RGB, agent_colours
 
 HEADLINE = ("return", "length", "success")
 
 
-def summary(result: EvaluationResult) -> list[dict[str, Any]]:
-    """Mean metrics per (agent, scenario), in the order agents and scenarios were given."""
+def summary(result: EvaluationResult, metric: str = "return") -> list[dict[str, Any]]:
+    """Mean metrics per (agent, scenario), in the order agents and scenarios were given, with the
+    median of ``metric`` and bootstrap intervals of its median and mean (``agents.stats``)."""
     groups: dict[tuple[str, str], list[dict[str, Any]]] = defaultdict(list)
     for row in result.rows:
         groups[(row["agent"], row["scenario"])].append(row)
@@ -41,10 +43,100 @@ def summary(result: EvaluationResult) -> list[dict[str, Any]]:
                 "episodes": len(rows),
                 "seeds": _seeds([int(r["seed"]) for r in rows if "seed" in r]),
                 **metrics,
+                **_spread(rows, metric),
                 "end": ",".join(reasons),
             }
         )
     return out
+
+
+def _spread(rows: list[dict[str, Any]], metric: str) -> dict[str, float]:
+    values = [float(r[metric]) for r in rows if isinstance(r.get(metric), int | float)]
+    if not values:
+        return {}
+    stats = describe(values)
+    return {
+        f"{metric}.median": stats["median"],
+        f"{metric}.median_low": stats["median_low"],
+        f"{metric}.median_high": stats["median_high"],
+        f"{metric}.mean_low": stats["mean_low"],
+        f"{metric}.mean_high": stats["mean_high"],
+    }
+
+
+def paired(
+    result: EvaluationResult, reference: str | None = None, metric: str = "return"
+) -> list[dict[str, Any]]:
+    """Paired differences of ``metric`` against ``reference`` (default: the first agent)."""
+    if not result.agents or len(result.agents) < 2:
+        return []
+    return paired_differences(result.rows, reference or result.agents[0], metric)
+
+
+def spread_cells(row: dict[str, Any], metric: str = "return") -> list[str]:
+    """The median of ``metric`` and its interval, and the mean's interval, as table cells."""
+    return [
+        _fmt(row.get(f"{metric}.median", math.nan)),
+        interval_text(row.get(f"{metric}.median_low", math.nan), row.get(f"{metric}.median_high", math.nan)),
+        interval_text(row.get(f"{metric}.mean_low", math.nan), row.get(f"{metric}.mean_high", math.nan)),
+    ]
+
+
+def paired_cells(row: dict[str, Any]) -> list[str]:
+    return [
+        row["agent"],
+        row["scenario"],
+        str(row["episodes"]),
+        _fmt(row["difference"]),
+        interval_text(row["low"], row["high"]),
+        f"{row['wins']}/{row['losses']}/{row['ties']}",
+        row["verdict"],
+    ]
+
+
+SPREAD_COLUMNS = ["median", "median 95% CI", "mean 95% CI"]
+PAIRED_COLUMNS = ["agent", "scenario", "episodes", "difference", "95% CI", "wins/losses/ties", "verdict"]
+
+
+MARGIN_COLUMNS = ["baseline", "point", "radius", "gain margin [dB]", "phase margin [deg]", "stability margin"]
+
+
+def design_margins(experiment: Experiment, agents: list[str]) -> list[dict[str, Any]]:
+    """Stability margins (``bridge.control.margins``) of every lqr/mpc baseline among ``agents``,
+    one row per design point: the loop that runs, Kalman filter included."""
+    baselines = experiment.evaluation.baselines
+    chosen = [a for a in agents if a in baselines and baselines[a].type in ("lqr", "mpc")]
+    if not chosen:
+        return []
+    from agents.evaluate import baseline_settings
+    from agents.policies import make_policy
+    from bridge.control.margins import margins
+    from bridge.env.fmu_env import FmuEnv
+
+    rows = []
+    env = FmuEnv(experiment)
+    try:
+        for name in chosen:
+            policy: Any = make_policy(name, baseline_settings(experiment))
+            policy.reset(env.task, None)
+            controller = policy.controller
+            for point, design in zip(controller.points, controller.designs):
+                label = f"{controller.spec.schedule.signal}={point:g}" if controller.spec.schedule else "-"
+                rows.append({"baseline": name, "point": label, **margins(design).row()})
+    finally:
+        env.close()
+    return rows
+
+
+def margin_cells(row: dict[str, Any]) -> list[str]:
+    return [
+        row["baseline"],
+        row["point"],
+        _fmt(row["closed_loop_radius"]),
+        f"{_fmt(row['gain_margin_low_db'])} .. {_fmt(row['gain_margin_high_db'])}",
+        _fmt(row["phase_margin_deg"]),
+        _fmt(row["stability_margin"]),
+    ]
 
 
 def _seeds(seeds: list[int]) -> str:
@@ -72,20 +164,52 @@ def headline_columns(rows: list[dict[str, Any]], limit: int = 6) -> list[str]:
 
 
 def write(
-    result: EvaluationResult, out_dir: Path, title: str, experiment: Experiment | None = None
+    result: EvaluationResult,
+    out_dir: Path,
+    title: str,
+    experiment: Experiment | None = None,
+    *,
+    reference: str | None = None,
+    metric: str = "return",
 ) -> dict[str, Path]:
-    """Write the tables and the report; ``experiment`` gives units, tracking pairs and plotted signals."""
+    """Write the tables and the report; ``experiment`` gives units, tracking pairs and plotted signals
+    and what the baselines read; ``reference`` and ``metric`` choose the paired comparison."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    rows = summary(result)
+    rows = summary(result, metric)
+    pairs = paired(result, reference, metric)
     paths = {
         "csv": out_dir / "results.csv",
         "json": out_dir / "results.json",
         "report": out_dir / "report.md",
     }
     _write_csv(paths["csv"], result.rows)
-    paths["json"].write_text(json.dumps({"episodes": result.rows, "summary": rows}, indent=2, default=_json))
+    margins = design_margins(experiment, result.agents) if experiment is not None else []
+    paths["json"].write_text(
+        json.dumps(
+            {"episodes": result.rows, "summary": rows, "paired": pairs, "margins": margins},
+            indent=2,
+            default=_json,
+        )
+    )
     plots = _plots(result, rows, out_dir, PlotSpec.of(experiment, result))
-    paths["report"].write_text(_markdown(title, rows, plots, result))
+    note = _signals_note(experiment)
+    text = _markdown(title, rows, plots, result, pairs=pairs, metric=metric, note=note)
+    if margins:
+        text += "\n".join(
+            [
+                "",
+                "## Stability margins of the model-based designs",
+                "",
+                "The loop that runs (the LQR with its Kalman filter; the mpc without active limits), "
+                "broken at the plant input, per design point: the closed loop's spectral radius, the gain "
+                "interval over which it stays stable, the phase margin and the Nyquist curve's least "
+                "distance from -1.",
+                "",
+                *_table(MARGIN_COLUMNS, [margin_cells(m) for m in margins]),
+                "",
+            ]
+        )
+    paths["report"].write_text(text)
     return paths
 
 
@@ -111,11 +235,58 @@ def _fmt(value: Any) -> str:
     return str(value)
 
 
-def _markdown(title: str, rows: list[dict[str, Any]], plots: list[Path], result: EvaluationResult) -> str:
+def _signals_note(experiment: Experiment | None) -> str:
+    if experiment is None:
+        return ""
+    if experiment.evaluation.baseline_signals == "exact":
+        return (
+            "Baselines read the exact model values (`evaluation.baseline_signals: exact`), "
+            "not the agent's sensors."
+        )
+    noisy = sorted(experiment.noise.observations)
+    if not noisy:
+        return "Baselines and agents read the same signals (the experiment declares no sensor noise)."
+    return (
+        f"Baselines read the agent's sensors: the same sensor noise on {', '.join(noisy)} "
+        "as the agent's observation."
+    )
+
+
+def _table(columns: list[str], cells: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    return lines + ["| " + " | ".join(row) + " |" for row in cells]
+
+
+def _markdown(
+    title: str,
+    rows: list[dict[str, Any]],
+    plots: list[Path],
+    result: EvaluationResult,
+    *,
+    pairs: list[dict[str, Any]] | None = None,
+    metric: str = "return",
+    note: str = "",
+) -> str:
     columns = ["agent", "scenario", "episodes", "seeds", *headline_columns(rows, limit=10), "end"]
-    lines = [f"# {title}", "", "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(_fmt(r.get(c, "")) for c in columns) + " |" for r in rows]
+    lines = [f"# {title}", "", *_table(columns, [[_fmt(r.get(c, "")) for c in columns] for r in rows])]
     lines += ["", "Means over episodes; every agent saw the same seeds on the same scenarios.", ""]
+    if note:
+        lines += [note, ""]
+    lines += [f"## {metric}: medians and 95 % bootstrap intervals", ""]
+    spread = [[r["agent"], r["scenario"], str(r["episodes"]), *spread_cells(r, metric)] for r in rows]
+    lines += [*_table(["agent", "scenario", "episodes", *SPREAD_COLUMNS], spread), ""]
+    if pairs:
+        reference = pairs[0]["reference"]
+        lines += [
+            f"## Paired differences of {metric} against {reference}",
+            "",
+            f"Per episode (same scenario, same seed): {metric}(agent) - {metric}({reference}); "
+            "the mean and its 95 % percentile bootstrap interval; "
+            "a verdict only where the interval excludes zero.",
+            "",
+            *_table(PAIRED_COLUMNS, [paired_cells(p) for p in pairs]),
+            "",
+        ]
     lines += [f"![{p.stem}]({p.name})" for p in plots]
     if result.recordings:
         lines += ["", "Recordings (MCAP):", *[f"- `{p}`" for p in result.recordings]]

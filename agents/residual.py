@@ -81,5 +81,5 @@ class ResidualWrapper(gym.Wrapper[Any, Any, Any, Any]):
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        signals = self._task.signal_dict()
+        signals = self._task.controller_signals()
         return self.env.step(combine(self._task, self._baseline, signals, action, self._scale))

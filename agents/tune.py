@@ -102,8 +102,9 @@ def tune(
     log: Any = None,
 ) -> TuneResult:
     """Nelder-Mead over the log of ``parameters`` of the baseline ``name``; see the module doc."""
-    from scipy.optimize import minimize
+    from bridge.control.deps import require
 
+    minimize = require("scipy.optimize", "fmu-bridge tune (Nelder-Mead)").minimize
     started = time.perf_counter()
     experiment = load_experiment(experiment_path, version=version)
     settings = baseline_settings(experiment)

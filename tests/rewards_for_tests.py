@@ -44,3 +44,15 @@ def interrupts_after_200(signals: dict[str, float]) -> float:
     if _Counter.calls > 200:
         raise KeyboardInterrupt
     return 0.0
+
+
+class SeenSignals:
+    """What ``record_signals`` was handed, one dict per call (the sensor-path tests read it)."""
+
+    calls: list[dict[str, float]] = []
+
+
+def record_signals(obs: Any, signals: dict[str, float]) -> Any:
+    """A scripted policy that keeps the signals it reads and applies +12 V (action 0.5)."""
+    SeenSignals.calls.append(dict(signals))
+    return np.array([0.5], dtype=np.float32)

@@ -87,8 +87,14 @@ class LinearController:
                 self.designs = [
                     design_point(fmu, self.spec, self.dt, noise, {schedule.input: v}) for v in self.points
                 ]
+        if self.spec.output_limits and self.kind != "mpc":
+            raise ConfigError(
+                f"baseline {self.name}: design.output_limits {sorted(self.spec.output_limits)} need a "
+                "controller that plans ahead: use type: mpc (an lqr cannot keep outputs within limits)"
+            )
         given = {**(limits or {}), **self.spec.limits}
         self._limits = [given.get(name, (-np.inf, np.inf)) for name in self.spec.inputs]
+        self._rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
         self._steps = preview_samples(self.spec, self.dt)
 
     def check_signals(self, signal_names: tuple[str, ...] | list[str]) -> None:
@@ -109,6 +115,7 @@ class LinearController:
         self._x = np.zeros(n)  # predicted state deviation
         self._z = np.zeros(len(self.spec.integral))
         self._u_prev: Matrix | None = None
+        self.rate_limited = 0  # samples of this episode whose command the rate limit held back
 
     def _at(self, signals: Mapping[str, float]) -> _Blended:
         value = signals[self.spec.schedule.signal] if self.spec.schedule else 0.0
@@ -161,11 +168,14 @@ class LinearController:
         n = len(x_hat)
         x_star, u_star = targets[:, :n], targets[:, n:]
         state = np.concatenate([x_hat - x_star[0], self._z])
-        nu = self._law(m, state, x_star, u_star, u_prev)
+        nu = self._law(m, state, x_star, u_star, u_prev, w=w)
         u = m.u0 + u_star[0] + nu
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
-        applied = np.clip(u, low, high)
+        step = self._rate * self.dt  # the actuator's rate limit, for every design (the mpc plans with it)
+        limited = np.clip(u, u_prev - step, u_prev + step)
+        self.rate_limited += int(np.any(np.abs(limited - u) > 1e-9 * np.maximum(1.0, np.abs(u))))
+        applied = np.clip(limited, low, high)
         span = 1e-6 * np.maximum(1.0, np.abs(applied))
         saturated = np.any((applied <= low + span) | (applied >= high - span))
         if len(self._z) and not saturated:  # integrate only while no input is at a limit (anti-windup)
@@ -178,8 +188,15 @@ class LinearController:
     def horizon_samples(self) -> int:
         return 0
 
-    def _law(self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix) -> Matrix:
-        """nu = -K s - sum_j F_j (x*_j - x*_j+1)."""
+    @property
+    def failures(self) -> int:
+        """Samples where an optimiser gave no answer (none here: the LQR law is closed form)."""
+        return 0
+
+    def _law(
+        self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix, *, w: Matrix
+    ) -> Matrix:
+        """nu = -K s - sum_j F_j (x*_j - x*_j+1) (``w``, the disturbances ahead, serves the mpc)."""
         j = min(len(x_star) - 1, len(m.preview))
         changes = x_star[:j] - x_star[1 : j + 1]
         feedforward = np.einsum("jmn,jn->m", m.preview[:j], changes) if j else 0.0

@@ -47,6 +47,10 @@ class PointDesign:
     ct: Matrix  # tracked outputs with an integral
     dt_u: Matrix
     dt_w: Matrix
+    cl: Matrix  # outputs with limits (design.output_limits): y = yl0 + cl dx + dl_u du + dl_w dw
+    dl_u: Matrix
+    dl_w: Matrix
+    yl0: Matrix
 
 
 def preview_samples(design: ControlDesign, dt: float) -> int:
@@ -65,7 +69,14 @@ def design_point(
     inputs, dist = list(design.inputs), list(design.disturbances)
     tracked = list(design.tracking)
     outputs = list(
-        dict.fromkeys([*design.measured, *tracked, *(n for n in design.q if n not in (design.states or []))])
+        dict.fromkeys(
+            [
+                *design.measured,
+                *tracked,
+                *(n for n in design.q if n not in (design.states or [])),
+                *design.output_limits,
+            ]
+        )
     )
     point = {**design.operating_point, **(extra_point or {})}
     continuous = linearize(
@@ -93,6 +104,7 @@ def design_from_model(
     a, bu, bw = model.a, model.b[:, ui], model.b[:, wi]
     cm, dmu, dmw = model.c[mi], model.d[mi][:, ui], model.d[mi][:, wi]
     ct_all, dtu_all, dtw_all = model.c[ti], model.d[ti][:, ui], model.d[ti][:, wi]
+    li = [model.outputs.index(o) for o in design.output_limits]
     # weights: states directly, other outputs through their rows of C
     q = np.zeros((n, n))
     for name, weight in design.q.items():
@@ -138,6 +150,7 @@ def design_from_model(
     return PointDesign(
         model=model, a=aa, b=ba, q=qa, r=r, k=k, p=p, preview=preview, target=target, kalman=kalman,
         bw=bw, cm=cm, dm=dmu, dmw=dmw, ct=ct, dt_u=dtu, dt_w=dtw,
+        cl=model.c[li], dl_u=model.d[li][:, ui], dl_w=model.d[li][:, wi], yl0=model.y0[li],
     )  # fmt: skip
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from bridge.control.deps import require
 from bridge.errors import ConfigError
 from bridge.fmu.model import Model
 from bridge.fmu.states import state_names
@@ -59,8 +60,7 @@ class LinearModel:
         """Zero-order hold over ``dt`` (the matrix exponential of the augmented system)."""
         if self.dt is not None:
             raise ConfigError(f"this model is sampled already (dt = {self.dt} s)")
-        from scipy.linalg import expm
-
+        expm = require("scipy.linalg", "sampling a linearised model (lqr and mpc baselines)").expm
         n, m = self.b.shape
         block = np.zeros((n + m + 1, n + m + 1))
         block[:n, :n], block[:n, n : n + m], block[:n, -1] = self.a, self.b, self.f0

@@ -12,20 +12,23 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import sparse
 
 from bridge.control.controller import LinearController, _Blended
+from bridge.control.deps import require
 from bridge.control.design import PointDesign
 from bridge.control.linear import Matrix
-from bridge.errors import ConfigError, DependencyMissing
 
 
 class _Qp:
-    def __init__(self, d: PointDesign, horizon: int, rate: Matrix, dt: float) -> None:
-        try:
-            import osqp
-        except ImportError as exc:
-            raise DependencyMissing("osqp", "the mpc baseline", 'pip install "fmu-bridge[control]"') from exc
+    """The condensed QP of one design point: the moves ``nu`` (and, with output limits, one slack per
+    limited output and sample, penalised linearly and quadratically so that the limits hold
+    whenever they can and the problem stays feasible when they cannot)."""
+
+    def __init__(
+        self, d: PointDesign, horizon: int, rate: Matrix, dt: float, output_limits: list[tuple[float, float]]
+    ) -> None:
+        sparse = require("scipy.sparse", "the mpc baseline")
+        osqp = require("osqp", "the mpc baseline")
         a, b, q, r, p = d.a, d.b, d.q, d.r, d.p
         ns, m, n = a.shape[0], b.shape[1], d.model.a.shape[0]
         powers = [np.eye(ns)]
@@ -41,18 +44,43 @@ class _Qp:
         qbar = sparse.block_diag([q] * (horizon - 1) + [p]).toarray()
         hessian = su.T @ qbar @ su + np.kron(np.eye(horizon), r)
         self.gradient = su.T @ qbar
-        self.sd, self.horizon, self.m = sd, horizon, m
+        self.sd, self.horizon, self.m, self.n, self.ns = sd, horizon, m, n, ns
+        self.design = d
         diff = np.eye(horizon * m) - np.eye(horizon * m, k=-m)
-        constraints = sparse.csc_matrix(np.vstack([np.eye(horizon * m), diff]))
+        blocks = [np.eye(horizon * m), diff]
         self.rate = np.tile(rate * dt, horizon)
+        k = d.cl.shape[0]
+        self.k, self.slack_cost = k, np.zeros(0)
+        if k:  # y_j = free_j + G nu (j = 1..h): the limited outputs after each move
+            g = np.zeros((horizon * k, horizon * m))
+            for j in range(1, horizon + 1):
+                rows = slice((j - 1) * k, j * k)
+                g[rows] = d.cl @ su[(j - 1) * ns : (j - 1) * ns + n]
+                g[rows, (j - 1) * m : j * m] += d.dl_u
+            weight = 1e3 * max(1.0, float(np.max(np.diag(hessian))))
+            eye, zero = np.eye(horizon * k), np.zeros((horizon * k, horizon * m))
+            hessian = sparse.block_diag([hessian, weight * eye]).toarray()
+            blocks = [np.hstack([blk, np.zeros((blk.shape[0], horizon * k))]) for blk in blocks]
+            blocks += [np.hstack([g, -eye]), np.hstack([g, eye]), np.hstack([zero, eye])]
+            self.slack_cost = np.full(horizon * k, weight)
+            self.y_low = np.tile([lo for lo, _ in output_limits], horizon)
+            self.y_high = np.tile([hi for _, hi in output_limits], horizon)
         self.solver: Any = osqp.OSQP()
-        n_con = 2 * horizon * m
+        constraints = sparse.csc_matrix(np.vstack(blocks))
+        n_con = constraints.shape[0]
         self.solver.setup(
-            sparse.triu(sparse.csc_matrix(hessian), format="csc"), np.zeros(horizon * m), constraints,
+            sparse.triu(sparse.csc_matrix(hessian), format="csc"), np.zeros(hessian.shape[0]), constraints,
             -np.full(n_con, np.inf), np.full(n_con, np.inf),
             verbose=False, eps_abs=1e-7, eps_rel=1e-7, warm_starting=True, max_iter=20000,
         )  # fmt: skip
         self.failures = 0
+
+    def _free_outputs(self, s: Matrix, x_star: Matrix, u_star: Matrix, w: Matrix) -> Matrix:
+        """The limited outputs at samples 1..h with every move zero (the part the moves do not set)."""
+        d, h, n, ns = self.design, self.horizon, self.n, self.ns
+        states = s.reshape(h, ns)[:, :n] + x_star[1 : h + 1]
+        y = d.yl0 + states @ d.cl.T + u_star[:h] @ d.dl_u.T + w[:h] @ d.dl_w.T
+        return np.asarray(y, dtype=np.float64).reshape(-1)
 
     def solve(
         self,
@@ -64,14 +92,24 @@ class _Qp:
         low: Matrix,
         high: Matrix,
         u_prev: Matrix,
+        x_star: Matrix,
+        w: Matrix,
     ) -> Matrix | None:
         h, m = self.horizon, self.m
-        q = self.gradient @ (self.sx @ state + self.sd @ changes.reshape(-1))
+        free_s = self.sx @ state + self.sd @ changes.reshape(-1)
+        q = self.gradient @ free_s
         base = (u0 + u_star[:h]).reshape(-1)  # u_j = base_j + nu_j
         box_lo, box_hi = np.tile(low, h) - base, np.tile(high, h) - base
         step = base - np.concatenate([u_prev, base[:-m]])  # u_j - u_j-1 = nu_j - nu_j-1 + step_j
         rate_lo, rate_hi = -self.rate - step, self.rate - step
-        self.solver.update(q=q, l=np.concatenate([box_lo, rate_lo]), u=np.concatenate([box_hi, rate_hi]))
+        lower, upper = [box_lo, rate_lo], [box_hi, rate_hi]
+        if self.k:
+            free_y = self._free_outputs(free_s, x_star, u_star, w)
+            inf = np.full(free_y.size, np.inf)
+            lower += [-inf, self.y_low - free_y, np.zeros(free_y.size)]
+            upper += [self.y_high - free_y, inf, inf]
+            q = np.concatenate([q, self.slack_cost])
+        self.solver.update(q=q, l=np.concatenate(lower), u=np.concatenate(upper))
         result = self.solver.solve(raise_error=False)
         x = result.x
         if x is None or not np.all(np.isfinite(x)) or "solved" not in str(result.info.status).lower():
@@ -85,13 +123,8 @@ class Mpc(LinearController):
 
     def build(self, limits: Any = None) -> None:
         super().build(limits)
-        rate = np.array([self.spec.rate_limits.get(name, np.inf) for name in self.spec.inputs])
-        unknown = sorted(set(self.spec.rate_limits) - set(self.spec.inputs))
-        if unknown:
-            raise ConfigError(
-                f"baseline {self.name}: rate_limits {unknown} are not inputs {self.spec.inputs}"
-            )
-        self._qps = [_Qp(d, self.spec.horizon, rate, self.dt) for d in self.designs]
+        limits = list(self.spec.output_limits.values())
+        self._qps = [_Qp(d, self.spec.horizon, self._rate, self.dt, limits) for d in self.designs]
         self._nearest = 0
 
     def horizon_samples(self) -> int:
@@ -107,16 +140,18 @@ class Mpc(LinearController):
         finally:
             self.designs, self.points = saved, points
 
-    def _law(self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix) -> Matrix:
+    def _law(
+        self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix, *, w: Matrix
+    ) -> Matrix:
         h = self.spec.horizon
         changes = x_star[:h] - x_star[1 : h + 1]
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
         move = self._qps[self._nearest].solve(
-            state, changes, u_star=u_star, u0=m.u0, low=low, high=high, u_prev=u_prev
+            state, changes, u_star=u_star, u0=m.u0, low=low, high=high, u_prev=u_prev, x_star=x_star, w=w
         )
         if move is None:  # the LQR law (clipped by the caller) when the solver gives no answer
-            return super()._law(m, state, x_star, u_star, u_prev)
+            return super()._law(m, state, x_star, u_star, u_prev, w=w)
         return move
 
     @property

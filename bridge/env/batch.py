@@ -241,7 +241,7 @@ class BatchEnv:
                     outputs, sample, bool(result.terminated[0]), rng
                 )
                 code[0] = self._codes[reason]
-                batch.signals[0] = task.signal_values
+                batch.follow_scalar_step(self.samples)
             except NonFiniteOutputs:
                 errors[0] = self._non_finite(0, str(task.bad_output(outputs, sample)), step=sample)
         if errors:  # rare: the signal rows the batch's own step leaves (evaluation reads them)

@@ -57,10 +57,17 @@ class ControlDesign(Strict):
     )
     horizon: Annotated[int, Field(ge=1, le=500)] = 20
     rate_limits: dict[str, PositiveFloat] = Field(
-        default={}, description="mpc: |du/dt| per input, physical units per second"
+        default={},
+        description="|du/dt| per input, physical units per second: the mpc's constraint, the lqr's "
+        "command limiter (both keep the command within what the actuator can follow)",
     )
     limits: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
         default={}, description="input limits; default the action space's"
+    )
+    output_limits: dict[str, tuple[FiniteFloat, FiniteFloat]] = Field(
+        default={},
+        description="mpc: FMU outputs kept within [low, high] over the horizon (soft: a slack with a heavy "
+        "penalty keeps the QP feasible), e.g. the lateral acceleration the grip allows",
     )
 
     @model_validator(mode="after")
@@ -75,7 +82,11 @@ class ControlDesign(Strict):
             raise ValueError(
                 f"preview {stray} must be disturbances too (disturbances: {sorted(self.disturbances)})"
             )
-        for name, (low, high) in self.limits.items():
-            if not low < high:
-                raise ValueError(f"limits.{name}: low {low} must be below high {high}")
+        for key, table in (("limits", self.limits), ("output_limits", self.output_limits)):
+            for name, (low, high) in table.items():
+                if not low < high:
+                    raise ValueError(f"{key}.{name}: low {low} must be below high {high}")
+        stray = sorted(set(self.rate_limits) - set(self.inputs))
+        if stray:
+            raise ValueError(f"rate_limits {stray} must be inputs too (inputs: {self.inputs})")
         return self

@@ -173,6 +173,10 @@ class EvaluationSection(Strict):
     baselines: dict[str, BaselineSection] = {}
     metrics: MetricsSection = MetricsSection()
     plots: list[str] = Field(default=[], description="signals the report plots (default: all)")
+    baseline_signals: Literal["measured", "exact"] = Field(
+        default="measured",
+        description="what baselines read: the agent's sensors (noise included) or the exact model values",
+    )
 
 
 # -- recording, node, ROS -------------------------------------------------------------------------

@@ -79,6 +79,9 @@ class BatchTask:
         self._observe = batch_observation(observer.source)
         self._h, self._dim = observer.history_length, observer.dim
         self._obs_noise = observer.has_noise
+        self._noise_signals = observer.noise_signals
+        self._exact_signals = exp.evaluation.baseline_signals == "exact"
+        self._obs_row: npt.NDArray[np.int64] | None = None
         self.reasons: list[str | None] = [None]  # reason code -> text; 0: running
         self._bounds: list[tuple[int, float, float, int]] = []
         for name, (lo, hi) in exp.termination.bounds.items():
@@ -220,7 +223,23 @@ class BatchTask:
             total = np.where(terminated, total + self._penalty, total)
         return total
 
+    def follow_scalar_step(self, samples: npt.NDArray[np.int64]) -> None:
+        """After a batch of one stepped through its scalar Task: take its signal row and the
+        observation's noise row, as :meth:`step_result` would have left them."""
+        self.signals[0] = self.tasks[0].signal_values
+        self._obs_row = self._row(samples)
+
+    def controller_signals(self) -> FloatArray:
+        """Every env's last signals as controllers read them, one row per env: the scalar
+        :meth:`Task.controller_signals` over the batch (the sensor noise of the last observation)."""
+        if self._exact_signals or not self._obs_noise or self._obs_row is None:
+            return self.signals
+        out = self.signals.copy()
+        out[:, self._noise_signals] += self._tables["obs_noise"][self._all, self._obs_row]
+        return out
+
     def _observations(self, s: FloatArray, row: npt.NDArray[np.int64]) -> npt.NDArray[np.float32]:
+        self._obs_row = row
         nz = self._tables["obs_noise"][self._all, row].T if self._obs_noise else None
         columns = self._observe(s.T, self.inputs.T, nz)
         new = np.stack(columns, axis=1).astype(np.float32) if columns else np.zeros((self.n, 0), np.float32)

@@ -407,7 +407,16 @@ class Task:
         return self._signals
 
     def signal_dict(self) -> dict[str, float]:
+        """The last signals by name, exact (as the model computed them)."""
         return dict(zip(self.signal_names, self._signals))
+
+    def controller_signals(self) -> dict[str, float]:
+        """The last signals by name as a controller reads them: through the agent's sensors (the
+        sensor noise of the observation just made) unless ``evaluation.baseline_signals`` is
+        ``exact``. Every baseline on every path (evaluation, residual training, deployment) reads this."""
+        if self.experiment.evaluation.baseline_signals == "exact":
+            return self.signal_dict()
+        return dict(zip(self.signal_names, self.observer.measured(self._signals)))
 
 
 def _as_table(rows: list[list[float]], n: int) -> FloatArray:

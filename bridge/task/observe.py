@@ -52,6 +52,8 @@ class ObservationBuilder:
         noise = task.experiment.noise.observations
         self._noise = [(section.outputs.index(n), d) for n, d in noise.items()]
         self._noise_table: list[list[float]] = []
+        self._noise_signals = [self._direct_list[p] for p, _ in self._noise]  # signal index per column
+        self._last_noise: list[float] = []
         self._sample = 0
         self._compiled = self._compile()
         self._history: deque[list[float]] = deque(maxlen=section.history)
@@ -123,6 +125,11 @@ class ObservationBuilder:
         return bool(self._noise)
 
     @property
+    def noise_signals(self) -> list[int]:
+        """The signal index of each sensor noise column (``noise_table``'s columns)."""
+        return self._noise_signals
+
+    @property
     def noise_table(self) -> list[list[float]]:
         """This episode's sensor noise, one row per sample, one column per noisy output."""
         return self._noise_table
@@ -131,12 +138,24 @@ class ObservationBuilder:
     def new_episode(self, rng: np.random.Generator, rows: int) -> None:
         """Draw the sensor noise of a whole episode at once (rows = samples + 1)."""
         self._noise_table = noise_table(self._noise, rng, rows)
+        self._last_noise = []
         self._sample = 0
+
+    def measured(self, signals: list[float]) -> list[float]:
+        """``signals`` as the sensors report them: the sensor noise of the last observation added to
+        the noisy observed outputs (what the agent saw), the other signals as they are."""
+        if not self._last_noise:
+            return signals
+        out = list(signals)
+        for i, value in zip(self._noise_signals, self._last_noise):
+            out[i] += value
+        return out
 
     def _single(self, signals: list[float], inputs: list[float], rng: np.random.Generator) -> list[float]:
         if self._noise:
             row = self._noise_table[min(self._sample, len(self._noise_table) - 1)]
             self._sample += 1
+            self._last_noise = row
             return self._compiled(signals, inputs, row)
         return self._compiled(signals, inputs, _NO_NOISE)
 

@@ -170,3 +170,60 @@ def test_design_errors_name_what_is_wrong(vehicle: FmuEnv) -> None:
         ControlDesign.model_validate({**VEHICLE_DESIGN, "integral": {"heading_error": 1.0}})
     with pytest.raises(ValueError, match="preview"):
         ControlDesign.model_validate({**VEHICLE_DESIGN, "disturbances": {}})
+
+
+def test_lqr_keeps_its_command_within_the_rate_limit_and_counts_the_samples(vehicle: FmuEnv) -> None:
+    free = run_episode(vehicle, ModelBased("lqr", VEHICLE_DESIGN, "lqr"), 0, "hairpin")
+    dt = 0.05
+    assert np.max(np.abs(np.diff(free.inputs["steer_cmd"]))) > 0.2 * dt  # the limit below binds
+    policy = ModelBased("lqr", {**VEHICLE_DESIGN, "rate_limits": {"steer_cmd": 0.2}}, "lqr")
+    trace = run_episode(vehicle, policy, 0, "hairpin")
+    u = trace.inputs["steer_cmd"]
+    assert np.max(np.abs(np.diff(u))) <= 0.2 * dt * (1 + 1e-5)  # the action is float32 on its way
+    assert trace.extra["rate_limited"] > 0
+    assert "solver_fallbacks" not in trace.extra  # an lqr has no solver
+
+
+def test_mpc_reports_its_solver_fallbacks_per_episode(vehicle: FmuEnv) -> None:
+    design = {**VEHICLE_DESIGN, "horizon": 10, "rate_limits": {"steer_cmd": 0.8}}
+    policy = ModelBased("mpc", design, "mpc")
+    trace = run_episode(vehicle, policy, 0, "s_bend")
+    assert trace.extra["solver_fallbacks"] == policy.controller.failures  # first episode: all of them
+    assert "rate_limited" in trace.extra
+
+
+@pytest.fixture(scope="module")
+def vehicle_accel(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    """The showcase with the lateral acceleration observed too (so that the trace holds it)."""
+    import yaml
+
+    data = yaml.safe_load(example_experiment("vehicle_path").read_text())
+    data.pop("versions", None)
+    data["observations"]["outputs"].append("lateral_accel")
+    data["observations"]["scale"]["lateral_accel"] = [-10.0, 10.0]
+    path = tmp_path_factory.mktemp("accel") / "vehicle.yaml"
+    path.write_text(yaml.safe_dump(data))
+    env = FmuEnv(load_experiment(path))
+    yield env
+    env.close()
+
+
+def test_mpc_keeps_the_lateral_acceleration_within_its_output_limits(vehicle_accel: FmuEnv) -> None:
+    """A grip limit as an output limit: the unconstrained mpc exceeds 3 m/s^2 on the hairpin, the
+    constrained one plans within it (soft: the plant is not the linear model, so a small overshoot)."""
+    vehicle = vehicle_accel
+    design = {**VEHICLE_DESIGN, "horizon": 15, "rate_limits": {"steer_cmd": 0.6}}
+    free = run_episode(vehicle, ModelBased("mpc", design, "mpc"), 0, "hairpin")
+    assert np.max(np.abs(free.signals["lateral_accel"])) > 4.0
+    limited = {**design, "output_limits": {"lateral_accel": [-3.0, 3.0]}}
+    policy = ModelBased("mpc", limited, "mpc")
+    trace = run_episode(vehicle, policy, 0, "hairpin")
+    assert np.max(np.abs(trace.signals["lateral_accel"])) < 3.3
+    assert policy.controller.failures == 0
+
+
+def test_output_limits_need_the_mpc(vehicle: FmuEnv) -> None:
+    with pytest.raises(ConfigError, match=r"output_limits .*use type: mpc"):
+        ModelBased("lqr", {**VEHICLE_DESIGN, "output_limits": {"lateral_accel": [-3.0, 3.0]}}, "lqr").reset(
+            vehicle.task, 0
+        )
