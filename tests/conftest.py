@@ -109,10 +109,16 @@ def typed_fmu3() -> Path:
 
 
 def _pythonfmu_build(
-    tool: str, source: Path, out: Path, files: Sequence[Path] = (), env: dict[str, str] | None = None
+    tool: str,
+    source: Path,
+    out: Path,
+    *,
+    files: Sequence[Path] = (),
+    env: dict[str, str] | None = None,
+    flags: Sequence[str] = (),
 ) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out), *map(str, files)]
+    cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out), *flags, *map(str, files)]
     result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False, env=env)
     if result.returncode != 0:
         pytest.fail(f"{tool} could not export {source.name}:\n{result.stdout}\n{result.stderr}")
@@ -158,7 +164,7 @@ def unimportable_fmu(tool: str, out: Path, requirements: str | None = None) -> P
     path = os.pathsep.join([str(stand_in.parent), os.environ.get("PYTHONPATH", "")])
     env = {**os.environ, "PYTHONPATH": path}
     source = DATA / "slaves" / ("Unimportable2.py" if tool == "pythonfmu" else "Unimportable3.py")
-    return _pythonfmu_build(tool, source, out / "fmu", files, env)
+    return _pythonfmu_build(tool, source, out / "fmu", files=files, env=env)
 
 
 @pytest.fixture(scope="session")
