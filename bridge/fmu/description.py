@@ -18,7 +18,7 @@ import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
 
 from bridge.errors import FmuLoadError
-from bridge.fmu import unzip
+from bridge.fmu import python_backed, unzip
 from bridge.fmu.vocab import (
     NUMERIC_TYPES,
     ClockInfo,
@@ -80,13 +80,14 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
     interfaces: list[Interface] = []
     identifiers: dict[str, str] = {}
     can_state: dict[str, bool] = {}
-    once_per_process = False
+    once_per_process = needs_tool = False
     for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange), ("se", md.scheduledExecution)):
         if iface is not None:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
             can_state[kind] = bool(iface.canGetAndSetFMUstate)
             once_per_process |= bool(iface.canBeInstantiatedOnlyOncePerProcess)
+            needs_tool |= bool(iface.needsExecutionTool)
     scheduled = md.scheduledExecution is not None
     if not interfaces and not scheduled:
         raise FmuLoadError(
@@ -112,6 +113,9 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
         scheduled_execution=scheduled,
         has_event_mode=bool(md.coSimulation is not None and md.coSimulation.hasEventMode),
         once_per_process=once_per_process,
+        needs_execution_tool=needs_tool,
+        python_backed=python_backed.is_python_backed(fmu_path, md.generationTool),
+        python_requirements=python_backed.requirements(fmu_path),
         raw=md,
     )
 
