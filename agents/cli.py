@@ -441,7 +441,7 @@ def evaluate_cmd(
     agents: Annotated[
         list[str],
         typer.Argument(
-            help="Models/run dirs, baselines (zero, random, constant:V, "
+            help="Models/run dirs, baselines (zero, start, random, constant:V, "
             "names in evaluation.baselines) or python:module:function; NAME=AGENT names one."
         ),
     ],

@@ -22,7 +22,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from agents.run_state import read_run
 from bridge.errors import ConfigError
 from bridge.task.core import Task
-from bridge.task.fixed import physical_action, zero_values
+from bridge.task.fixed import physical_action, start_values, zero_values
 
 _log = logging.getLogger(__name__)
 
@@ -202,24 +202,35 @@ def discrete_levels(task: Task) -> dict[str, list[float]] | None:
 @dataclass
 class FixedPolicy:
     """``zero`` (no change: 0 on every FMU input, the start value on every tunable parameter) /
+    ``start`` (the model as exported: every input at its start value, parameters untouched) /
     ``constant:V`` (the physical value V) / ``random`` (seeded samples of the action space).
 
     On a continuous space the physical values reach the FMU exactly (float64, not through the
     agent's float32 action), clipped to an input's bounds with one warning
     (:mod:`bridge.task.fixed`). On a discrete space the value must be one of the levels: ``zero``
     on a push-left/push-right cart-pole would otherwise push at the nearest level every step while
-    being called zero. A model without actions takes only ``zero``.
+    being called zero; ``start`` goes to the level nearest each start value, with a warning where
+    that is not the start value. A model without actions takes only ``zero`` and ``start``.
     """
 
     name: str
     value: float | None = None
     zero: bool = False
+    start: bool = False
     _built_for: Task | None = field(default=None, init=False, repr=False, compare=False)
 
     def reset(self, task: Task, seed: int | None) -> None:
         if self.value is not None and task is self._built_for:
             return  # the same action for every episode (and its warning once)
         self._task = task
+        if self.start:
+            self._action = (
+                physical_action(task, start_values(task), f"agent {self.name!r}")
+                if task.action_inputs
+                else task.action_for_inputs([])
+            )
+            self._built_for = task
+            return
         if not task.action_inputs and not self.zero:
             raise ConfigError(
                 f"agent {self.name!r}: the experiment has no actions (actions.inputs is empty), so "
@@ -393,6 +404,8 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
         return baseline(spec, experiment_baselines[spec])
     if spec == "zero":
         return FixedPolicy(name or "zero", 0.0, zero=True)
+    if spec == "start":
+        return FixedPolicy(name or "start", 0.0, start=True)
     if spec == "random":
         return FixedPolicy(name or "random")
     if spec.startswith("constant:"):
@@ -411,7 +424,7 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
         return Sb3Policy(path, name)
     raise ConfigError(
         f"agent {spec!r} is not a model file or run directory, not a baseline of the experiment "
-        f"({sorted(experiment_baselines) or 'none defined'}), and not zero, random, constant:V or "
+        f"({sorted(experiment_baselines) or 'none defined'}), and not zero, start, random, constant:V or "
         "python:module:function"
     )
 

@@ -108,10 +108,18 @@ def typed_fmu3() -> Path:
     return example_fmu("typed", "3.0", "cs")
 
 
-def _pythonfmu_build(tool: str, source: Path, out: Path) -> Path:
+def _pythonfmu_build(
+    tool: str,
+    source: Path,
+    out: Path,
+    *,
+    files: Sequence[Path] = (),
+    env: dict[str, str] | None = None,
+    flags: Sequence[str] = (),
+) -> Path:
     out.mkdir(parents=True, exist_ok=True)
-    cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out)]
-    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+    cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out), *flags, *map(str, files)]
+    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False, env=env)
     if result.returncode != 0:
         pytest.fail(f"{tool} could not export {source.name}:\n{result.stdout}\n{result.stderr}")
     return out / f"{source.stem}.fmu"
@@ -136,6 +144,27 @@ def pythonfmu_longrun2(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """pythonfmu's export of tests/data/slaves/LongRun2.py: a default experiment of 1e8 s at 0.01 s."""
     pytest.importorskip("pythonfmu")
     return _pythonfmu_build("pythonfmu", DATA / "slaves" / "LongRun2.py", tmp_path_factory.mktemp("longrun2"))
+
+
+def unimportable_fmu(tool: str, out: Path, requirements: str | None = None) -> Path:
+    """A pythonfmu (FMI 2.0) or pythonfmu3 (FMI 3.0) export whose class import fails when it runs.
+
+    Its module imports ``fmu_bridge_absent_package``, which exists only while it is exported (a
+    package made for the build in ``out``); ``requirements`` becomes the FMU's
+    ``resources/requirements.txt``.
+    """
+    pytest.importorskip(tool)
+    stand_in = out / "build-path" / "fmu_bridge_absent_package"
+    stand_in.mkdir(parents=True, exist_ok=True)
+    (stand_in / "__init__.py").write_text("")
+    files = []
+    if requirements is not None:
+        files.append(out / "requirements.txt")
+        files[0].write_text(requirements)
+    path = os.pathsep.join([str(stand_in.parent), os.environ.get("PYTHONPATH", "")])
+    env = {**os.environ, "PYTHONPATH": path}
+    source = DATA / "slaves" / ("Unimportable2.py" if tool == "pythonfmu" else "Unimportable3.py")
+    return _pythonfmu_build(tool, source, out / "fmu", files=files, env=env)
 
 
 @pytest.fixture(scope="session")

@@ -17,16 +17,22 @@ from rich.table import Table
 from bridge.cli.simulate import make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.env.plants import model_info_for
+from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 from bridge.experiment.validate import check_experiment, timing
 from bridge.task.core import Task
+from bridge.task.fixed import is_fixed_policy, unknown_policy
 from bridge.task.scenario import describe
 
 
-def check_and_report(path: Path, *, version: str | None, steps: int, console: Console) -> None:
-    """Validate, run both env checkers, and print spaces and a few steps."""
+def check_and_report(
+    path: Path, *, version: str | None, steps: int, console: Console, policy: str = "zero"
+) -> None:
+    """Validate, run both env checkers, and print spaces and a few steps of the fixed ``policy``."""
     from gymnasium.utils.env_checker import check_env as gym_check
 
+    if not is_fixed_policy(policy):  # before the FMU is loaded
+        raise ConfigError(unknown_policy(policy))
     experiment = load_experiment(path, version=version)
     info = check_experiment(experiment, model_info_for(experiment))
     console.print(
@@ -52,7 +58,7 @@ def check_and_report(path: Path, *, version: str | None, steps: int, console: Co
             f"FMU step {t.step_size_s:g} s x {t.steps_per_sample} = sample {t.sampling_time_s:g} s; "
             f"episode {env.task.episode_duration_s:g} s"
         )
-        _few_steps(env, steps, console)
+        _few_steps(env, steps, console, policy)
 
 
 def _plugin_checkers() -> list[tuple[str, Callable[[Any], None]]]:
@@ -66,10 +72,10 @@ def _plugin_checkers() -> list[tuple[str, Callable[[Any], None]]]:
     return found
 
 
-def _few_steps(env: FmuEnv, steps: int, console: Console) -> None:
-    policy = make_policy("zero", env.task, 0)
+def _few_steps(env: FmuEnv, steps: int, console: Console, spec: str) -> None:
+    policy = make_policy(spec, env.task, 0)
     obs, info = env.reset(seed=0)
-    title = f"first steps (zero action, scenario {info['scenario']})"
+    title = f"first steps ({spec} action, scenario {info['scenario']})"
     header = [escape(h) for h in ("step", "t [s]", *env.output_names, "reward")]  # "[s]" is not markup
     rows = []
     for _ in range(steps):

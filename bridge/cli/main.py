@@ -183,11 +183,18 @@ def check(
     experiment: ExperimentArg,
     version: VersionOpt = None,
     steps: Annotated[int, typer.Option(help="Sample steps to show.")] = 5,
+    policy: Annotated[
+        str,
+        typer.Option(
+            help="The action of the steps shown: zero (0 on FMU inputs) | start (inputs at their "
+            "start values, parameters untouched) | random | constant:VALUE"
+        ),
+    ] = "zero",
 ) -> None:
     """Validate an experiment against its FMU, run Gymnasium's and SB3's env checkers, show a few steps."""
     from bridge.cli.check import check_and_report
 
-    check_and_report(experiment, version=version, steps=steps, console=console)
+    check_and_report(experiment, version=version, steps=steps, console=console, policy=policy)
 
 
 @app.command()
@@ -198,7 +205,8 @@ def simulate(
     policy: Annotated[
         str,
         typer.Option(
-            help="zero (0 on FMU inputs, the start value on tunable parameters) | random | constant:VALUE "
+            help="zero (0 on FMU inputs, the start value on tunable parameters) | start (the model as "
+            "exported: inputs at their start values, parameters untouched) | random | constant:VALUE "
             "(physical, applied exactly; clipped to the input's bounds with a warning)"
         ),
     ] = "zero",
@@ -213,9 +221,10 @@ def simulate(
 ) -> None:
     """Run open-loop episodes, print a table, and record them (MCAP) unless --no-record."""
     from bridge.errors import ConfigError
+    from bridge.task.fixed import is_fixed_policy, unknown_policy
 
-    if policy not in ("zero", "random") and not policy.startswith("constant:"):
-        raise ConfigError(f"--policy {policy!r} is unknown; use zero, random or constant:VALUE")
+    if not is_fixed_policy(policy):
+        raise ConfigError(unknown_policy(policy))
     from bridge.cli.simulate import make_policy, run_episodes
     from bridge.env.fmu_env import FmuEnv
     from bridge.experiment.config import load_experiment

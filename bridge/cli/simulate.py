@@ -1,13 +1,14 @@
 """Open-loop episodes of an experiment: ``fmu-bridge simulate`` and the quick checks of ``check``.
 
 Policies here are fixed rules (no learning): ``zero`` (no change: 0 on every FMU input and the
-FMU's start value on every tunable parameter), ``random`` (seeded samples of the action space) and
+FMU's start value on every tunable parameter), ``start`` (the model as exported: every input at its
+declared start value, parameters untouched), ``random`` (seeded samples of the action space) and
 ``constant:V`` (the physical value V on every action input).
 
 A physical value reaches the FMU exactly (an :class:`~bridge.task.core.ExactAction` carries it past
 the action mapping); a value outside an input's bounds, or between the levels of a discrete
 action, is changed to the nearest allowed value with one warning naming the value, the bound and the
-variable. A model without actions takes only ``zero`` (nothing is applied).
+variable. A model without actions takes only ``zero`` and ``start`` (nothing is applied).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import numpy as np
 
 from bridge.errors import ConfigError
 from bridge.task.core import Task
-from bridge.task.fixed import physical_action, zero_values
+from bridge.task.fixed import is_fixed_policy, physical_action, start_values, unknown_policy, zero_values
 
 Policy = Callable[[Any], Any]
 _log = logging.getLogger(__name__)
@@ -41,11 +42,11 @@ class EpisodeResult:
 
 
 def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
-    """A fixed policy from its name: ``zero``, ``random`` or ``constant:V``."""
-    if spec not in ("zero", "random") and not spec.startswith("constant:"):
-        raise ConfigError(f"--policy {spec!r} is unknown; use zero, random or constant:VALUE")
+    """A fixed policy from its name: ``zero``, ``start``, ``random`` or ``constant:V``."""
+    if not is_fixed_policy(spec):
+        raise ConfigError(unknown_policy(spec))
     if not task.action_inputs:
-        if spec != "zero":
+        if spec not in ("zero", "start"):
             raise ConfigError(
                 f"--policy {spec}: the experiment has no actions (actions.inputs is empty), so there is "
                 "nothing to apply it to; leave --policy out (zero: nothing applied), or add an FMU input "
@@ -53,8 +54,9 @@ def make_policy(spec: str, task: Task, seed: int | None) -> Policy:
             )
         nothing = task.action_for_inputs([])
         return lambda obs: nothing
-    if spec == "zero":
-        action = physical_action(task, zero_values(task), "--policy zero")
+    if spec in ("zero", "start"):
+        values = zero_values(task) if spec == "zero" else start_values(task)
+        action = physical_action(task, values, f"--policy {spec}")
         return lambda obs: action
     if spec == "random":
         space = task.action_space

@@ -38,7 +38,13 @@ def q(text: str) -> str:
 
 
 def _num(value: float) -> str:
-    return repr(float(value))
+    """``value`` as a YAML float that YAML 1.1 readers (PyYAML, ROS 2) read as a float too: they
+    want a dot in the mantissa of an exponent form (``1.0e-06``, not ``1e-06``, a string there)."""
+    text = repr(float(value))
+    mantissa, e, exponent = text.partition("e")
+    if e and "." not in mantissa:
+        return f"{mantissa}.0e{exponent}"
+    return {"inf": ".inf", "-inf": "-.inf", "nan": ".nan"}.get(text, text)
 
 
 def _comment(var: Variable) -> str:
@@ -171,10 +177,10 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
         "model:",
         f"  fmu: {q(str(shown))}",
         *[f"  {note}" for note in notes],
-        f"  step_size: {step!r}          # FMU step, s",
-        f"  sampling_time: {sampling!r}      # one agent sample; a whole multiple of step_size",
-        f"  episode_duration: {duration!r}   # s; the episode is truncated after this",
-        *([f"  start_time: {start!r}"] if start else []),
+        f"  step_size: {_num(step)}          # FMU step, s",
+        f"  sampling_time: {_num(sampling)}      # one agent sample; a whole multiple of step_size",
+        f"  episode_duration: {_num(duration)}   # s; the episode is truncated after this",
+        *([f"  start_time: {_num(start)}"] if start else []),
         *_reset_policy(info),
     ]
 

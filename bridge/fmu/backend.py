@@ -10,6 +10,7 @@ cheaper than FMPy's own convenience API. Status codes come from ``bridge.fmu.abi
 from __future__ import annotations
 
 import ctypes
+import logging
 import pathlib
 from collections.abc import Callable
 from typing import Any
@@ -23,6 +24,8 @@ from bridge.fmu.abi import DISCARD, WARNING, status_name
 from bridge.fmu.clocks import clock_driver_needed
 from bridge.fmu.description import Interface, ModelInfo
 from bridge.fmu.events import fmi1_iterate
+
+_log = logging.getLogger(__name__)
 
 # FMI-3 type name -> (FMI 1/2 function suffix, FMI 3 function suffix, ctypes type per version)
 _V12 = {
@@ -112,8 +115,38 @@ class Backend:
         return _V3[var_type][0] if self.major == 3 else _V12[var_type][0]
 
     # -- life cycle (implemented per version) --------------------------------------------------
+    _INSTANTIATE = "fmi2Instantiate"  # the FMI function's name, for messages (FMI 1.0: two names)
+
     def instantiate(self) -> None:
+        """Create the instance, logging off; on NULL, try once more with the FMU's logging on.
+
+        An FMU that cannot instantiate often says why only to a logger it was told to use (a
+        Python-backed FMU's ``ModuleNotFoundError``, a missing resource file); the second try asks
+        for every category so that the error carries what it logged.
+        """
+        component = self._create(logging_on=False)
+        if not component:
+            component = self._create(logging_on=True)
+            if not component:
+                raise FmuError(self._null_message(), log=self.log.recent())
+            _log.info("%s: instantiated on the second try, with logging on", self.info.model_name)
+            self._debug_logging_off(component)
+        self.component = component
+        self.fmu.component = component
+
+    def _null_message(self) -> str:
+        said = "" if self.log.messages else "; it logged nothing, also with logging on"
+        what = self._INSTANTIATE
+        if self.major == 1:
+            what = "fmiInstantiateModel" if self.interface == "me" else "fmiInstantiateSlave"
+        return f"{self.info.model_name}: {what} returned NULL (the FMU refused to start){said}"
+
+    def _create(self, logging_on: bool) -> Any:
+        """The FMI instantiate call; the new instance, or None/0 when the FMU returned NULL."""
         raise NotImplementedError
+
+    def _debug_logging_off(self, component: Any) -> None:
+        """After a retry with logging on: back to the FMU's quiet default."""
 
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
         raise NotImplementedError
@@ -213,42 +246,32 @@ class Fmi1Backend(Backend):
         fn = self.functions[f"fmi1{'Set' if setter else 'Get'}{_V12[var_type][0]}"]
         return fn  # type: ignore[no-any-return]
 
-    def instantiate(self) -> None:
+    def _create(self, logging_on: bool) -> Any:
+        logging_flag = fmi1.fmi1True if logging_on else fmi1.fmi1False
+        name, guid = self.instance_name.encode(), self.info.guid.encode()
         if self.interface == "me":
-            self._instantiate_model()
-            return
+            return self.call(
+                "fmiInstantiateModel",
+                lambda: self.fmu.fmi1InstantiateModel(name, guid, self._callbacks, logging_flag),
+            )
         location = pathlib.Path(self.fmu.unzipDirectory).as_uri()
-        self.component = self.call(
+        return self.call(
             "fmiInstantiateSlave",
             lambda: self.fmu.fmi1InstantiateSlave(
-                self.instance_name.encode(),
-                self.info.guid.encode(),
+                name,
+                guid,
                 location.encode(),
                 b"application/x-fmu-sharedlibrary",
                 0.0,
                 fmi1.fmi1False,
                 fmi1.fmi1False,
                 self._callbacks,
-                fmi1.fmi1False,
+                logging_flag,
             ),
         )
-        if not self.component:
-            raise FmuError(
-                f"{self.info.model_name}: fmiInstantiateSlave returned NULL", log=self.log.recent()
-            )
-        self.fmu.component = self.component
 
-    def _instantiate_model(self) -> None:
-        name, guid = self.instance_name.encode(), self.info.guid.encode()
-        self.component = self.call(
-            "fmiInstantiateModel",
-            lambda: self.fmu.fmi1InstantiateModel(name, guid, self._callbacks, fmi1.fmi1False),
-        )
-        if not self.component:
-            raise FmuError(
-                f"{self.info.model_name}: fmiInstantiateModel returned NULL", log=self.log.recent()
-            )
-        self.fmu.component = self.component
+    def _debug_logging_off(self, component: Any) -> None:
+        self.functions["fmi1SetDebugLogging"](component, fmi1.fmi1False)
 
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
         self._init_args = (start_s, stop_s)
@@ -303,10 +326,10 @@ class Fmi2Backend(Backend):
     def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
         return self.functions[f"fmi2{'Set' if setter else 'Get'}{_V12[var_type][0]}"]  # type: ignore[no-any-return]
 
-    def instantiate(self) -> None:
+    def _create(self, logging_on: bool) -> Any:
         kind = fmi2.fmi2CoSimulation if self.interface == "cs" else fmi2.fmi2ModelExchange
         resources = pathlib.Path(self.fmu.unzipDirectory, "resources").as_uri()
-        self.component = self.call(
+        return self.call(
             "fmi2Instantiate",
             lambda: self.fmu.fmi2Instantiate(
                 self.instance_name.encode(),
@@ -315,12 +338,12 @@ class Fmi2Backend(Backend):
                 resources.encode(),
                 ctypes.byref(self._callbacks),
                 fmi2.fmi2False,
-                fmi2.fmi2False,
+                fmi2.fmi2True if logging_on else fmi2.fmi2False,
             ),
         )
-        if not self.component:
-            raise FmuError(f"{self.info.model_name}: fmi2Instantiate returned NULL", log=self.log.recent())
-        self.fmu.component = self.component
+
+    def _debug_logging_off(self, component: Any) -> None:
+        self.functions["fmi2SetDebugLogging"](component, fmi2.fmi2False, 0, None)
 
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
         self.call(
@@ -390,7 +413,9 @@ class Fmi3Backend(Backend):
     def accessor(self, var_type: str, setter: bool) -> Callable[..., int]:
         return self.functions[f"fmi3{'Set' if setter else 'Get'}{_V3[var_type][0]}"]  # type: ignore[no-any-return]
 
-    def instantiate(self) -> None:
+    _INSTANTIATE = "fmi3Instantiate"
+
+    def _create(self, logging_on: bool) -> Any:
         resources = (str(pathlib.Path(self.fmu.unzipDirectory, "resources")) + "/").encode()
         name, token = self.instance_name.encode(), self.info.guid.encode()
         env = ctypes.c_void_p(self.log.id)
@@ -402,7 +427,7 @@ class Fmi3Backend(Backend):
                 token,
                 resources,
                 False,
-                False,
+                logging_on,
                 self.event_mode,
                 False,
                 no_vrs,
@@ -419,16 +444,16 @@ class Fmi3Backend(Backend):
                 fmi3.fmi3UnlockPreemptionCallback(lambda: None),
             )
             create = lambda: self.fmu.fmi3InstantiateScheduledExecution(  # noqa: E731
-                name, token, resources, False, False, env, logs.V3_LOGGER, *self._se_callbacks
+                name, token, resources, False, logging_on, env, logs.V3_LOGGER, *self._se_callbacks
             )
         else:
             create = lambda: self.fmu.fmi3InstantiateModelExchange(  # noqa: E731
-                name, token, resources, False, False, env, logs.V3_LOGGER
+                name, token, resources, False, logging_on, env, logs.V3_LOGGER
             )
-        self.component = self.call("fmi3Instantiate", create)
-        if not self.component:
-            raise FmuError(f"{self.info.model_name}: fmi3Instantiate returned NULL", log=self.log.recent())
-        self.fmu.component = self.component
+        return self.call("fmi3Instantiate", create)
+
+    def _debug_logging_off(self, component: Any) -> None:
+        self.functions["fmi3SetDebugLogging"](component, False, 0, None)
 
     def enter_initialization(self, start_s: float, stop_s: float | None, tolerance: float | None) -> None:
         self.call(

@@ -6,6 +6,7 @@ including ones built for other platforms.
 
 from __future__ import annotations
 
+import io
 import logging
 import zipfile
 from dataclasses import replace
@@ -18,7 +19,7 @@ import fmpy
 from fmpy.model_description import ModelDescription, ModelVariable, ValidationError, read_model_description
 
 from bridge.errors import FmuLoadError
-from bridge.fmu import unzip
+from bridge.fmu import python_backed, unzip
 from bridge.fmu.vocab import (
     NUMERIC_TYPES,
     ClockInfo,
@@ -77,16 +78,18 @@ def _cached_model_info(fmu_path: Path, version: tuple[int, ...]) -> ModelInfo:
 
 def _parse_model_info(fmu_path: Path) -> ModelInfo:
     md, problems = _read_description(fmu_path)
+    names = _entry_names(fmu_path)
     interfaces: list[Interface] = []
     identifiers: dict[str, str] = {}
     can_state: dict[str, bool] = {}
-    once_per_process = False
+    once_per_process = needs_tool = False
     for kind, iface in (("cs", md.coSimulation), ("me", md.modelExchange), ("se", md.scheduledExecution)):
         if iface is not None:
             interfaces.append(kind)  # type: ignore[arg-type]
             identifiers[kind] = iface.modelIdentifier
             can_state[kind] = bool(iface.canGetAndSetFMUstate)
             once_per_process |= bool(iface.canBeInstantiatedOnlyOncePerProcess)
+            needs_tool |= bool(iface.needsExecutionTool)
     scheduled = md.scheduledExecution is not None
     if not interfaces and not scheduled:
         raise FmuLoadError(
@@ -101,19 +104,54 @@ def _parse_model_info(fmu_path: Path) -> ModelInfo:
         interfaces=tuple(interfaces),
         model_identifiers=identifiers,
         default_experiment=_default_experiment(md),
-        platforms=tuple(fmpy.supported_platforms(str(fmu_path))) if fmu_path.is_file() else (),
+        platforms=_platforms(fmu_path, names),
         variables=_variables(md, fmu_path),
         can_get_set_state=can_state,
         number_of_states=int(md.numberOfContinuousStates or 0),
         number_of_event_indicators=int(md.numberOfEventIndicators or 0),
         generation_tool=md.generationTool,
         description=md.description,
-        problems=problems,
+        problems=problems + _backslash_problem(names),
         scheduled_execution=scheduled,
         has_event_mode=bool(md.coSimulation is not None and md.coSimulation.hasEventMode),
         once_per_process=once_per_process,
+        needs_execution_tool=needs_tool,
+        python_backed=python_backed.is_python_backed(fmu_path, md.generationTool),
+        python_requirements=python_backed.requirements(fmu_path),
         raw=md,
     )
+
+
+def _platforms(fmu_path: Path, names: list[str]) -> tuple[str, ...]:
+    """The platforms the archive has binaries (or sources) for. Archives zipped on Windows may
+    name their entries with backslashes (``binaries\\win64\\m.dll``, against the zip format);
+    FMPy's reading of the names is given them with forward slashes."""
+    if not fmu_path.is_file():
+        return ()
+    if not any("\\" in name for name in names):
+        return tuple(fmpy.supported_platforms(str(fmu_path)))
+    listing = io.BytesIO()
+    with zipfile.ZipFile(listing, "w") as names_only:
+        for name in sorted({name.replace("\\", "/") for name in names}):
+            names_only.writestr(name, b"")
+    return tuple(fmpy.supported_platforms(listing))
+
+
+def _backslash_problem(names: list[str]) -> tuple[str, ...]:
+    if not any("\\" in name for name in names):
+        return ()
+    return (
+        "the archive names its entries with backslashes (the zip format wants '/'); fmu-bridge "
+        "does not extract it: unzip it and zip it again with forward slashes (any zip tool on "
+        "Linux or macOS, or Python's zipfile)",
+    )
+
+
+def _entry_names(fmu_path: Path) -> list[str]:
+    if not fmu_path.is_file():
+        return []
+    with zipfile.ZipFile(fmu_path) as archive:
+        return archive.namelist()
 
 
 def _read_description(fmu_path: Path) -> tuple[ModelDescription, tuple[str, ...]]:

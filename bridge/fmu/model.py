@@ -22,7 +22,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, FmuError, StepError, VariableError
-from bridge.fmu import access, archive, once, serial, start_state, structure
+from bridge.fmu import access, archive, once, python_backed, serial, start_state, structure
 from bridge.fmu.abi import DISCARD, FATAL, STATUS_NAMES, WARNING, Clock, address, pointer_value
 from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.clocks import ClockDriver, ClockedOutputs, ClockInputs, clock_driver_needed
@@ -110,6 +110,7 @@ class Model:
         clock_schedule: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         self.info: ModelInfo = read_model_info(path)
+        python_backed.check_requirements(self.info)  # its missing packages named before it loads
         self._structural = structure.check(self.info, structural_parameters) if structural_parameters else {}
         self._configured = False  # structural parameters applied (sizes in info) at least once
         self._initialized_once = False

@@ -140,6 +140,9 @@ class ModelInfo:
     scheduled_execution: bool = False  # FMI 3.0 scheduled execution (interface "se")
     has_event_mode: bool = False  # FMI 3.0 co-simulation with event mode (clocks tick there)
     once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess (either interface)
+    needs_execution_tool: bool = False  # needsExecutionTool (either interface)
+    python_backed: bool = False  # runs Python code in the process (pythonfmu, pythonfmu3 exports)
+    python_requirements: tuple[str, ...] = ()  # its resources/requirements.txt, one requirement a line
     raw: Any = field(default=None, repr=False, compare=False)  # FMPy's ModelDescription, in-process only
 
     @property

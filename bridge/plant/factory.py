@@ -22,9 +22,7 @@ def fmu_plant(experiment: Experiment, *, isolate: bool = False, timeout_s: float
     it (bounded by the file's ``timeout``, else ``timeout_s``, else 10 s), else in this process.
     ``plant.isolated`` says which."""
     isolation = experiment.model.isolation
-    if isolation is None and not isolate and model_info_for(experiment).once_per_process:
-        # canBeInstantiatedOnlyOncePerProcess: each instance gets a process of its own, so that
-        # several envs, a vector env or a system never share the FMU's global state.
+    if isolation is None and not isolate and _needs_own_process(model_info_for(experiment)):
         from bridge.experiment.config import IsolationSection
 
         isolation = IsolationSection()
@@ -40,6 +38,15 @@ def fmu_plant(experiment: Experiment, *, isolate: bool = False, timeout_s: float
     from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
 
     return LocalFmuPlant(experiment)
+
+
+def _needs_own_process(info: ModelInfo) -> bool:
+    """canBeInstantiatedOnlyOncePerProcess: each instance gets a process of its own, so that
+    several envs, a vector env or a system never share the FMU's global state. Python-backed FMUs
+    (pythonfmu, pythonfmu3) and FMUs that need an execution tool: their teardown may abort, crash
+    or hang after a correct run, which must not decide the exit status of the process that ran
+    them."""
+    return info.once_per_process or info.python_backed or info.needs_execution_tool
 
 
 def is_system(experiment: Experiment) -> bool:

@@ -30,6 +30,7 @@ import logging
 import multiprocessing as mp
 import os
 import signal
+import sys
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -142,12 +143,13 @@ class IsolatedFmuPlant(Plant):
             self._call(("hello",), timeout_s=_START_TIMEOUT_S, step=None)
         except PlantDied as exc:
             raise PlantDied(
-                f"{self.name}: the plant's process could not start ({exc.detail}); its error is "
-                "printed above. Run from a script file or a module: a child process imports the "
-                "main module again, which a program read from standard input cannot be",
+                f"{self.name}: the plant's process could not start ({exc.detail}); {_start_hint()}",
                 plant=self.name,
                 detail=exc.detail,
             ) from None
+        except BridgeError:  # the FMU did not load in the child: its error, as in process
+            self._stop()
+            raise
         self._rss_start = _rss_bytes(process.pid or 0)
         if self._start_file is not None:  # a fresh child starts from the state it was given too
             self._call(("start", *self._start_file), step=None)
@@ -358,8 +360,12 @@ def _serve(
     from bridge.plant.local import LocalFmuPlant
     from bridge.plant.system.component import FmuComponent
 
-    plant = LocalFmuPlant(experiment) if component is None else FmuComponent(*component)
-    plant.bind(input_names, output_names)
+    try:
+        plant = LocalFmuPlant(experiment) if component is None else FmuComponent(*component)
+        plant.bind(input_names, output_names)
+    except BridgeError as exc:  # the FMU did not load: the parent's "hello" gets the error itself
+        _refuse(conn, exc)
+        return
     if memory_limit_mb is not None:
         _cap_address_space(memory_limit_mb)
     while True:
@@ -382,6 +388,13 @@ def _serve(
     plant.close()
 
 
+def _refuse(conn: Connection, exc: BridgeError) -> None:
+    """Answer the parent's first message with ``exc`` (raised there as it would be in process)."""
+    with contextlib.suppress(EOFError, OSError):
+        conn.recv()
+        conn.send(("error", exc))
+
+
 def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
     if op == "step":
         outputs = plant.step(args[0])
@@ -396,6 +409,18 @@ def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
     else:  # "hello"
         outputs = np.zeros(0)
     return ("ok", outputs, plant.time_s, plant.terminated)
+
+
+def _start_hint() -> str:
+    """Why a child can die before it answers: a program read from standard input cannot be
+    imported again by a spawned child; otherwise the FMU's library crashed while loading."""
+    main_file = getattr(sys.modules.get("__main__"), "__file__", None)
+    if main_file is None or not os.path.isfile(main_file):
+        return (
+            "its error is printed above. Run from a script file or a module: a child process "
+            "imports the main module again, which a program read from standard input cannot be"
+        )
+    return "the FMU crashed while loading (its native code); its own output, if any, is printed above"
 
 
 def _kill_group(process: Any) -> None:

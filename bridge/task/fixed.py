@@ -1,7 +1,9 @@
-"""Physical values for fixed policies (``zero``, ``constant:V``): the action that applies them
-exactly, and what ``zero`` means.
+"""Physical values for fixed policies (``zero``, ``start``, ``constant:V``): the action that applies
+them exactly, and what ``zero`` and ``start`` mean.
 
 ``zero`` is no change: 0 on every FMU input and the FMU's start value on every tunable parameter.
+``start`` runs the model as exported: every input at its declared start value, parameters
+untouched (FMPy's ``simulate_fmu`` without inputs does the same).
 A physical value reaches the FMU exactly (an :class:`~bridge.task.core.ExactAction` carries it past
 the action mapping); a value outside an input's bounds, or between the levels of a discrete
 action, is changed to the nearest allowed value with one warning naming the value, the bound and
@@ -28,6 +30,30 @@ def zero_values(task: Task) -> list[float]:
         var = task.variables[name]
         start = var.start if isinstance(var.start, int | float) else 0.0
         values.append(float(start) if var.causality == "parameter" else 0.0)
+    return values
+
+
+FIXED_POLICIES = ("zero", "start", "random", "constant:VALUE")
+
+
+def is_fixed_policy(spec: str) -> bool:
+    """Whether ``spec`` names a fixed policy (``constant:`` with any value; its number is checked
+    where the policy is made)."""
+    return spec in FIXED_POLICIES[:3] or spec.startswith("constant:")
+
+
+def unknown_policy(spec: str) -> str:
+    """The message for an unknown fixed policy ``spec``."""
+    return f"--policy {spec!r} is unknown; use {', '.join(FIXED_POLICIES[:-1])} or {FIXED_POLICIES[-1]}"
+
+
+def start_values(task: Task) -> list[float]:
+    """``start``: each action input at its declared start value (the model as exported; an input
+    or parameter without a numeric start is at 0)."""
+    values = []
+    for name in task.action_inputs:
+        start = task.variables[name].start
+        values.append(float(start) if isinstance(start, int | float) else 0.0)
     return values
 
 

@@ -105,6 +105,10 @@ def test_fixed_policies(motor: FmuEnv) -> None:
     constant = make_policy("constant:6", {})
     constant.reset(motor.task, 0)
     np.testing.assert_allclose(constant.act(None, {}), [0.25])
+    start = make_policy("start", {})
+    start.reset(motor.task, 0)
+    declared = [float(motor.task.variables[name].start) for name in motor.task.action_inputs]
+    assert start.act(None, {}).physical == declared  # the inputs' start values, applied exactly
     a, b = make_policy("random", {}), make_policy("random", {})
     a.reset(motor.task, 3)
     b.reset(motor.task, 3)

@@ -116,7 +116,7 @@ def test_simulate_rejects_an_unknown_policy() -> None:
     result = runner.invoke(
         app, ["simulate", str(example_experiment("cartpole_balance")), "--policy", "smart"]
     )
-    assert result.exit_code != 0 and "zero, random or constant:VALUE" in str(result.exception)
+    assert result.exit_code != 0 and "zero, start, random or constant:VALUE" in str(result.exception)
 
 
 def test_scenarios_shows_schedule_and_samples() -> None:

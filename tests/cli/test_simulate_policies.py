@@ -1,7 +1,8 @@
 """The fixed policies of ``simulate`` and ``check`` say it when they change what the user asked:
 physical values reach the FMU exactly, a value out of bounds is clipped with one warning naming the
 value, the bound and the variable, ``zero`` leaves tunable parameters at the FMU's start values, and
-a policy for a model without actions is refused."""
+a policy for a model without actions is refused; ``start`` runs the model as exported, as FMPy's
+default simulation does."""
 
 from __future__ import annotations
 
@@ -10,10 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fmpy import simulate_fmu
+from typer.testing import CliRunner
 
+from bridge.cli.main import app
 from bridge.cli.simulate import make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
+from bridge.experiment.init import starting_config
 from bridge.models import example_fmu
 
 
@@ -83,6 +88,61 @@ def test_a_policy_for_a_model_without_actions_is_refused(tmp_path: Path, spec: s
         with pytest.raises(ConfigError, match=r"has no actions \(actions\.inputs is empty\)"):
             make_policy(spec, env.task, 0)
         policy = make_policy("zero", env.task, 0)  # nothing applied: observation only
+        obs, _ = env.reset(seed=0)
+        obs, *_ = env.step(policy(obs))
+        assert np.isfinite(obs).all()
+
+
+@pytest.fixture(scope="module")
+def vehicle_as_exported(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``init``'s experiment for the vehicle: its speed input starts at 15 m/s, not 0."""
+    path = tmp_path_factory.mktemp("start") / "vehicle.yaml"
+    path.write_text(starting_config(example_fmu("vehicle", "2.0", "cs")))
+    return path
+
+
+def _trajectory(path: Path, spec: str, samples: int) -> tuple[np.ndarray, list[str]]:
+    with FmuEnv(path) as env:
+        policy = make_policy(spec, env.task, 0)
+        obs, _ = env.reset(seed=0)
+        rows = []
+        for _ in range(samples):
+            obs, *_, info = env.step(policy(obs))
+            rows.append(np.asarray(info["outputs"], dtype=np.float64))
+        return np.array(rows), list(env.output_names)
+
+
+def test_start_runs_the_model_as_fmpys_default_simulation(vehicle_as_exported: Path) -> None:
+    samples, step_s = 40, 0.05
+    ours, names = _trajectory(vehicle_as_exported, "start", samples)
+    fmu = str(example_fmu("vehicle", "2.0", "cs"))
+    fmpy = simulate_fmu(
+        fmu,
+        fmi_type="CoSimulation",
+        step_size=step_s,
+        output_interval=step_s,
+        stop_time=samples * step_s,
+        output=names,
+    )
+    theirs = np.array([[row[name] for name in names] for row in fmpy[1 : samples + 1]])
+    np.testing.assert_allclose(ours, theirs, rtol=1e-12, atol=1e-12)
+    assert theirs[-1, names.index("distance")] > 25.0  # it drove at its start speed of 15 m/s
+    zero, _ = _trajectory(vehicle_as_exported, "zero", samples)
+    assert not np.allclose(zero, theirs)  # zero stops the car: not the model as exported
+
+
+def test_check_shows_the_steps_of_the_start_policy(vehicle_as_exported: Path) -> None:
+    shown = CliRunner().invoke(app, ["check", str(vehicle_as_exported), "--policy", "start", "--steps", "2"])
+    assert shown.exit_code == 0, shown.output
+    assert "first steps (start action" in shown.output
+    refused = CliRunner().invoke(app, ["check", str(vehicle_as_exported), "--policy", "stat"])
+    assert isinstance(refused.exception, ConfigError)  # the CLI's entry point prints it as one line
+    assert "use zero, start, random or constant:VALUE" in str(refused.exception)
+
+
+def test_start_on_a_model_without_actions_applies_nothing(tmp_path: Path) -> None:
+    with _env(tmp_path, "bouncing_ball", "{inputs: []}", "[h]") as env:
+        policy = make_policy("start", env.task, 0)
         obs, _ = env.reset(seed=0)
         obs, *_ = env.step(policy(obs))
         assert np.isfinite(obs).all()

@@ -12,7 +12,7 @@ import yaml
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
-from bridge.experiment.init import discrete_levels, q, starting_config
+from bridge.experiment.init import _num, discrete_levels, q, starting_config
 from bridge.experiment.validate import check_experiment
 from bridge.fmu import read_model_info
 from bridge.fmu.vocab import Variable
@@ -48,6 +48,13 @@ def _var(type_: str, **kw: object) -> Variable:
         start=0,
     )
     return Variable(**{**base, **kw})  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("value", [1e-06, -1e-06, 1e16, 2.5e-07, 1e300, 5e-324, 0.1, -3.0, 0.0])
+def test_numbers_are_floats_to_yaml_1_1_readers(value: float) -> None:
+    text = _num(value)
+    read = yaml.safe_load(f"x: {text}")["x"]  # PyYAML follows YAML 1.1: 1e-06 would be a string
+    assert isinstance(read, float) and read == value, text
 
 
 def test_discrete_levels_respect_type_range_and_items() -> None:
