@@ -190,6 +190,9 @@ class FmuNode:
         self.watchdog.stop()
         if self._driver is not None:
             self._driver.stop(timeout_s)
+        follower = self._link.ros.follower if self._link.ros is not None else None
+        if follower is not None:  # its thread steps under the lock taken next
+            follower.close(timeout_s)
         locked = self._lock.acquire(timeout=timeout_s)
         if not locked and self.isolated:
             self.plant.close()  # kills the child: the blocked step returns with PlantDied
@@ -347,7 +350,7 @@ class FmuNode:
         """One sample on an external clock's tick (``--follow-clock``) with the latest inputs held:
         the FMU time reached in ns, or None when the episode is over."""
         with self._lock:
-            if self.lockstep.ended:
+            if self.lockstep.ended or self._stop.is_set():
                 return None
             self._advance(self.current_inputs(), (0, b""))
             return round(self.plant.time_s * 1e9)

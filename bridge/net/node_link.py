@@ -182,4 +182,6 @@ def clock_follower(node: FmuNode, settings: RosViewSettings) -> Any:
         return None
     from bridge.net.ros2.clock import ClockFollower
 
-    return ClockFollower(round(node.timing.sampling_time_s * 1e9), node.clock_start, node.clock_step)
+    return ClockFollower(
+        round(node.timing.sampling_time_s * 1e9), node.clock_start, node.clock_step, name=node.name
+    )

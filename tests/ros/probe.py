@@ -68,6 +68,7 @@ class Probe:
         self.received: dict[str, list[dict[str, Any]]] = {}
         self.subscriptions: dict[str, Any] = {}
         self.publishers: dict[str, Any] = {}
+        self.clients: dict[str, Any] = {}
         self.executor = MultiThreadedExecutor(num_threads=2)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self.spin, daemon=True)
@@ -158,13 +159,14 @@ class Probe:
 
     def op_publish(self, command: dict[str, Any]) -> Any:
         topic, type_name = command["topic"], command["type"]
-        key = f"{topic}|{type_name}|{command.get('depth', 10)}"
+        key = f"{topic}|{type_name}|{command.get('depth', 10)}|{command.get('reliability', 'reliable')}"
         if key not in self.publishers:
             self.publishers[key] = self.node.create_publisher(TYPES[type_name], topic, qos(command))
         publisher = self.publishers[key]
         if command.get("wait_subscribers", True):
             deadline = time.monotonic() + 20.0
-            while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+            wanted = int(command.get("subscribers", 1))  # /clock: ours and rclpy's TimeSource
+            while publisher.get_subscription_count() < wanted and time.monotonic() < deadline:
                 time.sleep(0.02)
         for message in command["messages"]:
             publisher.publish(self.message(type_name, message))
@@ -203,11 +205,28 @@ class Probe:
         finally:
             self.node.destroy_client(client)
 
+    def op_client(self, command: dict[str, Any]) -> Any:
+        """A Trigger client kept for ``trigger`` (its discovery done here, not in the timed call)."""
+        client = self.node.create_client(Trigger, command["service"])
+        self.clients[command["service"]] = client
+        return client.wait_for_service(timeout_sec=float(command.get("timeout", 20.0)))
+
     def op_trigger(self, command: dict[str, Any]) -> Any:
-        answer = self._call(Trigger, command["service"], Trigger.Request(), command.get("timeout", 20.0))
+        """A Trigger call; ``elapsed_s`` from request to answer, ``t``: when it came (monotonic)."""
+        client = self.clients.get(command["service"])
+        timeout = float(command.get("timeout", 20.0))
+        start = time.monotonic()
+        if client is None:
+            answer = self._call(Trigger, command["service"], Trigger.Request(), timeout)
+        else:
+            future = client.call_async(Trigger.Request())
+            while not future.done() and time.monotonic() < start + timeout:
+                time.sleep(0.001)
+            answer = future.result() if future.done() else {"error": "the service did not answer"}
         if isinstance(answer, dict):
             return answer
-        return {"success": answer.success, "message": answer.message}
+        end = time.monotonic()
+        return {"success": answer.success, "message": answer.message, "elapsed_s": end - start, "t": end}
 
     def op_lifecycle_get(self, command: dict[str, Any]) -> Any:
         answer = self._call(

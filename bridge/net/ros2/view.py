@@ -12,7 +12,8 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
   lost (rclpy's ``message_lost`` event) is counted in ``lost`` and logged as a warning. A
   publisher keeps its side of the contract with RELIABLE and a depth of at least the steps it
   sends ahead of the outputs (one, if it waits for each output);
-- ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time);
+- ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time); with
+  ``follow_clock`` subscribed instead, with ROS's clock QoS (:func:`clock_qos`);
 - ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
 - with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
   way fmi_adapter users know them.
@@ -67,6 +68,20 @@ def open_backend_node(session: Any, settings: RosViewSettings, name: str) -> Any
 
     context = RosContext(session, domain_id=settings.domain_id, namespace=settings.namespace)
     return context.create_node(name)
+
+
+def clock_qos(settings: RosViewSettings) -> Any:
+    """ROS's clock QoS for following ``/clock``: best effort, depth 1 (rclpy's ``TimeSource``).
+
+    A best-effort subscription matches every ``/clock`` publisher, reliable ones and the best-effort
+    ones of rosbag2's player and Gazebo; depth 1: only the newest time matters."""
+    if settings.backend == "rclpy":
+        from bridge.net.ros2.rclpy_backend import RclpyQoS
+
+        return RclpyQoS("best_effort", 1)
+    from bridge.net.ros2 import QoS, Reliability
+
+    return QoS(reliability=Reliability.BEST_EFFORT, depth=1)
 
 
 def qos_profile(settings: RosViewSettings, *, keep_all: bool = False) -> Any:
@@ -127,7 +142,9 @@ class RosView:
             else None
         )
         if follower is not None:  # another simulator's clock drives this node (bridge.net.ros2.clock)
-            self.node.create_subscription("/clock", "rosgraph_msgs/msg/Clock", self._on_clock, qos)
+            self.node.create_subscription(
+                "/clock", "rosgraph_msgs/msg/Clock", self._on_clock, clock_qos(settings)
+            )
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
@@ -210,15 +227,17 @@ class RosView:
             return interfaces.trigger_response(  # type: ignore[no-any-return]
                 False, f"bad request: std_srvs/srv/Trigger takes no fields, got {len(request)} bytes"
             )
+        if self.follower is not None:  # first: no step of the clock's catch-up beside the reset
+            self.follower.restart()  # lined up with the clock again at its next tick
         try:
             success, message = self._on_reset()
         except Exception as exc:  # never let a service handler die
             _log.exception("ROS reset failed")
             success, message = False, f"reset failed ({type(exc).__name__})"
-        if success and self.follower is not None:
-            self.follower.restart()  # lined up with the clock again at its next tick
 
         return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
 
     def close(self) -> None:
+        if self.follower is not None:  # first: no step after the node's entities are gone
+            self.follower.close()
         self.node.close()
