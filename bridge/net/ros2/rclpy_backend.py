@@ -125,6 +125,9 @@ class RclpyNode:
         use_sim_time: the node's clock follows ``/clock`` (the ``use_sim_time`` parameter).
         node_class: the rclpy node class (default ``rclpy.node.Node``; a ``LifecycleNode`` subclass).
         parameters: ROS parameter overrides (``--ros-args -p`` values meant for the node).
+        executor_threads: 1: a single-threaded executor; more: a multi-threaded one, so that
+            callbacks in reentrant or separate callback groups run beside a long one (a lifecycle
+            node's ``get_state`` while its ``configure`` loads a policy).
     """
 
     def __init__(
@@ -136,9 +139,10 @@ class RclpyNode:
         use_sim_time: bool = False,
         node_class: Any = None,
         parameters: dict[str, Any] | None = None,
+        executor_threads: int = 1,
     ) -> None:
         rclpy = _import_rclpy()
-        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
         from rclpy.parameter import Parameter
 
         self.context = open_context(domain_id)
@@ -159,7 +163,11 @@ class RclpyNode:
             self.context.try_shutdown()
             raise ConfigError(f"ROS node {name!r} in {namespace!r}: {exc}") from None
         self.lost = 0  # messages an RMW reported lost on this node's subscriptions
-        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor = (
+            SingleThreadedExecutor(context=self.context)
+            if executor_threads <= 1
+            else MultiThreadedExecutor(num_threads=executor_threads, context=self.context)
+        )
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"rclpy-{name}", daemon=True)
         self._thread.start()
