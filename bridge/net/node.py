@@ -108,7 +108,10 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
-        self._held_inputs = [element_start(self.info, n) for n in self.input_names]  # u[2]: an element
+        self.start_inputs = tuple(element_start(self.info, n) for n in self.input_names)  # u[2]: an element
+        self._held_inputs = list(self.start_inputs)
+        # ROS lockstep (anonymous actions) ends an episode after model.episode_duration
+        self.episode_samples = round(exp.model.episode_duration / self.timing.sampling_time_s)
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
@@ -338,10 +341,17 @@ class FmuNode:
         try:
             if self._driver is not None or self.follows_clock:
                 self._latest_inputs = inputs
-            elif not self.lockstep.ended:
+            elif not self.lockstep.ended and self.lockstep.step < self.episode_samples:
                 self._advance(inputs, (0, b""))
-            else:  # lockstep after the episode ended: no step, but not silently
+            else:  # lockstep after the episode ended (or ran its duration): no step, not silently
                 self.counters["ros_ignored_episode_ended"] += 1
+                if self.counters["ros_ignored_episode_ended"] == 1:
+                    _log.warning(
+                        "node %s: ROS action after the end of episode %d (step %d of %d, "
+                        "model.episode_duration %g s): not stepped; call ~/reset for the next episode",
+                        self.name, self.lockstep.episode, self.lockstep.step, self.episode_samples,
+                        self.experiment.model.episode_duration,
+                    )  # fmt: skip
         finally:
             self._lock.release()
         return True

@@ -9,6 +9,7 @@ ROS view (``bridge.net.ros2.view``), whose requests it turns into the node's own
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -74,7 +75,7 @@ class NodeLink:
             output_names=node.output_names,
             input_names=node.input_names,
             on_actions=lambda values: ros_actions(node, values),
-            on_reset=lambda: ros_reset(node),
+            on_reset=lambda: ros_reset(node, keep_inputs=settings.reset_keeps_inputs),
             realtime=node.mode == "realtime",
             follower=clock_follower(node, settings),
         )
@@ -151,25 +152,47 @@ def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
 
 
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
-    """Input values by name from the ROS view: held in real time, one sample each in lockstep."""
+    """Input values by name from the ROS view: held in real time, one sample each in lockstep.
+    A rejected action is counted by cause (``ros_rejected_<cause>``) and logged the first time."""
     if node.lease.holder is not None:
-        node.counters["ros_rejected_not_holder"] += 1
-        return
+        return ros_rejected(node, "not_holder", "a client holds the node's lease (native protocol)")
     current = node.current_inputs()
     merged = [float(values.get(name, current[i])) for i, name in enumerate(node.input_names)]
-    if node.rules.inputs(merged) is not None:
-        node.counters["ros_rejected_out_of_range"] += 1
-        return
+    if not all(math.isfinite(v) for v in merged):
+        return ros_rejected(node, "not_finite", f"an input is NaN or infinite: {values}")
+    reason = node.rules.inputs(merged)
+    if reason is not None:
+        return ros_rejected(node, "out_of_range", reason)
     if not node.apply(merged):
-        node.counters["ros_rejected_unhealthy"] += 1
+        ros_rejected(node, "unhealthy", f"the node is unhealthy or busy: {node.health_detail}")
+    return None
 
 
-def ros_reset(node: FmuNode) -> tuple[bool, str]:
+def ros_rejected(node: FmuNode, cause: str, reason: str) -> None:
+    """Count a rejected ROS action; the first of each cause is logged with its reason, later ones
+    only counted (a publisher of bad values at 1 kHz must not flood the log)."""
+    key = f"ros_rejected_{cause}"
+    node.counters[key] += 1
+    if node.counters[key] == 1:
+        _log.warning(
+            "node %s: ROS action rejected (%s); further actions rejected for this reason are only "
+            "counted (%s in fmu-bridge nodes --json)",
+            node.name,
+            reason,
+            key,
+        )
+
+
+def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
+    """``~/reset``: back to t0 with the nominal values and, unless ``keep_inputs``
+    (``ros.reset_keeps_inputs``), the inputs' start values: an action of the last episode is not
+    held into the next."""
     refusal = node.lease.acquire(0, "", False)
     if refusal is not None:
         return False, f"reset refused: {refusal}"
+    inputs = None if keep_inputs else list(node.start_inputs)
     try:
-        node.reset(dict(node.served.nominal), None, node.lockstep.episode + 1)
+        node.reset(dict(node.served.nominal), inputs, node.lockstep.episode + 1)
     except BridgeError as exc:
         return False, redact(f"reset failed: {exc}")
     return True, f"reset to t0 (episode {node.lockstep.episode})"
