@@ -110,6 +110,7 @@ class FmuNode:
         self._latest_inputs: list[float] | None = None
         self.start_inputs = tuple(element_start(self.info, n) for n in self.input_names)  # u[2]: an element
         self._held_inputs = list(self.start_inputs)
+        self.ros_parameters: dict[str, Any] = {}  # FMU parameters set over ROS, for the next ~/reset
         # ROS lockstep (anonymous actions) ends an episode after model.episode_duration
         self.episode_samples = round(exp.model.episode_duration / self.timing.sampling_time_s)
         self.checksum = plant.provenance()["fmu_sha256"]
@@ -341,7 +342,7 @@ class FmuNode:
         try:
             if self._driver is not None or self.follows_clock:
                 self._latest_inputs = inputs
-            elif not self.lockstep.ended and self.lockstep.step < self.episode_samples:
+            elif not self.episode_over():
                 self._advance(inputs, (0, b""))
             else:  # lockstep after the episode ended (or ran its duration): no step, not silently
                 self.counters["ros_ignored_episode_ended"] += 1
@@ -355,6 +356,13 @@ class FmuNode:
         finally:
             self._lock.release()
         return True
+
+    def episode_over(self) -> bool:
+        """Whether the episode has ended: terminated or failed, or (lockstep, where actions come
+        over ROS) ``model.episode_duration`` run; real time and an external clock go on."""
+        state = self.lockstep
+        lockstep = self._driver is None and not self.follows_clock
+        return state.ended or (lockstep and state.step >= self.episode_samples)
 
     def clock_step(self) -> int | None:
         """One sample on an external clock's tick (``--follow-clock``) with the latest inputs held:

@@ -18,6 +18,7 @@ from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.requests import redact
+from bridge.net.ros2.params import fmu_parameters
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import undeclare
 
@@ -78,6 +79,8 @@ class NodeLink:
             on_reset=lambda: ros_reset(node, keep_inputs=settings.reset_keeps_inputs),
             realtime=node.mode == "realtime",
             follower=clock_follower(node, settings),
+            parameters=fmu_parameters(node.info, node.served.settable, node.served.nominal),
+            on_parameters=lambda changes: ros_parameters(node, changes),
         )
 
     def _on_action(self, sample: Any) -> None:
@@ -192,10 +195,25 @@ def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
         return False, f"reset refused: {refusal}"
     inputs = None if keep_inputs else list(node.start_inputs)
     try:
-        node.reset(dict(node.served.nominal), inputs, node.lockstep.episode + 1)
+        node.reset({**node.served.nominal, **node.ros_parameters}, inputs, node.lockstep.episode + 1)
     except BridgeError as exc:
         return False, redact(f"reset failed: {exc}")
     return True, f"reset to t0 (episode {node.lockstep.episode})"
+
+
+def ros_parameters(node: FmuNode, changes: dict[str, Any]) -> str | None:
+    """FMU parameters set over ROS: kept for the next ``~/reset`` between episodes; inside one,
+    the reason they are refused."""
+    state = node.lockstep
+    if not node.episode_over():
+        return (
+            f"inside episode {state.episode} (step {state.step}) of node {node.name!r}: FMU parameters "
+            "are set between episodes (before the first ~/reset, or once an episode has ended) and "
+            "apply at the next ~/reset"
+        )
+    node.ros_parameters.update(changes)
+    _log.info("node %s: FMU parameters %s apply at the next ~/reset", node.name, changes)
+    return None
 
 
 def clock_follower(node: FmuNode, settings: RosViewSettings) -> Any:

@@ -17,6 +17,8 @@ from typing import Any
 import rclpy
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -277,6 +279,29 @@ class Probe:
         if isinstance(answer, dict):
             return answer
         return {"success": answer.success, "t": time.monotonic()}
+
+    # -- parameters, as ``ros2 param`` reaches them: the node's parameter services ----------------
+    def op_param_set(self, command: dict[str, Any]) -> Any:
+        value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(command["value"]))
+        request = SetParameters.Request(parameters=[Parameter(name=command["name"], value=value)])
+        answer = self._call(SetParameters, f"{command['node']}/set_parameters", request, 20.0)
+        if isinstance(answer, dict):
+            return answer
+        return {"successful": answer.results[0].successful, "reason": answer.results[0].reason}
+
+    def op_param_get(self, command: dict[str, Any]) -> Any:
+        request = GetParameters.Request(names=[command["name"]])
+        answer = self._call(GetParameters, f"{command['node']}/get_parameters", request, 20.0)
+        return answer if isinstance(answer, dict) else answer.values[0].double_value
+
+    def op_param_describe(self, command: dict[str, Any]) -> Any:
+        request = DescribeParameters.Request(names=[command["name"]])
+        answer = self._call(DescribeParameters, f"{command['node']}/describe_parameters", request, 20.0)
+        if isinstance(answer, dict):
+            return answer
+        descriptor = answer.descriptors[0]
+        ranges = [(r.from_value, r.to_value) for r in descriptor.floating_point_range]
+        return {"type": descriptor.type, "description": descriptor.description, "ranges": ranges}
 
     def close(self) -> None:
         self.executor.shutdown()

@@ -224,6 +224,30 @@ class RclpyNode:
 
         return self.node.create_service(cls, name, serve)
 
+    def declare_fmu_parameters(
+        self, parameters: list[Any], on_set: Callable[[dict[str, Any]], str | None]
+    ) -> None:
+        """ROS parameters for FMU parameters (``bridge.net.ros2.params.FmuParameter``), with their
+        ranges; ``on_set({name: value})`` returns why a set is refused, or None to accept it."""
+        from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+
+        names = set()
+        for p in parameters:
+            descriptor = ParameterDescriptor(description=p.description)
+            if not isinstance(p.value, bool):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=p.low, to_value=p.high, step=0.0)
+                ]
+            self.node.declare_parameter(p.name, p.value, descriptor)
+            names.add(p.name)
+
+        def check(changed: list[Any]) -> Any:
+            values = {c.name: c.value for c in changed if c.name in names}
+            reason = on_set(values) if values else None
+            return SetParametersResult(successful=reason is None, reason=reason or "")
+
+        self.node.add_on_set_parameters_callback(check)
+
     def close(self) -> None:
         """Stop the executor, destroy the node, shut the context down (quietly, within a second)."""
         self._executor.shutdown(timeout_sec=1.0)

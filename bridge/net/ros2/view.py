@@ -16,7 +16,9 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
   ``follow_clock`` subscribed instead, with ROS's clock QoS (:func:`clock_qos`);
 - ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
 - with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
-  way fmi_adapter users know them.
+  way fmi_adapter users know them;
+- on the rclpy backend, the FMU parameters a reset may set as ROS parameters
+  (``bridge.net.ros2.params``): set between episodes, applied at the next ``~/reset``.
 """
 
 from __future__ import annotations
@@ -112,6 +114,8 @@ class RosView:
         on_reset: Callable[[], tuple[bool, str]],
         realtime: bool,
         follower: ClockFollower | None = None,
+        parameters: Sequence[Any] = (),
+        on_parameters: Callable[[dict[str, Any]], str | None] | None = None,
     ) -> None:
         self.settings = settings
         self._output_names, self._input_names = tuple(output_names), tuple(input_names)
@@ -148,6 +152,8 @@ class RosView:
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
+        if parameters and on_parameters is not None and settings.backend == "rclpy":
+            self.node.declare_fmu_parameters(list(parameters), on_parameters)  # params.py
 
     def _on_lost(self, count: int) -> None:
         self.lost += count
