@@ -60,27 +60,6 @@ def _like(default: Any, value: Any, name: str) -> Any:
         raise ConfigError(f"--ros-args -p {name}:={value!r}: expected the type of {default!r}") from None
 
 
-def _one_transition_at_a_time(node: Any, lock: threading.Lock) -> None:
-    """``change_state`` (in a reentrant group) refuses a transition while another runs: rcl's state
-    machine would raise inside the executor on a transition from a transition state."""
-    service = node._service_change_state  # rclpy's own service of the lifecycle mixin
-    change = service.callback
-
-    def serialized(request: Any, response: Any) -> Any:
-        if not lock.acquire(blocking=False):
-            node.get_logger().warning(
-                f"change_state {request.transition.id} refused: another transition is under way"
-            )
-            response.success = False
-            return response
-        try:
-            return change(request, response)
-        finally:
-            lock.release()
-
-    service.callback = serialized
-
-
 class ManagedAgent:
     """The lifecycle node and what its transitions build; ``close()`` ends it."""
 
@@ -91,6 +70,7 @@ class ManagedAgent:
 
         from bridge.net.ros2.args import current as ros_args
         from bridge.net.ros2.rclpy_backend import RclpyNode
+        from bridge.net.ros2.rclpy_lifecycle import one_transition_at_a_time
         from bridge.net.ros2.view import ros_node_name
 
         self.model, self.config, self.base = model, config, settings
@@ -104,7 +84,7 @@ class ManagedAgent:
             def __init__(self, node_name: str, **kwargs: Any) -> None:
                 Node.__init__(self, node_name, **kwargs)
                 LifecycleNodeMixin.__init__(self, callback_group=ReentrantCallbackGroup())
-                _one_transition_at_a_time(self, outer._transitions)
+                one_transition_at_a_time(self, outer._transitions)
 
             def on_configure(self, state: Any) -> Any:
                 return outer._configure()

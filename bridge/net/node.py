@@ -70,6 +70,8 @@ class FmuNode:
             FMU is killed after ``step_timeout_s`` and restarted by the next reset.
         step_timeout_s: the longest a reset or step may take before the node reports it hung.
         pacing: how a real-time node keeps its period (``bridge.net.realtime.Pacing``).
+        ros_node: a ROS node to serve the ROS view on (the managed node's lifecycle node).
+        managed: start inactive: no stepping until :meth:`activate` (a lifecycle node drives it).
     """
 
     def __init__(
@@ -87,6 +89,8 @@ class FmuNode:
         step_timeout_s: float = 10.0,
         served: Served | None = None,
         pacing: Pacing | None = None,
+        ros_node: Any = None,
+        managed: bool = False,
     ) -> None:
         check_arguments(name, mode, rate, step_timeout_s)
         self.experiment = exp = as_experiment(experiment)
@@ -118,12 +122,14 @@ class FmuNode:
         self._driver: RealtimeDriver | None = None
         self._realtime: RealtimeStepping | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
+        self.acting = not managed  # a managed node steps once activated
+        self._pacing = pacing
         # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
         self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
         try:
-            self._declare(session, ros, pacing)
+            self._declare(session, ros, ros_node)
         except BaseException:
             self.watchdog.stop()
             plant.close()
@@ -140,7 +146,7 @@ class FmuNode:
         return self.plant.isolated
 
     # -- life cycle --------------------------------------------------------------------------------
-    def _declare(self, session: Any, ros: RosViewSettings | None, pacing: Pacing | None) -> None:
+    def _declare(self, session: Any, ros: RosViewSettings | None, ros_node: Any) -> None:
         self._link = link = NodeLink(
             session,
             self.keys,
@@ -157,20 +163,39 @@ class FmuNode:
             put=link.outputs.put, name=self.name,
         )  # fmt: skip
         if ros is not None:
-            link.add_ros(self, ros)
-        if self.mode == "realtime":  # runs from the start with the nominal values
-            self.reset(dict(self.served.nominal), None, 0)
-            self._realtime = rt = RealtimeStepping(
-                lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
-                clock=link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
-                period_s=self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0,
-                name=self.name, counters=self.counters, pacing=pacing,
-            )  # fmt: skip
-            self._driver = rt.driver
-            self._driver.start()
+            link.add_ros(self, ros, ros_node)
+        if self.acting:
+            self._start_realtime()
         _log.info(
             "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, link.keys.base
         )
+
+    def _start_realtime(self) -> None:
+        """A real-time node runs from now with the nominal values (a lockstep node: nothing)."""
+        if self.mode != "realtime":
+            return
+        if not self.counters["resets"]:  # the first start; a managed node resumes where it stopped
+            self.reset(dict(self.served.nominal), None, 0)
+        self._realtime = rt = RealtimeStepping(
+            lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
+            clock=self._link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
+            period_s=self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0,
+            name=self.name, counters=self.counters, pacing=self._pacing,
+        )  # fmt: skip
+        self._driver = rt.driver
+        self._driver.start()
+
+    def activate(self) -> None:
+        """A managed node starts stepping: ROS actions are taken, a real-time node runs."""
+        self.acting = True
+        self._start_realtime()
+
+    def deactivate(self) -> None:
+        """A managed node stops stepping (the FMU keeps its state; :meth:`activate` resumes)."""
+        self.acting = False
+        if self._driver is not None:
+            self._driver.stop(self.step_timeout_s)
+            self._driver = self._realtime = None
 
     def __enter__(self) -> FmuNode:
         return self
@@ -340,7 +365,7 @@ class FmuNode:
         if self.health.is_hung or not self._lock.acquire(timeout=self.step_timeout_s):
             return False
         try:
-            if self._driver is not None or self.follows_clock:
+            if self.mode == "realtime" or self.follows_clock:
                 self._latest_inputs = inputs
             elif not self.episode_over():
                 self._advance(inputs, (0, b""))
@@ -361,7 +386,7 @@ class FmuNode:
         """Whether the episode has ended: terminated or failed, or (lockstep, where actions come
         over ROS) ``model.episode_duration`` run; real time and an external clock go on."""
         state = self.lockstep
-        lockstep = self._driver is None and not self.follows_clock
+        lockstep = self.mode != "realtime" and not self.follows_clock
         return state.ended or (lockstep and state.step >= self.episode_samples)
 
     def clock_step(self) -> int | None:

@@ -67,7 +67,7 @@ class NodeLink:
             session.liveliness().declare_token(keys.alive),
         ]
 
-    def add_ros(self, node: FmuNode, settings: RosViewSettings) -> None:
+    def add_ros(self, node: FmuNode, settings: RosViewSettings, ros_node: Any = None) -> None:
         """The node's ROS view: actions and a reset Trigger by name (anonymous, never holding)."""
         self.ros = RosView(
             self.session,
@@ -81,6 +81,7 @@ class NodeLink:
             follower=clock_follower(node, settings),
             parameters=fmu_parameters(node.info, node.served.settable, node.served.nominal),
             on_parameters=lambda changes: ros_parameters(node, changes),
+            node=ros_node,
         )
 
     def _on_action(self, sample: Any) -> None:
@@ -157,6 +158,8 @@ def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
     """Input values by name from the ROS view: held in real time, one sample each in lockstep.
     A rejected action is counted by cause (``ros_rejected_<cause>``) and logged the first time."""
+    if not node.acting:
+        return ros_rejected(node, "inactive", "the managed node is not active; activate it first")
     if node.lease.holder is not None:
         return ros_rejected(node, "not_holder", "a client holds the node's lease (native protocol)")
     current = node.current_inputs()

@@ -226,9 +226,10 @@ class RclpyNode:
 
     def declare_fmu_parameters(
         self, parameters: list[Any], on_set: Callable[[dict[str, Any]], str | None]
-    ) -> None:
+    ) -> Any:
         """ROS parameters for FMU parameters (``bridge.net.ros2.params.FmuParameter``), with their
-        ranges; ``on_set({name: value})`` returns why a set is refused, or None to accept it."""
+        ranges; ``on_set({name: value})`` returns why a set is refused, or None to accept it.
+        Returns the callback rclpy holds (to remove it again)."""
         from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
 
         names = set()
@@ -247,6 +248,7 @@ class RclpyNode:
             return SetParametersResult(successful=reason is None, reason=reason or "")
 
         self.node.add_on_set_parameters_callback(check)
+        return check
 
     def close(self) -> None:
         """Stop the executor, destroy the node, shut the context down (quietly, within a second)."""

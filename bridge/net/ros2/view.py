@@ -116,12 +116,14 @@ class RosView:
         follower: ClockFollower | None = None,
         parameters: Sequence[Any] = (),
         on_parameters: Callable[[dict[str, Any]], str | None] | None = None,
+        node: Any = None,
     ) -> None:
         self.settings = settings
         self._output_names, self._input_names = tuple(output_names), tuple(input_names)
         self._layout = cdr.JointStateLayout.of(list(output_names))
         self._on_actions, self._on_reset = on_actions, on_reset
-        self.node = open_backend_node(session, settings, ros_node_name(settings.node_name or name))
+        # ``node``: a node of someone else's to serve on (the managed FMU node's lifecycle node)
+        self.node = node or open_backend_node(session, settings, ros_node_name(settings.node_name or name))
         qos = qos_profile(settings)
         self._outputs = self.node.create_publisher(settings.outputs_topic, "sensor_msgs/msg/JointState", qos)
         self.dropped = 0  # malformed or foreign messages
