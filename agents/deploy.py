@@ -133,6 +133,13 @@ def model_info_for(
     )
 
 
+def _decade(n: int) -> bool:
+    """1, 10, 100, ...: when a repeated event is worth another log line."""
+    while n >= 10 and n % 10 == 0:
+        n //= 10
+    return n == 1
+
+
 class DeployedAgent:
     """Receives observations, acts, publishes; thread-safe; ``close()`` stops it."""
 
@@ -155,6 +162,7 @@ class DeployedAgent:
         self._sample = 0
         self._last_inputs: list[float] | None = None
         self._last_time = time.monotonic()
+        self._missing_in_a_row = 0  # missing-observation events since the last observation
         self._stop = threading.Event()
         self._warm_up()
         self._watchdog = threading.Thread(target=self._watch, name="agent-watchdog", daemon=True)
@@ -188,6 +196,9 @@ class DeployedAgent:
                 self._start_episode(episode)
             else:
                 self._sample = self._sample + 1 if step is None else step
+            if self._missing_in_a_row:
+                _log.info("observations again after %d missing-observation events", self._missing_in_a_row)
+                self._missing_in_a_row = 0
             obs = self.task.observe(values, self._sample, self._rng)
             action = self.policy.act(obs, self.task.controller_signals())
             # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
@@ -214,12 +225,18 @@ class DeployedAgent:
                 inputs = self._last_inputs if self.settings.missing == "hold" else self._safe()
                 self._last_time = time.monotonic()
                 self.stats.missing_events += 1
-            _log.warning(
-                "no observation for %.0f ms: %s action %s",
-                self.settings.timeout_s * 1e3,
-                "holding the last" if self.settings.missing == "hold" else "publishing the safe",
-                inputs,
-            )
+                self._missing_in_a_row += 1
+                in_a_row = self._missing_in_a_row
+            if _decade(in_a_row):  # the 1st, 10th, 100th, ...: a node gone for hours is a few lines
+                _log.warning(
+                    "no observation for %.0f ms (%d time%s in a row; told again at %d): %s action %s",
+                    self.settings.timeout_s * 1e3 * in_a_row,
+                    in_a_row,
+                    "" if in_a_row == 1 else "s",
+                    in_a_row * 10,
+                    "holding the last" if self.settings.missing == "hold" else "publishing the safe",
+                    inputs,
+                )
             self._send(inputs, self._sample)
 
     def _send(self, inputs: list[float], sample: int) -> bool:

@@ -11,7 +11,20 @@ lifecycle events drive them:
 - **activate** starts acting: each observation message gets one action.
 - **deactivate** stops acting; with ``missing: safe`` it publishes the safe action once, with
   ``hold`` it publishes nothing (the plant holds the last action).
-- **cleanup** drops the policy and the topics; **shutdown** ends the node.
+- **cleanup** drops the policy and the topics; **shutdown** ends the node: once ``finalized`` the
+  process exits.
+
+Every other way out of active fails safe: **shutdown** from active, Ctrl-C (SIGINT), SIGTERM and an
+error (a transition that fails, or an exception while acting) stop acting first and then publish
+the safe action (``safe_value``, 0 by default), whatever ``missing`` says: the node is going away
+and holds nothing, so the safe action is the last action it sends. An error while acting also
+deactivates the node (it says so in its log and in the transition event).
+
+The lifecycle services are served beside the transitions (a reentrant callback group on a
+multi-threaded executor): ``configure`` loads the policy (seconds: torch, onnxruntime) without
+holding up ``get_state``, ``get_available_states`` and ``get_available_transitions``, which answer
+at once (``configuring`` meanwhile). Transitions themselves run one at a time: a ``change_state``
+that arrives while another is under way is refused (``success: false``, logged).
 
 Parameters: ``runtime`` (torch, onnx, fmu), ``missing`` (hold, safe), ``safe_value`` (one per action
 input, or one for all), ``timeout`` (s without an observation before the missing rule, while
@@ -51,18 +64,28 @@ class ManagedAgent:
     """The lifecycle node and what its transitions build; ``close()`` ends it."""
 
     def __init__(self, model: Path, config: Path | None, settings: DeploySettings) -> None:
-        from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
+        from rclpy.callback_groups import ReentrantCallbackGroup
+        from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn
+        from rclpy.node import Node
 
         from bridge.net.ros2.args import current as ros_args
         from bridge.net.ros2.rclpy_backend import RclpyNode
+        from bridge.net.ros2.rclpy_lifecycle import one_transition_at_a_time
         from bridge.net.ros2.view import ros_node_name
 
         self.model, self.config, self.base = model, config, settings
         self.experiment, _ = deployment_experiment(model, config)
         self._ok, self._failure = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
+        self._transitions = threading.Lock()
+        self.finished = threading.Event()  # finalized: the process may exit
         outer = self
 
-        class _Node(LifecycleNode):  # type: ignore[misc]  # rclpy is untyped here
+        class _Node(LifecycleNodeMixin, Node):  # type: ignore[misc]  # rclpy is untyped here
+            def __init__(self, node_name: str, **kwargs: Any) -> None:
+                Node.__init__(self, node_name, **kwargs)
+                LifecycleNodeMixin.__init__(self, callback_group=ReentrantCallbackGroup())
+                one_transition_at_a_time(self, outer._transitions)
+
             def on_configure(self, state: Any) -> Any:
                 return outer._configure()
 
@@ -76,7 +99,10 @@ class ManagedAgent:
                 return outer._cleanup()
 
             def on_shutdown(self, state: Any) -> Any:
-                return outer._cleanup()
+                return outer._shutdown()
+
+            def on_error(self, state: Any) -> Any:
+                return outer._error()
 
         declared = {
             "runtime": settings.runtime,
@@ -93,6 +119,7 @@ class ManagedAgent:
             settings.namespace,
             domain_id=settings.domain_id,
             node_class=_Node,
+            executor_threads=3,  # transitions, the other lifecycle services, observations
         )
         for name, default in declared.items():
             self.ros.node.declare_parameter(name, given.get(name, default))
@@ -191,6 +218,42 @@ class ManagedAgent:
             self.ros.node.get_logger().info("inactive: holding (no action sent)")
         return self._ok
 
+    def _exit_safe(self, why: str) -> None:
+        """Leave active for good (shutdown, a signal, an error): stop acting, then send the safe
+        action, so that it is the last action sent; nothing when the node is not active."""
+        with self._lock:
+            agent, self.agent = self.agent, None
+        if agent is None:
+            return
+        agent.close()  # no action of the policy or its missing rule after this
+        safe = list(self.settings.safe_inputs or [0.0] * len(self.experiment.actions.inputs))
+        self._publish(safe, 0)
+        self.ros.node.get_logger().warning(f"left active ({why}): safe action {safe} sent")
+
+    def _shutdown(self) -> Any:
+        self._exit_safe("shutdown")
+        self._cleanup()
+        self.finished.set()
+        self.ros.node.get_logger().info("finalized: the process ends")
+        return self._ok
+
+    def _error(self) -> Any:
+        self._exit_safe("a transition failed")
+        self._cleanup()
+        return self._ok  # back to unconfigured
+
+    def _failed_while_acting(self, exc: Exception) -> None:
+        """An exception while acting: fail safe and deactivate (one transition at a time)."""
+        self.ros.node.get_logger().error(f"acting failed ({type(exc).__name__}: {exc}); deactivating")
+        self._exit_safe(f"error: {type(exc).__name__}")
+        if self._transitions.acquire(blocking=False):
+            try:
+                self.ros.node.trigger_deactivate()
+            except Exception:  # not active any more (a transition got there first)
+                _log.debug("deactivate after an error", exc_info=True)
+            finally:
+                self._transitions.release()
+
     def _cleanup(self) -> Any:
         with self._lock:
             agent, self.agent = self.agent, None
@@ -221,26 +284,39 @@ class ManagedAgent:
             agent = self.agent
         if agent is None:  # configured but not active: observations are not acted on
             return
-        message = cdr.decode_joint_state(payload)
+        try:
+            message = cdr.decode_joint_state(payload)
+        except Exception as exc:  # a foreign or malformed message: not an observation
+            _log.warning("dropped an observation message that is not a JointState: %s", exc)
+            return
         index = {name: i for i, name in enumerate(message.name)}
         try:
             outputs = [float(message.position[index[n]]) for n in agent.task.output_names]
-        except KeyError as exc:
-            _log.warning("observation message lacks %s (it has %s)", exc, message.name)
+        except (KeyError, IndexError):
+            _log.warning(
+                "observation message lacks %s (it has names %s, %d positions)",
+                [n for n in agent.task.output_names if n not in index],
+                message.name,
+                len(message.position),
+            )
             return
         if message.stamp_ns < self._last_stamp:
             self._episode += 1
         self._last_stamp = message.stamp_ns
-        agent.observe(outputs, episode=self._episode)
+        try:
+            agent.observe(outputs, episode=self._episode)
+        except Exception as exc:  # the policy or the transport failed: never act on after it
+            self._failed_while_acting(exc)
 
     @property
     def state(self) -> str:
         return "active" if self.agent is not None else "configured" if self._policy is not None else "idle"
 
     def run(self, duration_s: float | None, stop: threading.Event) -> Any:
+        """Until ``stop``, Ctrl-C/SIGTERM, ``duration_s`` or the shutdown transition (finalized)."""
         deadline = None if duration_s is None else time.monotonic() + duration_s
         try:
-            while not stop.wait(0.1):
+            while not stop.wait(0.1) and not self.finished.is_set():
                 if deadline is not None and time.monotonic() > deadline:
                     break
         except KeyboardInterrupt:
@@ -251,5 +327,7 @@ class ManagedAgent:
         return agent.stats if agent is not None else Stats()
 
     def close(self) -> None:
+        """Ctrl-C, SIGTERM, the end of ``--duration``: fail safe if active, then end the node."""
+        self._exit_safe("the process is stopping")
         self._cleanup()
         self.ros.close()

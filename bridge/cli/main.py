@@ -328,6 +328,13 @@ def node(
     ] = False,
     isolate: IsolateOpt = False,
     step_timeout: StepTimeoutOpt = 10.0,
+    managed: Annotated[
+        bool,
+        typer.Option(
+            "--managed/--unmanaged",
+            help="rclpy: a lifecycle node; configure loads the FMU, activate steps it (docs/ros2.md).",
+        ),
+    ] = False,
 ) -> None:
     """Serve an FMU over Zenoh until interrupted (Ctrl-C or SIGTERM)."""
     import os
@@ -355,17 +362,18 @@ def node(
         section.update({"follow_clock": True} if follow_clock else {})
         section = current().apply(section)
         view = settings_from(section, backend=ros_backend)
-    server = FmuNode(
-        loaded,
-        name=name,
-        mode=mode,  # type: ignore[arg-type]
-        rate=rate,
-        options=_zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode, network=network),
-        prefix=prefix,
-        ros=view,
-        isolate=isolate,
-        step_timeout_s=step_timeout,
-    )
+    options = _zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode, network=network)
+
+    def build(ros_node: Any = None) -> FmuNode:
+        return FmuNode(
+            loaded, name=name, mode=mode, rate=rate, options=options,  # type: ignore[arg-type]
+            prefix=prefix, ros=view, isolate=isolate, step_timeout_s=step_timeout,
+            ros_node=ros_node, managed=ros_node is not None,
+        )  # fmt: skip
+
+    if managed:
+        return _serve_managed(build, view, name)
+    server = build()
     # SIGTERM as Ctrl-C (a KeyboardInterrupt in the main thread; ``finally`` closes the server):
     # closing from the handler could deadlock on the stop Event's lock the main thread may hold
     signal.signal(signal.SIGTERM, signal.default_int_handler)
@@ -385,6 +393,38 @@ def node(
             sys.stdout.flush()
             sys.stderr.flush()
             os._exit(0)
+
+
+def _serve_managed(build: Any, view: Any, name: str) -> None:
+    """``node --managed``: the FMU node as a lifecycle node (bridge.net.ros2.rclpy_lifecycle)."""
+    import os
+    import signal
+
+    if view is None or view.backend != "rclpy":
+        raise BridgeError("--managed is a ROS 2 lifecycle node: use it with --ros-backend rclpy")
+    from bridge.net.ros2.names import normalize_namespace
+    from bridge.net.ros2.rclpy_lifecycle import ManagedFmuNode
+    from bridge.net.ros2.view import ros_node_name
+
+    node = ManagedFmuNode(
+        build, ros_node_name(view.node_name or name), normalize_namespace(view.namespace), view.domain_id
+    )
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    err_console.print(
+        f"managed node {node.ros.fully_qualified_name} (unconfigured: configure loads the FMU, "
+        "activate steps it); Ctrl-C stops it",
+        highlight=False,
+    )
+    try:
+        while not node.finished.wait(0.2):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.close()
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)  # as the rclpy node: Fast DDS's unloading at exit can outlast a second
 
 
 @app.command()

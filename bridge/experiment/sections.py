@@ -215,3 +215,4 @@ class RosSection(Strict):
     depth: Annotated[int, Field(ge=1, le=10_000)] = 10
     backend: Literal["zenoh", "rclpy"] = "zenoh"
     follow_clock: bool = False  # step on an external /clock (use_sim_time); see docs/ros2.md
+    reset_keeps_inputs: bool = False  # ~/reset keeps the held inputs (default: back to their start values)

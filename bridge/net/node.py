@@ -70,6 +70,8 @@ class FmuNode:
             FMU is killed after ``step_timeout_s`` and restarted by the next reset.
         step_timeout_s: the longest a reset or step may take before the node reports it hung.
         pacing: how a real-time node keeps its period (``bridge.net.realtime.Pacing``).
+        ros_node: a ROS node to serve the ROS view on (the managed node's lifecycle node).
+        managed: start inactive: no stepping until :meth:`activate` (a lifecycle node drives it).
     """
 
     def __init__(
@@ -87,6 +89,8 @@ class FmuNode:
         step_timeout_s: float = 10.0,
         served: Served | None = None,
         pacing: Pacing | None = None,
+        ros_node: Any = None,
+        managed: bool = False,
     ) -> None:
         check_arguments(name, mode, rate, step_timeout_s)
         self.experiment = exp = as_experiment(experiment)
@@ -108,18 +112,24 @@ class FmuNode:
         self._stop = threading.Event()
         self._time_ns = round(self.timing.start_time_s * 1e9)
         self._latest_inputs: list[float] | None = None
-        self._held_inputs = [element_start(self.info, n) for n in self.input_names]  # u[2]: an element
+        self.start_inputs = tuple(element_start(self.info, n) for n in self.input_names)  # u[2]: an element
+        self._held_inputs = list(self.start_inputs)
+        self.ros_parameters: dict[str, Any] = {}  # FMU parameters set over ROS, for the next ~/reset
+        # ROS lockstep (anonymous actions) ends an episode after model.episode_duration
+        self.episode_samples = round(exp.model.episode_duration / self.timing.sampling_time_s)
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
         self._realtime: RealtimeStepping | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
+        self.acting = not managed  # a managed node steps once activated
+        self._pacing = pacing
         # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
         self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
         try:
-            self._declare(session, ros, pacing)
+            self._declare(session, ros, ros_node)
         except BaseException:
             self.watchdog.stop()
             plant.close()
@@ -136,7 +146,7 @@ class FmuNode:
         return self.plant.isolated
 
     # -- life cycle --------------------------------------------------------------------------------
-    def _declare(self, session: Any, ros: RosViewSettings | None, pacing: Pacing | None) -> None:
+    def _declare(self, session: Any, ros: RosViewSettings | None, ros_node: Any) -> None:
         self._link = link = NodeLink(
             session,
             self.keys,
@@ -153,20 +163,39 @@ class FmuNode:
             put=link.outputs.put, name=self.name,
         )  # fmt: skip
         if ros is not None:
-            link.add_ros(self, ros)
-        if self.mode == "realtime":  # runs from the start with the nominal values
-            self.reset(dict(self.served.nominal), None, 0)
-            self._realtime = rt = RealtimeStepping(
-                lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
-                clock=link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
-                period_s=self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0,
-                name=self.name, counters=self.counters, pacing=pacing,
-            )  # fmt: skip
-            self._driver = rt.driver
-            self._driver.start()
+            link.add_ros(self, ros, ros_node)
+        if self.acting:
+            self._start_realtime()
         _log.info(
             "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, link.keys.base
         )
+
+    def _start_realtime(self) -> None:
+        """A real-time node runs from now with the nominal values (a lockstep node: nothing)."""
+        if self.mode != "realtime":
+            return
+        if not self.counters["resets"]:  # the first start; a managed node resumes where it stopped
+            self.reset(dict(self.served.nominal), None, 0)
+        self._realtime = rt = RealtimeStepping(
+            lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
+            clock=self._link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
+            period_s=self.timing.sampling_time_s / self.rate if self.rate > 0 else 0.0,
+            name=self.name, counters=self.counters, pacing=self._pacing,
+        )  # fmt: skip
+        self._driver = rt.driver
+        self._driver.start()
+
+    def activate(self) -> None:
+        """A managed node starts stepping: ROS actions are taken, a real-time node runs."""
+        self.acting = True
+        self._start_realtime()
+
+    def deactivate(self) -> None:
+        """A managed node stops stepping (the FMU keeps its state; :meth:`activate` resumes)."""
+        self.acting = False
+        if self._driver is not None:
+            self._driver.stop(self.step_timeout_s)
+            self._driver = self._realtime = None
 
     def __enter__(self) -> FmuNode:
         return self
@@ -190,6 +219,9 @@ class FmuNode:
         self.watchdog.stop()
         if self._driver is not None:
             self._driver.stop(timeout_s)
+        follower = self._link.ros.follower if self._link.ros is not None else None
+        if follower is not None:  # its thread steps under the lock taken next
+            follower.close(timeout_s)
         locked = self._lock.acquire(timeout=timeout_s)
         if not locked and self.isolated:
             self.plant.close()  # kills the child: the blocked step returns with PlantDied
@@ -333,21 +365,35 @@ class FmuNode:
         if self.health.is_hung or not self._lock.acquire(timeout=self.step_timeout_s):
             return False
         try:
-            if self._driver is not None or self.follows_clock:
+            if self.mode == "realtime" or self.follows_clock:
                 self._latest_inputs = inputs
-            elif not self.lockstep.ended:
+            elif not self.episode_over():
                 self._advance(inputs, (0, b""))
-            else:  # lockstep after the episode ended: no step, but not silently
+            else:  # lockstep after the episode ended (or ran its duration): no step, not silently
                 self.counters["ros_ignored_episode_ended"] += 1
+                if self.counters["ros_ignored_episode_ended"] == 1:
+                    _log.warning(
+                        "node %s: ROS action after the end of episode %d (step %d of %d, "
+                        "model.episode_duration %g s): not stepped; call ~/reset for the next episode",
+                        self.name, self.lockstep.episode, self.lockstep.step, self.episode_samples,
+                        self.experiment.model.episode_duration,
+                    )  # fmt: skip
         finally:
             self._lock.release()
         return True
+
+    def episode_over(self) -> bool:
+        """Whether the episode has ended: terminated or failed, or (lockstep, where actions come
+        over ROS) ``model.episode_duration`` run; real time and an external clock go on."""
+        state = self.lockstep
+        lockstep = self.mode != "realtime" and not self.follows_clock
+        return state.ended or (lockstep and state.step >= self.episode_samples)
 
     def clock_step(self) -> int | None:
         """One sample on an external clock's tick (``--follow-clock``) with the latest inputs held:
         the FMU time reached in ns, or None when the episode is over."""
         with self._lock:
-            if self.lockstep.ended:
+            if self.lockstep.ended or self._stop.is_set():
                 return None
             self._advance(self.current_inputs(), (0, b""))
             return round(self.plant.time_s * 1e9)

@@ -9,6 +9,7 @@ ROS view (``bridge.net.ros2.view``), whose requests it turns into the node's own
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -17,6 +18,7 @@ from bridge.errors import BridgeError, TransportError
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.requests import redact
+from bridge.net.ros2.params import fmu_parameters
 from bridge.net.ros2.view import RosView, RosViewSettings
 from bridge.net.transport import undeclare
 
@@ -65,7 +67,7 @@ class NodeLink:
             session.liveliness().declare_token(keys.alive),
         ]
 
-    def add_ros(self, node: FmuNode, settings: RosViewSettings) -> None:
+    def add_ros(self, node: FmuNode, settings: RosViewSettings, ros_node: Any = None) -> None:
         """The node's ROS view: actions and a reset Trigger by name (anonymous, never holding)."""
         self.ros = RosView(
             self.session,
@@ -74,9 +76,12 @@ class NodeLink:
             output_names=node.output_names,
             input_names=node.input_names,
             on_actions=lambda values: ros_actions(node, values),
-            on_reset=lambda: ros_reset(node),
+            on_reset=lambda: ros_reset(node, keep_inputs=settings.reset_keeps_inputs),
             realtime=node.mode == "realtime",
             follower=clock_follower(node, settings),
+            parameters=fmu_parameters(node.info, node.served.settable, node.served.nominal),
+            on_parameters=lambda changes: ros_parameters(node, changes),
+            node=ros_node,
         )
 
     def _on_action(self, sample: Any) -> None:
@@ -151,28 +156,67 @@ def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
 
 
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
-    """Input values by name from the ROS view: held in real time, one sample each in lockstep."""
+    """Input values by name from the ROS view: held in real time, one sample each in lockstep.
+    A rejected action is counted by cause (``ros_rejected_<cause>``) and logged the first time."""
+    if not node.acting:
+        return ros_rejected(node, "inactive", "the managed node is not active; activate it first")
     if node.lease.holder is not None:
-        node.counters["ros_rejected_not_holder"] += 1
-        return
+        return ros_rejected(node, "not_holder", "a client holds the node's lease (native protocol)")
     current = node.current_inputs()
     merged = [float(values.get(name, current[i])) for i, name in enumerate(node.input_names)]
-    if node.rules.inputs(merged) is not None:
-        node.counters["ros_rejected_out_of_range"] += 1
-        return
+    if not all(math.isfinite(v) for v in merged):
+        return ros_rejected(node, "not_finite", f"an input is NaN or infinite: {values}")
+    reason = node.rules.inputs(merged)
+    if reason is not None:
+        return ros_rejected(node, "out_of_range", reason)
     if not node.apply(merged):
-        node.counters["ros_rejected_unhealthy"] += 1
+        ros_rejected(node, "unhealthy", f"the node is unhealthy or busy: {node.health_detail}")
+    return None
 
 
-def ros_reset(node: FmuNode) -> tuple[bool, str]:
+def ros_rejected(node: FmuNode, cause: str, reason: str) -> None:
+    """Count a rejected ROS action; the first of each cause is logged with its reason, later ones
+    only counted (a publisher of bad values at 1 kHz must not flood the log)."""
+    key = f"ros_rejected_{cause}"
+    node.counters[key] += 1
+    if node.counters[key] == 1:
+        _log.warning(
+            "node %s: ROS action rejected (%s); further actions rejected for this reason are only "
+            "counted (%s in fmu-bridge nodes --json)",
+            node.name,
+            reason,
+            key,
+        )
+
+
+def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
+    """``~/reset``: back to t0 with the nominal values and, unless ``keep_inputs``
+    (``ros.reset_keeps_inputs``), the inputs' start values: an action of the last episode is not
+    held into the next."""
     refusal = node.lease.acquire(0, "", False)
     if refusal is not None:
         return False, f"reset refused: {refusal}"
+    inputs = None if keep_inputs else list(node.start_inputs)
     try:
-        node.reset(dict(node.served.nominal), None, node.lockstep.episode + 1)
+        node.reset({**node.served.nominal, **node.ros_parameters}, inputs, node.lockstep.episode + 1)
     except BridgeError as exc:
         return False, redact(f"reset failed: {exc}")
     return True, f"reset to t0 (episode {node.lockstep.episode})"
+
+
+def ros_parameters(node: FmuNode, changes: dict[str, Any]) -> str | None:
+    """FMU parameters set over ROS: kept for the next ``~/reset`` between episodes; inside one,
+    the reason they are refused."""
+    state = node.lockstep
+    if not node.episode_over():
+        return (
+            f"inside episode {state.episode} (step {state.step}) of node {node.name!r}: FMU parameters "
+            "are set between episodes (before the first ~/reset, or once an episode has ended) and "
+            "apply at the next ~/reset"
+        )
+    node.ros_parameters.update(changes)
+    _log.info("node %s: FMU parameters %s apply at the next ~/reset", node.name, changes)
+    return None
 
 
 def clock_follower(node: FmuNode, settings: RosViewSettings) -> Any:
@@ -182,4 +226,6 @@ def clock_follower(node: FmuNode, settings: RosViewSettings) -> Any:
         return None
     from bridge.net.ros2.clock import ClockFollower
 
-    return ClockFollower(round(node.timing.sampling_time_s * 1e9), node.clock_start, node.clock_step)
+    return ClockFollower(
+        round(node.timing.sampling_time_s * 1e9), node.clock_start, node.clock_step, name=node.name
+    )

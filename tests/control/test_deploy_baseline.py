@@ -130,3 +130,34 @@ def test_agent_run_deploys_a_baseline_and_says_so(loopback: Loopback) -> None:
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     assert "agent deploys baseline lqr of the experiment's evaluation.baselines" in result.stdout
     assert "inference latency median" in result.stdout
+
+
+def test_missing_observations_are_told_at_the_1st_10th_100th_event(caplog: pytest.LogCaptureFixture) -> None:
+    """A node gone for good: the missing rule acts at every timeout, the log says so at the 1st,
+    10th, 100th... event in a row (not every timeout), and says when observations come back."""
+    import logging
+
+    experiment, _ = deployment_experiment(Path("lqr"), CARTPOLE)
+    policy = load_policy(Path("lqr"), "baseline", experiment)
+    sent: list[list[float]] = []
+    settings = DeploySettings(runtime="baseline", timeout_s=0.02, missing="safe", safe_inputs=[0.0])
+    caplog.set_level(logging.INFO, logger="agents.deploy")
+    agent = DeployedAgent(
+        policy, experiment, model_info_for(experiment, CARTPOLE.parent, None), settings,
+        lambda inputs, step: sent.append(inputs),
+    )  # fmt: skip
+    try:
+        agent.observe([0.0, 0.0, 0.05, 0.0])
+        deadline = time.monotonic() + 120
+        while agent.stats.missing_events < 25 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert agent.stats.missing_events >= 25
+        agent.observe([0.0, 0.0, 0.05, 0.0], step=1)
+    finally:
+        agent.close()
+    events = agent.stats.missing_events
+    told = [r.getMessage() for r in caplog.records if "no observation for" in r.getMessage()]
+    in_a_row = [m.split("(")[1].split(" ")[0] for m in told]
+    assert in_a_row == [str(n) for n in (1, 10, 100, 1000) if n <= events], (events, told)
+    assert sent.count([0.0]) == events  # the safe action went out at every one
+    assert any("observations again after" in r.getMessage() for r in caplog.records)

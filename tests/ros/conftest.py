@@ -240,3 +240,17 @@ def command(*args: str, ready: str = "serving", timeout_s: float = 90.0) -> Iter
         yield cmd
     finally:
         cmd.close()
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A cart-pole PPO run trained for a few hundred steps: it acts (forces of -10 or +10) without
+    balancing anything; for tests of how a deployed agent behaves, not of how well it acts."""
+    from agents.train import train
+    from bridge.experiment.examples import example_experiment
+
+    run = tmp_path_factory.mktemp("tiny") / "ppo"
+    overrides: dict[str, Any] = {"timesteps": 256, "n_envs": 1, "eval_every": 1_000_000}
+    overrides["hyperparams"] = {"n_steps": 128, "batch_size": 64, "n_epochs": 1}
+    train(example_experiment("cartpole_balance"), overrides=overrides, run_dir=run, progress=False)
+    return run

@@ -17,6 +17,8 @@ from typing import Any
 import rclpy
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import DescribeParameters, GetParameters, SetParameters
 from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
@@ -68,6 +70,8 @@ class Probe:
         self.received: dict[str, list[dict[str, Any]]] = {}
         self.subscriptions: dict[str, Any] = {}
         self.publishers: dict[str, Any] = {}
+        self.clients: dict[str, Any] = {}
+        self.pending: dict[str, Any] = {}
         self.executor = MultiThreadedExecutor(num_threads=2)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self.spin, daemon=True)
@@ -158,13 +162,14 @@ class Probe:
 
     def op_publish(self, command: dict[str, Any]) -> Any:
         topic, type_name = command["topic"], command["type"]
-        key = f"{topic}|{type_name}|{command.get('depth', 10)}"
+        key = f"{topic}|{type_name}|{command.get('depth', 10)}|{command.get('reliability', 'reliable')}"
         if key not in self.publishers:
             self.publishers[key] = self.node.create_publisher(TYPES[type_name], topic, qos(command))
         publisher = self.publishers[key]
         if command.get("wait_subscribers", True):
             deadline = time.monotonic() + 20.0
-            while publisher.get_subscription_count() < 1 and time.monotonic() < deadline:
+            wanted = int(command.get("subscribers", 1))  # /clock: ours and rclpy's TimeSource
+            while publisher.get_subscription_count() < wanted and time.monotonic() < deadline:
                 time.sleep(0.02)
         for message in command["messages"]:
             publisher.publish(self.message(type_name, message))
@@ -188,26 +193,52 @@ class Probe:
         raise TypeError(type_name)
 
     # -- services ---------------------------------------------------------------------------------
+    def _client(self, srv: Any, name: str, timeout: float) -> Any:
+        """A client of ``name``, kept for the next calls (discovered once)."""
+        client = self.clients.get(name)
+        if client is None:
+            client = self.clients[name] = self.node.create_client(srv, name)
+        return client if client.wait_for_service(timeout_sec=timeout) else None
+
     def _call(self, srv: Any, name: str, request: Any, timeout: float) -> Any:
-        client = self.node.create_client(srv, name)
-        try:
-            if not client.wait_for_service(timeout_sec=timeout):
-                return {"error": f"service {name} not available"}
-            future = client.call_async(request)
-            deadline = time.monotonic() + timeout
-            while not future.done() and time.monotonic() < deadline:
-                time.sleep(0.01)
-            if not future.done():
-                return {"error": f"service {name} did not answer"}
-            return future.result()
-        finally:
-            self.node.destroy_client(client)
+        future = self._call_async(srv, name, request, timeout)
+        return future if isinstance(future, dict) else self._result(future, name, timeout)
+
+    def _call_async(self, srv: Any, name: str, request: Any, timeout: float) -> Any:
+        client = self._client(srv, name, timeout)
+        if client is None:
+            return {"error": f"service {name} not available"}
+        return client.call_async(request)
+
+    @staticmethod
+    def _result(future: Any, name: str, timeout: float) -> Any:
+        deadline = time.monotonic() + timeout
+        while not future.done() and time.monotonic() < deadline:
+            time.sleep(0.001)
+        if not future.done():
+            return {"error": f"service {name} did not answer"}
+        return future.result()
+
+    def op_client(self, command: dict[str, Any]) -> Any:
+        """A Trigger client kept for ``trigger`` (its discovery done here, not in the timed call)."""
+        return self._client(Trigger, command["service"], float(command.get("timeout", 20.0))) is not None
+
+    def op_lifecycle_clients(self, command: dict[str, Any]) -> Any:
+        """The lifecycle clients of a node, discovered before calls that are timed."""
+        timeout = float(command.get("timeout", 20.0))
+        return all(
+            self._client(srv, f"{command['node']}/{name}", timeout) is not None
+            for srv, name in ((GetState, "get_state"), (ChangeState, "change_state"))
+        )
 
     def op_trigger(self, command: dict[str, Any]) -> Any:
+        """A Trigger call; ``elapsed_s`` from request to answer, ``t``: when it came (monotonic)."""
+        start = time.monotonic()
         answer = self._call(Trigger, command["service"], Trigger.Request(), command.get("timeout", 20.0))
         if isinstance(answer, dict):
             return answer
-        return {"success": answer.success, "message": answer.message}
+        end = time.monotonic()
+        return {"success": answer.success, "message": answer.message, "elapsed_s": end - start, "t": end}
 
     def op_lifecycle_get(self, command: dict[str, Any]) -> Any:
         answer = self._call(
@@ -215,24 +246,62 @@ class Probe:
         )
         if isinstance(answer, dict):
             return answer
-        return {"id": answer.current_state.id, "label": answer.current_state.label}
+        return {"id": answer.current_state.id, "label": answer.current_state.label, "t": time.monotonic()}
+
+    TRANSITIONS = {
+        "configure": Transition.TRANSITION_CONFIGURE,
+        "activate": Transition.TRANSITION_ACTIVATE,
+        "deactivate": Transition.TRANSITION_DEACTIVATE,
+        "cleanup": Transition.TRANSITION_CLEANUP,
+        "shutdown": Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
+        "shutdown_active": Transition.TRANSITION_ACTIVE_SHUTDOWN,
+    }
 
     def op_lifecycle_change(self, command: dict[str, Any]) -> Any:
-        ids = {
-            "configure": Transition.TRANSITION_CONFIGURE,
-            "activate": Transition.TRANSITION_ACTIVATE,
-            "deactivate": Transition.TRANSITION_DEACTIVATE,
-            "cleanup": Transition.TRANSITION_CLEANUP,
-            "shutdown": Transition.TRANSITION_UNCONFIGURED_SHUTDOWN,
-        }
+        self.op_lifecycle_change_async(command)
+        answer = self.op_lifecycle_wait(command)
+        return {"success": answer["success"]} if "success" in answer else answer
+
+    def op_lifecycle_change_async(self, command: dict[str, Any]) -> Any:
+        """Send a change_state request and return at once (``lifecycle_wait`` gets its answer)."""
         request = ChangeState.Request()
-        request.transition.id = ids[command["transition"]]
-        answer = self._call(
-            ChangeState, f"{command['node']}/change_state", request, command.get("timeout", 30.0)
-        )
+        request.transition.id = self.TRANSITIONS[command["transition"]]
+        name = f"{command['node']}/change_state"
+        future = self._call_async(ChangeState, name, request, command.get("timeout", 30.0))
+        self.pending[command["node"]] = future
+        return not isinstance(future, dict)
+
+    def op_lifecycle_wait(self, command: dict[str, Any]) -> Any:
+        future = self.pending.pop(command["node"])
+        if isinstance(future, dict):
+            return future
+        answer = self._result(future, command["node"], float(command.get("timeout", 30.0)))
         if isinstance(answer, dict):
             return answer
-        return {"success": answer.success}
+        return {"success": answer.success, "t": time.monotonic()}
+
+    # -- parameters, as ``ros2 param`` reaches them: the node's parameter services ----------------
+    def op_param_set(self, command: dict[str, Any]) -> Any:
+        value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(command["value"]))
+        request = SetParameters.Request(parameters=[Parameter(name=command["name"], value=value)])
+        answer = self._call(SetParameters, f"{command['node']}/set_parameters", request, 20.0)
+        if isinstance(answer, dict):
+            return answer
+        return {"successful": answer.results[0].successful, "reason": answer.results[0].reason}
+
+    def op_param_get(self, command: dict[str, Any]) -> Any:
+        request = GetParameters.Request(names=[command["name"]])
+        answer = self._call(GetParameters, f"{command['node']}/get_parameters", request, 20.0)
+        return answer if isinstance(answer, dict) else answer.values[0].double_value
+
+    def op_param_describe(self, command: dict[str, Any]) -> Any:
+        request = DescribeParameters.Request(names=[command["name"]])
+        answer = self._call(DescribeParameters, f"{command['node']}/describe_parameters", request, 20.0)
+        if isinstance(answer, dict):
+            return answer
+        descriptor = answer.descriptors[0]
+        ranges = [(r.from_value, r.to_value) for r in descriptor.floating_point_range]
+        return {"type": descriptor.type, "description": descriptor.description, "ranges": ranges}
 
     def close(self) -> None:
         self.executor.shutdown()

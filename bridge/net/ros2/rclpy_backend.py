@@ -125,6 +125,9 @@ class RclpyNode:
         use_sim_time: the node's clock follows ``/clock`` (the ``use_sim_time`` parameter).
         node_class: the rclpy node class (default ``rclpy.node.Node``; a ``LifecycleNode`` subclass).
         parameters: ROS parameter overrides (``--ros-args -p`` values meant for the node).
+        executor_threads: 1: a single-threaded executor; more: a multi-threaded one, so that
+            callbacks in reentrant or separate callback groups run beside a long one (a lifecycle
+            node's ``get_state`` while its ``configure`` loads a policy).
     """
 
     def __init__(
@@ -136,9 +139,10 @@ class RclpyNode:
         use_sim_time: bool = False,
         node_class: Any = None,
         parameters: dict[str, Any] | None = None,
+        executor_threads: int = 1,
     ) -> None:
         rclpy = _import_rclpy()
-        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
         from rclpy.parameter import Parameter
 
         self.context = open_context(domain_id)
@@ -159,7 +163,11 @@ class RclpyNode:
             self.context.try_shutdown()
             raise ConfigError(f"ROS node {name!r} in {namespace!r}: {exc}") from None
         self.lost = 0  # messages an RMW reported lost on this node's subscriptions
-        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor = (
+            SingleThreadedExecutor(context=self.context)
+            if executor_threads <= 1
+            else MultiThreadedExecutor(num_threads=executor_threads, context=self.context)
+        )
         self._executor.add_node(self.node)
         self._thread = threading.Thread(target=self._spin, name=f"rclpy-{name}", daemon=True)
         self._thread.start()
@@ -215,6 +223,32 @@ class RclpyNode:
             return deserialize_message(answer, cls.Response)
 
         return self.node.create_service(cls, name, serve)
+
+    def declare_fmu_parameters(
+        self, parameters: list[Any], on_set: Callable[[dict[str, Any]], str | None]
+    ) -> Any:
+        """ROS parameters for FMU parameters (``bridge.net.ros2.params.FmuParameter``), with their
+        ranges; ``on_set({name: value})`` returns why a set is refused, or None to accept it.
+        Returns the callback rclpy holds (to remove it again)."""
+        from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+
+        names = set()
+        for p in parameters:
+            descriptor = ParameterDescriptor(description=p.description)
+            if not isinstance(p.value, bool):
+                descriptor.floating_point_range = [
+                    FloatingPointRange(from_value=p.low, to_value=p.high, step=0.0)
+                ]
+            self.node.declare_parameter(p.name, p.value, descriptor)
+            names.add(p.name)
+
+        def check(changed: list[Any]) -> Any:
+            values = {c.name: c.value for c in changed if c.name in names}
+            reason = on_set(values) if values else None
+            return SetParametersResult(successful=reason is None, reason=reason or "")
+
+        self.node.add_on_set_parameters_callback(check)
+        return check
 
     def close(self) -> None:
         """Stop the executor, destroy the node, shut the context down (quietly, within a second)."""

@@ -12,10 +12,13 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
   lost (rclpy's ``message_lost`` event) is counted in ``lost`` and logged as a warning. A
   publisher keeps its side of the contract with RELIABLE and a depth of at least the steps it
   sends ahead of the outputs (one, if it waits for each output);
-- ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time);
+- ``/clock``: ``rosgraph_msgs/msg/Clock`` in real-time mode (simulation time); with
+  ``follow_clock`` subscribed instead, with ROS's clock QoS (:func:`clock_qos`);
 - ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
 - with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
-  way fmi_adapter users know them.
+  way fmi_adapter users know them;
+- on the rclpy backend, the FMU parameters a reset may set as ROS parameters
+  (``bridge.net.ros2.params``): set between episodes, applied at the next ``~/reset``.
 """
 
 from __future__ import annotations
@@ -69,6 +72,20 @@ def open_backend_node(session: Any, settings: RosViewSettings, name: str) -> Any
     return context.create_node(name)
 
 
+def clock_qos(settings: RosViewSettings) -> Any:
+    """ROS's clock QoS for following ``/clock``: best effort, depth 1 (rclpy's ``TimeSource``).
+
+    A best-effort subscription matches every ``/clock`` publisher, reliable ones and the best-effort
+    ones of rosbag2's player and Gazebo; depth 1: only the newest time matters."""
+    if settings.backend == "rclpy":
+        from bridge.net.ros2.rclpy_backend import RclpyQoS
+
+        return RclpyQoS("best_effort", 1)
+    from bridge.net.ros2 import QoS, Reliability
+
+    return QoS(reliability=Reliability.BEST_EFFORT, depth=1)
+
+
 def qos_profile(settings: RosViewSettings, *, keep_all: bool = False) -> Any:
     """The endpoints' QoS for the backend; ``keep_all`` where no message may be overwritten."""
     if settings.backend == "rclpy":
@@ -97,12 +114,16 @@ class RosView:
         on_reset: Callable[[], tuple[bool, str]],
         realtime: bool,
         follower: ClockFollower | None = None,
+        parameters: Sequence[Any] = (),
+        on_parameters: Callable[[dict[str, Any]], str | None] | None = None,
+        node: Any = None,
     ) -> None:
         self.settings = settings
         self._output_names, self._input_names = tuple(output_names), tuple(input_names)
         self._layout = cdr.JointStateLayout.of(list(output_names))
         self._on_actions, self._on_reset = on_actions, on_reset
-        self.node = open_backend_node(session, settings, ros_node_name(settings.node_name or name))
+        # ``node``: a node of someone else's to serve on (the managed FMU node's lifecycle node)
+        self.node = node or open_backend_node(session, settings, ros_node_name(settings.node_name or name))
         qos = qos_profile(settings)
         self._outputs = self.node.create_publisher(settings.outputs_topic, "sensor_msgs/msg/JointState", qos)
         self.dropped = 0  # malformed or foreign messages
@@ -127,10 +148,14 @@ class RosView:
             else None
         )
         if follower is not None:  # another simulator's clock drives this node (bridge.net.ros2.clock)
-            self.node.create_subscription("/clock", "rosgraph_msgs/msg/Clock", self._on_clock, qos)
+            self.node.create_subscription(
+                "/clock", "rosgraph_msgs/msg/Clock", self._on_clock, clock_qos(settings)
+            )
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
+        if parameters and on_parameters is not None and settings.backend == "rclpy":
+            self.node.declare_fmu_parameters(list(parameters), on_parameters)  # params.py
 
     def _on_lost(self, count: int) -> None:
         self.lost += count
@@ -210,15 +235,17 @@ class RosView:
             return interfaces.trigger_response(  # type: ignore[no-any-return]
                 False, f"bad request: std_srvs/srv/Trigger takes no fields, got {len(request)} bytes"
             )
+        if self.follower is not None:  # first: no step of the clock's catch-up beside the reset
+            self.follower.restart()  # lined up with the clock again at its next tick
         try:
             success, message = self._on_reset()
         except Exception as exc:  # never let a service handler die
             _log.exception("ROS reset failed")
             success, message = False, f"reset failed ({type(exc).__name__})"
-        if success and self.follower is not None:
-            self.follower.restart()  # lined up with the clock again at its next tick
 
         return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
 
     def close(self) -> None:
+        if self.follower is not None:  # first: no step after the node's entities are gone
+            self.follower.close()
         self.node.close()

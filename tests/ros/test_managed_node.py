@@ -1,0 +1,64 @@
+"""``fmu-bridge node --managed``: the FMU node as a lifecycle node, driven from a separate plain-rclpy
+process as ``ros2 lifecycle set`` drives it: configure loads the FMU (topics appear, nothing steps),
+activate steps it, deactivate stops it, cleanup closes it, shutdown ends the process."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from bridge.experiment.examples import example_experiment
+from tests.conftest import Loopback
+from tests.ros.conftest import Probe, command
+
+pytestmark = [pytest.mark.ros, pytest.mark.integration]
+CARTPOLE = example_experiment("cartpole_balance")
+JOINT_STATE = "sensor_msgs/msg/JointState"
+NODE = "/plant"
+
+
+def quiet_for(probe: Probe, seconds: float) -> list[object]:
+    """What arrives on the outputs in the next ``seconds`` (a check that nothing steps)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        time.sleep(0.1)
+    return list(probe.ask("take", id="out"))
+
+
+def test_the_fmu_node_as_a_lifecycle_node(loopback: Loopback, probe: Probe) -> None:
+    args = [
+        "node", str(CARTPOLE), "--name", "plant", "--connect", loopback.endpoint, "--prefix",
+        loopback.prefix, "--mode", "realtime", "--ros-backend", "rclpy", "--managed",
+    ]  # fmt: skip
+    probe.ask("subscribe", id="out", topic="/plant/outputs", type=JOINT_STATE, keep_all=True)
+    with command(*args, ready="Ctrl-C stops it") as node:
+        assert probe.ask("lifecycle_get", node=NODE)["label"] == "unconfigured"
+        assert probe.ask("topic_info", topic="/plant/outputs") == []  # no FMU loaded yet
+        for round_ in range(2):  # configured, active, inactive, cleaned up; then once more
+            assert probe.ask("lifecycle_change", node=NODE, transition="configure") == {"success": True}
+            assert probe.ask("lifecycle_get", node=NODE)["label"] == "inactive"
+            probe.wait(lambda: probe.ask("topic_info", topic="/plant/outputs"), what="the outputs publisher")
+            probe.ask("publish", topic="/plant/actions", type=JOINT_STATE,
+                      messages=[{"stamp_ns": 0, "name": ["force"], "position": [1.0]}])  # fmt: skip
+            assert quiet_for(probe, 1.0) == []  # loaded, not stepping; the action was refused
+            assert probe.ask("lifecycle_change", node=NODE, transition="activate") == {"success": True}
+            outputs = probe.ask("wait_count", id="out", count=10, timeout=30)
+            assert isinstance(outputs, list), node.output
+            assert outputs[0]["stamp_ns"] == 0  # the episode starts at activation
+            assert probe.ask("lifecycle_change", node=NODE, transition="deactivate") == {"success": True}
+            probe.ask("take", id="out")
+            assert quiet_for(probe, 1.0) == []  # its clock stopped
+            if round_ == 0:
+                assert probe.ask("lifecycle_change", node=NODE, transition="cleanup") == {"success": True}
+                probe.wait(
+                    lambda: probe.ask("topic_info", topic="/plant/outputs") == [],
+                    what="the outputs publisher gone after cleanup",
+                )
+        assert "ROS action rejected (the managed node is not active" in " ".join(node.output.split())
+        assert probe.ask("lifecycle_change", node=NODE, transition="activate") == {"success": True}
+        assert isinstance(probe.ask("wait_count", id="out", count=5, timeout=30), list)
+        # shutdown from active: finalized, and the process ends by itself
+        assert probe.ask("lifecycle_change", node=NODE, transition="shutdown_active") == {"success": True}
+        node.process.wait(timeout=30)
+        assert node.process.returncode == 0 and "Traceback" not in node.output, node.output
