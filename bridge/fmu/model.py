@@ -47,6 +47,20 @@ _Snapshot = tuple[ctypes.c_void_p, float | None]
 
 
 @dataclass
+class _ResetTrust:
+    """What ``reset_policy: auto`` has seen of the FMU's reset: a snapshot is taken of a fresh
+    instance's initialisation, never of a state not yet seen to work. An fmi reset is trusted until
+    an episode begun by it terminates at its first step where a fresh instance ran longer (the FMU
+    kept its terminated flag); then ``auto`` re-instantiates instead."""
+
+    origin: Literal["fresh", "fmi_reset", "restore"] = "fresh"  # how the current episode began
+    fresh_steps: int | None = None  # steps of a fresh instance's episode that ended by termination
+    fmi_reset_works: bool = True
+    snapshots_work: bool = True  # get_state after an fmi reset succeeded (or was not tried)
+    pending: tuple[tuple[Any, ...], _Snapshot] | None = None  # candidate snapshot after fmi reset
+
+
+@dataclass
 class ModelState:
     """A saved state of one :class:`Model` (``Model.save_state``): the FMU's own state, the step
     index and, for model exchange, the next time event. Free it with ``Model.free_state``."""
@@ -132,6 +146,7 @@ class Model:
         self._closed = False
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
+        self._trust = _ResetTrust()
         self._me: MeStepper | FixedStepper | None = None
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
@@ -395,6 +410,7 @@ class Model:
             if self._backend.component is None:
                 self._backend.instantiate()
             self._initialize(checked)
+        self._trust.origin = "fresh"
         self._remember(_freeze(checked))
 
     @property
@@ -414,30 +430,92 @@ class Model:
             return
         checked = self._check_init_values(values) if values else {}
         key = _freeze(checked) if checked else ()
+        if self.reset_policy == "auto":
+            self._judge_episode()
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
-        if snapshot is not None and self.reset_policy in ("auto", "restore"):
-            self._snapshots.move_to_end(key)
-            state, next_event_s = snapshot
-            self._backend.set_state(state)
-            self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
-            if self._me is not None:
-                self._me.restart(self.start_time_s)
-                self._me.next_event_s = next_event_s
-            if self._clocks is not None:
-                self._clocks.rewind(self.start_time_s)
+        restoring = snapshot is not None and self.reset_policy in ("auto", "restore")
+        if restoring and self._restored(key, snapshot):  # type: ignore[arg-type]
             return
         policy = self.reset_policy
-        if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
+        trust = self._trust
+        fresh = policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1
+        if fresh or (policy == "auto" and not trust.fmi_reset_works):
             self._reinstantiate(checked)
         else:
             try:
                 self._backend.reset()
                 self._initialize(checked)
+                if policy == "auto" and self.interface == "cs" and self._backend.reports_terminated():
+                    fresh = self._reset_kept_termination(checked)
             except FmuError as exc:
                 said = str(exc).partition(FMU_LOG_HEADER)[0]  # the log comes with the error, if it stays
                 _log.warning("%s: the FMU's reset failed (%s); re-instantiating", self.info.model_name, said)
                 self._reinstantiate(checked)
+                fresh = True
+        trust.origin = "fresh" if fresh or not trust.fmi_reset_works else "fmi_reset"
         self._remember(key)
+
+    def _reset_kept_termination(self, checked: dict[Variable, Any]) -> bool:
+        _log.warning(
+            "%s: the FMU still reports a terminated run after fmi reset and initialisation; "
+            "re-instantiating instead (set reset_policy to restore or reinstantiate to say so)",
+            self.info.model_name,
+        )
+        self._trust.fmi_reset_works = False
+        self._reinstantiate(checked)
+        return True
+
+    def _restored(self, key: tuple[Any, ...], snapshot: _Snapshot) -> bool:
+        """Back to the snapshot of ``key``; False (snapshots dropped) where the FMU refused it under
+        ``auto`` (some FMUs refuse their state functions once fmi-reset)."""
+        self._snapshots.move_to_end(key)
+        state, next_event_s = snapshot
+        try:
+            self._backend.set_state(state)
+        except FmuError as exc:
+            if self.reset_policy != "auto":
+                raise
+            _log.warning("%s: restoring a snapshot failed (%s); re-instantiating", self.info.model_name, exc)
+            self._drop_snapshots()
+            self._trust.fmi_reset_works = False  # the reset left state functions unusable
+            return False
+        self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
+        if self._me is not None:
+            self._me.restart(self.start_time_s)
+            self._me.next_event_s = next_event_s
+        if self._clocks is not None:
+            self._clocks.rewind(self.start_time_s)
+        self._trust.origin = "restore"
+        return True
+
+    def _judge_episode(self) -> None:
+        """``auto``: what the episode now ending shows (:class:`_ResetTrust`); a candidate snapshot
+        taken after an fmi reset is kept only if its episode ran a step without terminating."""
+        trust, steps, ended = self._trust, self.step_index, self.terminated
+        if trust.origin == "fresh" and ended:
+            trust.fresh_steps = steps
+        first_step_ended = trust.origin == "fmi_reset" and ended and steps <= 1
+        longer_when_fresh = trust.fresh_steps is None or trust.fresh_steps > 1
+        if first_step_ended and trust.fmi_reset_works and longer_when_fresh:
+            _log.warning(
+                "%s: the FMU asked to terminate at the first step after fmi reset, though a fresh "
+                "instance ran %s steps: its reset keeps a terminated run; re-instantiating instead "
+                "(set reset_policy to restore or reinstantiate to say so)",
+                self.info.model_name,
+                trust.fresh_steps if trust.fresh_steps is not None else "more",
+            )
+            trust.fmi_reset_works = False
+        pending, trust.pending = trust.pending, None
+        if pending is None:
+            return
+        key, snapshot = pending
+        ran = steps > 1 or (steps == 1 and not ended)
+        if trust.fmi_reset_works and trust.origin == "fmi_reset" and ran:
+            self._snapshots[key] = snapshot
+            self._snapshots.move_to_end(key)
+            self._evict()
+        else:
+            self._backend.free_state(snapshot[0])
 
     def _reinstantiate(self, values: dict[Variable, Any]) -> None:
         self._drop_snapshots()
@@ -554,20 +632,33 @@ class Model:
         return checked
 
     def _remember(self, key: tuple[Any, ...]) -> None:
-        """Snapshot the state right after initialisation for value sets that recur."""
+        """Snapshot the state right after initialisation: ``restore`` always; ``auto`` after an
+        initialisation of a fresh instance, and after an fmi reset for value sets that recur, as a
+        candidate kept once its episode has run (:meth:`_judge_episode`)."""
         if not self.can_restore or self.reset_policy not in ("auto", "restore"):
             return
-        if key in self._snapshots:
-            if self._snapshots[key] is not None:
-                return
-        elif self.reset_policy == "auto":
-            self._snapshots[key] = None  # first sighting: remember the key, snapshot on the next
-            self._evict()
+        if self._snapshots.get(key) is not None:
+            return
+        if self.reset_policy == "auto" and self._trust.origin != "fresh":
+            if key not in self._snapshots:
+                self._snapshots[key] = None  # first sighting: remember the key, a candidate on the next
+                self._evict()
+            elif self._trust.snapshots_work and (candidate := self._candidate()) is not None:
+                self._trust.pending = (key, candidate)
             return
         next_event_s = self._me.next_event_s if self._me is not None else None
         self._snapshots[key] = (self._backend.get_state(), next_event_s)
         self._snapshots.move_to_end(key)
         self._evict()
+
+    def _candidate(self) -> _Snapshot | None:
+        try:
+            state = self._backend.get_state()
+        except FmuError as exc:  # some FMUs refuse their state functions once fmi-reset
+            _log.info("%s: no snapshot after fmi reset (%s)", self.info.model_name, exc)
+            self._trust.snapshots_work = False
+            return None
+        return (state, self._me.next_event_s if self._me is not None else None)
 
     def _evict(self) -> None:
         while len(self._snapshots) > _MAX_SNAPSHOTS:
@@ -576,7 +667,8 @@ class Model:
                 self._backend.free_state(snapshot[0])
 
     def _drop_snapshots(self) -> None:
-        for snapshot in self._snapshots.values():
+        pending, self._trust.pending = self._trust.pending, None
+        for snapshot in [*self._snapshots.values(), pending[1] if pending else None]:
             if snapshot is not None:
                 self._backend.free_state(snapshot[0])
         self._snapshots.clear()
