@@ -378,19 +378,24 @@ class Model:
     def _to_c(self, var: Variable, value: Any) -> Any:
         return to_c(var, value, self.info.model_name, self._backend.major)
 
-    def _lookup(self, name: str, role: str = "variable") -> Variable:
-        var = self.info.variables.get(name)
-        if var is None:
-            raise unknown_variable_error(name, self.info, role)
-        if var.is_array:
-            raise VariableError(
-                f"{role} {name!r} is an FMI 3.0 array: parameters and start values are scalars here; "
-                f"set its elements between steps with Model.set({{'{var.element_names()[0]}': ...}})"
-            )
-        return var
-
-    def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
-        flat = {v.name: [self._to_c(v, values[v.name])] for v in variables}
+    def _write(self, variables: Sequence[Variable], values: Mapping[Variable, Any]) -> None:
+        """Initial values: scalars, whole arrays, and array elements over the array's current values."""
+        if not variables:
+            return
+        partial = [v for v in variables if isinstance(values[v], _Elements)]
+        current = access.read(self._backend, partial, self._where) if partial else {}
+        flat: dict[str, list[Any]] = {}
+        for v in variables:
+            value = values[v]
+            if isinstance(value, _Elements):
+                row = [self._to_c(v, x) for x in current[v.name]]
+                for index, x in value.items:
+                    row[index] = self._to_c(v, x)
+                flat[v.name] = row
+            elif v.dimensions:
+                flat[v.name] = [self._to_c(v, x) for x in _whole_array(v, value)]
+            else:
+                flat[v.name] = [self._to_c(v, value)]
         access.write(self._backend, list(variables), flat, self._where)
 
     def _inputs_written(self) -> None:
@@ -550,20 +555,22 @@ class Model:
         self._backend.log.clear()
         if self._structural and not self._fresh_configuration():
             self._configure()  # instantiated or fmi reset: structural parameters are back at their starts
-        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
+        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode,
+        # and array elements there too: the other elements are read first, which FMI 3.0 allows
+        # only from initialisation mode on.
         early = [
             v
             for v in values
-            if self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx")
+            if not isinstance(values[v], _Elements)
+            and (self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx"))
         ]
         late = [v for v in values if v not in early]
-        by_name = {v.name: value for v, value in values.items()}
-        self._init_values = by_name
-        self._write(early, by_name)
+        self._init_values = _by_name(values)
+        self._write(early, values)
         # Tolerance steers a co-simulation FMU's own solver; for model exchange it is ours (CVode).
         tolerance = self.tolerance if self.interface == "cs" else None
         self._backend.enter_initialization(self.start_time_s, self.stop_time_s, tolerance)
-        self._write(late, by_name)
+        self._write(late, values)
         if self._clocks is not None:
             self._clocks.configure(self.start_time_s)
         self._backend.exit_initialization()
@@ -622,13 +629,28 @@ class Model:
             self._me.restart(self.start_time_s)
 
     def _check_init_values(self, values: Mapping[str, Any]) -> dict[Variable, Any]:
+        """Parameters and start values by variable: scalars, whole FMI 3.0 arrays, and array
+        elements (``A[1,2]``, named as actions name them) gathered per array as :class:`_Elements`."""
         checked: dict[Variable, Any] = {}
+        elements: dict[Variable, dict[int, Any]] = {}
         for name, value in values.items():
-            var = self._lookup(name, "parameter or start value")
+            var, index = self._element(name, "parameter or start value")
             if not var.settable_at_init:
                 raise VariableError(_not_settable_at_init(var, self.info))
-            self._to_c(var, value)
+            if index is not None:
+                self._to_c(var, value)
+                elements.setdefault(var, {})[index] = value
+                continue
+            for x in _whole_array(var, value) if var.dimensions else [value]:
+                self._to_c(var, x)
             checked[var] = value
+        for var, items in elements.items():
+            if var in checked:
+                raise VariableError(
+                    f"{var.name!r} of {self.info.model_name} is given both whole and by element; "
+                    f"give one or the other"
+                )
+            checked[var] = _Elements(tuple(sorted(items.items())))
         return checked
 
     def _remember(self, key: tuple[Any, ...]) -> None:
@@ -989,6 +1011,35 @@ def _step_size(info: ModelInfo, step_size_s: float | None) -> float:
     if not (math.isfinite(h) and h > 0):
         raise ConfigError(f"step size must be a positive finite number of seconds, got {h!r}")
     return float(h)
+
+
+@dataclass(frozen=True)
+class _Elements:
+    """Some elements of an FMI 3.0 array to set at initialisation: ``(flat index, value)``, sorted."""
+
+    items: tuple[tuple[int, Any], ...]
+
+
+def _whole_array(var: Variable, value: Any) -> list[Any]:
+    given: list[Any] = np.asarray(value, dtype=object).reshape(-1).tolist()
+    if len(given) != var.size:
+        raise VariableError(
+            f"{var.name!r} is an array of shape {var.dimensions} ({var.size} elements), got {len(given)} "
+            f"values; give all of them, or single elements as {var.element_names()[0]!r}"
+        )
+    return given
+
+
+def _by_name(values: Mapping[Variable, Any]) -> dict[str, Any]:
+    """Initial values by the names they were given: array elements by their element names."""
+    named: dict[str, Any] = {}
+    for var, value in values.items():
+        if isinstance(value, _Elements):
+            names = var.element_names()
+            named.update((names[index], x) for index, x in value.items)
+        else:
+            named[var.name] = value
+    return named
 
 
 def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:

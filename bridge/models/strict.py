@@ -14,7 +14,9 @@ only in configuration mode. Like a strict exporter, it answers any get or set wh
 not the sum of the element counts of its value references with an error in the log and
 ``fmi3Error``. Co-simulation steps ``dx/dt = u - k x`` with its closed form
 ``x(t) = u/k + (x(t0) - u/k) exp(-k (t - t0))`` (``u`` held); model exchange leaves the
-integration to the importer.
+integration to the importer. A fixed 2 x 2 parameter array ``A`` (identity until set) and the
+local ``det_A``, its determinant, check that array parameters are set by element (``A[1,2]``)
+with whole-array calls.
 
 Example:
     >>> from bridge.models.strict import strict_arrays_fmu
@@ -63,7 +65,14 @@ _VARIABLES: Final = f"""
       <Dimension valueReference="1"/>
     </Float64>
     <Float64 name="total" valueReference="7" causality="output" variability="continuous"
-      description="The sum of x"/>"""
+      description="The sum of x"/>
+    <Float64 name="A" valueReference="8" causality="parameter" variability="fixed" start="1 0 0 1"
+      description="A 2 x 2 parameter array (identity until set); only its determinant is used">
+      <Dimension start="2"/>
+      <Dimension start="2"/>
+    </Float64>
+    <Float64 name="det_A" valueReference="9" causality="local" variability="fixed" initial="calculated"
+      description="The determinant of A"/>"""
 
 
 def model_description(token: str) -> str:
