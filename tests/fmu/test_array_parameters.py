@@ -37,7 +37,12 @@ def test_array_elements_as_parameters_under_every_reset_policy(fmu: Path, policy
     with Model(fmu, reset_policy=policy) as model:  # type: ignore[arg-type]
         model.initialize(ELEMENTS)
         assert model.get(["A"])["A"].tolist() == [[2.0, 1.0], [3.0, 1.0]]
-        for values, det in [({"A[2,2]": 5.0}, 5.0), (ELEMENTS, DET), ({"A": [[1, 2], [3, 4]]}, -2.0)] * 2:
+        cases: list[tuple[dict[str, Any], float]] = [
+            ({"A[2,2]": 5.0}, 5.0),
+            (ELEMENTS, DET),
+            ({"A": [[1, 2], [3, 4]]}, -2.0),
+        ]
+        for values, det in cases * 2:
             model.advance(2)
             model.reset(values)
             assert model.get(["det_A"])["det_A"] == det
