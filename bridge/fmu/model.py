@@ -31,14 +31,13 @@ from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.solver import MeStepper
+from bridge.fmu.spec import ResetPolicy, Solver
 from bridge.fmu.state_file import MAX_STATE_BYTES, StateFile
 from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
 
-ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
 RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
-Solver = Literal["cvode", "rk4", "euler"]
 SOLVERS: tuple[str, ...] = ("cvode", *METHODS)
 _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8

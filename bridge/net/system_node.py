@@ -184,6 +184,13 @@ def component_model(
             "structural_parameters": dict(component.structural_parameters),
             "clock_intervals": dict(component.clock_intervals),
             "clock_schedule": {k: list(v) for k, v in component.clock_schedule.items()},
+            "start_values": dict(component.start_values),
+            "reset_policy": (
+                {"state_file": str(component.state_file)} if component.state_file else component.reset_policy
+            ),
+            "tolerance": component.tolerance,
+            "solver": component.solver,
+            "solver_substeps": component.solver_substeps,
         },
         "actions": {  # bounds the model's checks ask for; the node checks served.low/high itself
             "inputs": list(served.input_names),
