@@ -51,7 +51,9 @@ def test_a_component_given_an_experiment_key_is_told_where_it_belongs(key: str, 
         parse_experiment(data, source=tmp_path / "s.yaml")
 
 
-def test_component_solver_substeps_tolerance_and_start_values_equal_the_same_model_alone(tmp_path: Path) -> None:
+def test_component_solver_substeps_tolerance_and_start_values_equal_the_same_model_alone(
+    tmp_path: Path,
+) -> None:
     fmu = strict_arrays_fmu()
     settings = {
         "interface": "me",
@@ -94,7 +96,9 @@ def test_component_solver_substeps_tolerance_and_start_values_equal_the_same_mod
 
 
 @pytest.mark.parametrize(("policy", "second_episode_steps"), [("reinstantiate", 10), ("reset", 1)])
-def test_component_reset_policy_reaches_its_model(tmp_path: Path, policy: str, second_episode_steps: int) -> None:
+def test_component_reset_policy_reaches_its_model(
+    tmp_path: Path, policy: str, second_episode_steps: int
+) -> None:
     """strict_reset keeps its terminated flag through fmi reset: the policy shows in the episodes."""
     data = system(
         {"a": {"fmu": str(strict_reset_fmu()), "reset_policy": policy, "parameters": {"quirks": 1}}},
