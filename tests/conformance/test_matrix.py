@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
 from bridge.env.batch import BatchEnv
 from bridge.env.fmu_env import FmuEnv
@@ -59,9 +60,11 @@ def _cartpole(version: str, interface: str) -> Callable[[], Path]:
     return lambda: example_fmu("cartpole", version, interface)
 
 
+# high 4: a node refuses reset inputs outside the action range, and u's start (u[3] = 3) is one
 ARRAY_SIGNALS: dict[str, Any] = {
     "inputs": ["u[1]", "u[3]"],
     "outputs": ["total", "y[1,2]", "y[2,3]", "det_A"],
+    "high": 4.0,
 }
 CART: dict[str, Any] = {
     "inputs": ["force"],
@@ -165,7 +168,7 @@ def in_process(setting: Setting, tmp_path: Path) -> np.ndarray:
     return rows
 
 
-def isolated(setting: Setting, tmp_path: Path) -> np.ndarray:
+def isolated(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
     data = experiment(setting, tmp_path, isolation={"timeout": 60.0})
     with FmuEnv(parse_experiment(data, source=tmp_path / "e.yaml")) as env:
         assert env.unwrapped.plant.isolated  # type: ignore[attr-defined]
@@ -181,7 +184,7 @@ def batch_of(n: int) -> Callable[[Setting, Path], np.ndarray]:
     return run
 
 
-def system_component(setting: Setting, tmp_path: Path) -> np.ndarray:
+def as_component(setting: Setting, tmp_path: Path) -> dict[str, Any]:
     """The model as the one component ``a`` of a system, its settings under system.components.a."""
     data = experiment(setting, tmp_path)
     model = data["model"]
@@ -194,8 +197,46 @@ def system_component(setting: Setting, tmp_path: Path) -> np.ndarray:
         "high": {f"a.{n}": setting.high for n in setting.inputs},
     }
     data["observations"] = {"outputs": [f"a.{n}" for n in setting.outputs], "scale": "none"}
+    return data
+
+
+def system_component(setting: Setting, tmp_path: Path) -> np.ndarray:
+    data = as_component(setting, tmp_path)
     with FmuEnv(parse_experiment(data, source=tmp_path / "s.yaml")) as env:
         rows = run_env(env, setting)
+    return rows
+
+
+def node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge node`` serving the experiment, driven by RemoteFmuEnv over loopback Zenoh."""
+    from bridge.env import RemoteFmuEnv
+    from tests.conftest import node_process
+
+    path = tmp_path / "node.yaml"
+    path.write_text(yaml.safe_dump(experiment(setting, tmp_path)))
+    with node_process(path, "matrix", net):
+        remote = RemoteFmuEnv(path, "matrix", session=net.session, prefix=net.prefix)
+        try:
+            return run_env(remote, setting)
+        finally:
+            remote.close()
+
+
+def component_in_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """The component ``a`` served by ``fmu-bridge system serve``, the system stepped here."""
+    from bridge.net.system_node import NodeComponents
+    from bridge.plant.system.plant import SystemPlant
+    from tests.plant.test_system_nodes import serve
+
+    data = as_component(setting, tmp_path)
+    data["system"]["components"]["a"]["node"] = "a-matrix"
+    path = tmp_path / "nodes.yaml"
+    path.write_text(yaml.safe_dump(data))
+    exp = parse_experiment(data, source=path)
+    with serve(path, net, "a"):
+        remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=60.0)
+        with FmuEnv(exp, plant=SystemPlant(exp, remote=remote)) as env:
+            rows = run_env(env, setting)
     return rows
 
 
@@ -204,10 +245,15 @@ PATHS: dict[str, Callable[[Setting, Path], np.ndarray]] = {
     "batch-3": batch_of(3),
     "system-component": system_component,
 }
-PROCESS_PATHS: dict[str, Callable[[Setting, Path], np.ndarray]] = {"isolated": isolated}
+PROCESS_PATHS: dict[str, Callable[[Setting, Path, Any], np.ndarray]] = {
+    "isolated": isolated,
+    "node": node,
+    "component-in-node": component_in_node,
+}
 
 
 def check_cell(setting_name: str, path: Callable[[Setting, Path], np.ndarray], tmp_path: Path) -> None:
+    """Run one cell: the path's two episodes equal the in-process FmuEnv's, or a named refusal."""
     setting = SETTINGS[setting_name]
     reference = in_process(setting, tmp_path)
     assert np.isfinite(reference).all() and len(reference) == len(EPISODES) * (STEPS + 1)
@@ -229,8 +275,8 @@ def test_in_process_path_equals_fmu_env(setting: str, path: str, tmp_path: Path)
 @pytest.mark.integration
 @pytest.mark.parametrize("path", list(PROCESS_PATHS))
 @pytest.mark.parametrize("setting", list(SETTINGS))
-def test_process_path_equals_fmu_env(setting: str, path: str, tmp_path: Path) -> None:
-    check_cell(setting, PROCESS_PATHS[path], tmp_path)
+def test_process_path_equals_fmu_env(setting: str, path: str, tmp_path: Path, loopback: Any) -> None:
+    check_cell(setting, lambda s, p: PROCESS_PATHS[path](s, p, loopback), tmp_path)
 
 
 def test_two_episodes_of_the_reference_repeat_where_the_seed_does_not_matter(tmp_path: Path) -> None:
