@@ -24,7 +24,8 @@ if TYPE_CHECKING:
     from bridge.fmu.description import read_model_info
     from bridge.fmu.model import RESET_POLICIES, Model, ModelState
     from bridge.fmu.signals import SignalGroup
-    from bridge.fmu.spec import ModelSpec, ResetPolicy, open_model
+    from bridge.fmu.opening import open_model
+    from bridge.fmu.spec import ModelSpec, ResetPolicy
 
 _RUNTIME = {
     "sha256": "bridge.fmu.archive",
@@ -37,7 +38,7 @@ _RUNTIME = {
     "ResetPolicy": "bridge.fmu.spec",
     "SignalGroup": "bridge.fmu.signals",
     "ModelSpec": "bridge.fmu.spec",
-    "open_model": "bridge.fmu.spec",
+    "open_model": "bridge.fmu.opening",
 }
 
 __all__ = [

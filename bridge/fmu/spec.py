@@ -4,11 +4,13 @@ The experiment's ``model:`` section, a system component (``system.components.NAM
 keys) and the Python API describe a model the same way: FMU, interface, time grid, reset policy
 (or a state file every episode starts from), tolerance, solver and substeps, structural
 parameters, clock intervals and schedule, parameters and start values (FMI 3.0 array elements
-by the element names actions use, ``A[1,2]``). :func:`open_model` is the one function that turns a
-description into a :class:`bridge.fmu.Model`; every plant opens its FMU through it, so a setting
-added here reaches every path at once. Importing this module loads no FMPy.
+by the element names actions use, ``A[1,2]``). ``open_model`` (:mod:`bridge.fmu.opening`) is the
+one function that turns a description into a :class:`bridge.fmu.Model`; every plant opens its FMU
+through it, so a setting added here reaches every path at once. Importing this module loads no
+FMPy.
 
 Example:
+    >>> from bridge.fmu import open_model
     >>> spec = ModelSpec.of("cartpole.fmu", step_size_s=0.02, parameters={"m": 1.2})
     >>> with open_model(spec) as model:
     ...     model.initialize(spec.initial_values())
@@ -19,10 +21,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal
-
-if TYPE_CHECKING:
-    from bridge.fmu.model import Model
+from typing import Any, Literal
 
 InterfaceChoice = Literal["auto", "cs", "me", "se"]  # auto: co-simulation where the FMU has it
 ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
@@ -93,38 +92,3 @@ class ModelSpec:
 
 def _pairs(values: Mapping[str, Any] | None) -> Pairs:
     return tuple((str(k), v) for k, v in (values or {}).items())
-
-
-def open_model(spec: ModelSpec) -> Model:
-    """The model instance ``spec`` describes (not yet initialised): the one place model settings
-    become ``Model`` arguments. With ``spec.state_file`` every episode starts from that state.
-
-    Raises:
-        ConfigError, FmuError, StateFileError: as :class:`bridge.fmu.Model` and
-            :meth:`bridge.fmu.Model.start_from` raise them.
-    """
-    from bridge.fmu import state_file
-    from bridge.fmu.model import Model
-
-    model = Model(
-        spec.fmu,
-        step_size_s=spec.step_size_s,
-        start_time_s=spec.start_time_s,
-        stop_time_s=spec.stop_time_s,
-        interface=spec.interface,
-        reset_policy=spec.reset_policy,
-        tolerance=spec.tolerance,
-        solver=spec.solver,
-        solver_substeps=spec.solver_substeps,
-        instance_name=spec.instance_name,
-        structural_parameters=dict(spec.structural_parameters) or None,
-        clock_intervals=dict(spec.clock_intervals),
-        clock_schedule={k: list(v) for k, v in spec.clock_schedule},
-    )
-    if spec.state_file is not None:
-        try:
-            model.start_from(state_file.read(spec.state_file), str(spec.state_file))
-        except BaseException:
-            model.close()
-            raise
-    return model

@@ -8,7 +8,8 @@ from pathlib import Path
 from bridge.experiment.config import Experiment
 from bridge.experiment.validate import Timing, resolve_state_file
 from bridge.fmu import Model
-from bridge.fmu.spec import ModelSpec, open_model
+from bridge.fmu.opening import open_model
+from bridge.fmu.spec import ModelSpec
 
 
 def experiment_spec(

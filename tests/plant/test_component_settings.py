@@ -18,7 +18,8 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import ModelSection, parse_experiment
 from bridge.experiment.model_settings import EXPERIMENT_KEYS, ModelSettings
 from bridge.experiment.system import ComponentSection
-from bridge.fmu.spec import ModelSpec, open_model
+from bridge.fmu.opening import open_model
+from bridge.fmu.spec import ModelSpec
 from bridge.models.strict import strict_arrays_fmu, strict_reset_fmu
 from bridge.plant.system.plant import SystemPlant
 

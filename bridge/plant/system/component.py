@@ -14,8 +14,9 @@ from typing import Any
 from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
 from bridge.fmu import read_model_info
+from bridge.fmu.opening import open_model
 from bridge.fmu.sample import sample_failure
-from bridge.fmu.spec import ModelSpec, open_model
+from bridge.fmu.spec import ModelSpec
 from bridge.plant.base import FloatArray
 from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
