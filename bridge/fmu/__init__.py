@@ -23,8 +23,8 @@ if TYPE_CHECKING:
     from bridge.fmu.batch import BatchOutcome, ModelBatch
     from bridge.fmu.description import read_model_info
     from bridge.fmu.model import RESET_POLICIES, Model, ModelState
-    from bridge.fmu.signals import SignalGroup
     from bridge.fmu.opening import open_model
+    from bridge.fmu.signals import SignalGroup
     from bridge.fmu.spec import ModelSpec, ResetPolicy
 
 _RUNTIME = {
