@@ -434,7 +434,7 @@ class Model:
             return
         checked = self._check_init_values(values) if values else {}
         key = _freeze(checked) if checked else ()
-        if self.reset_policy == "auto":
+        if self.reset_policy in ("auto", "reset"):
             self._judge_episode()
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
         restoring = snapshot is not None and self.reset_policy in ("auto", "restore")
@@ -449,7 +449,7 @@ class Model:
             try:
                 self._backend.reset()
                 self._initialize(checked)
-                if policy == "auto" and self.interface == "cs" and self._backend.reports_terminated():
+                if policy in ("auto", "reset") and self._kept_termination():
                     fresh = self._reset_kept_termination(checked)
             except FmuError as exc:
                 said = str(exc).partition(FMU_LOG_HEADER)[0]  # the log comes with the error, if it stays
@@ -459,15 +459,26 @@ class Model:
         trust.origin = "fresh" if fresh or not trust.fmi_reset_works else "fmi_reset"
         self._remember(key)
 
+    def _kept_termination(self) -> bool:
+        trusted = self._trust.fmi_reset_works
+        return trusted and self.interface == "cs" and self._backend.reports_terminated()
+
     def _reset_kept_termination(self, checked: dict[Variable, Any]) -> bool:
-        _log.warning(
-            "%s: the FMU still reports a terminated run after fmi reset and initialisation; "
-            "re-instantiating instead (set reset_policy to restore or reinstantiate to say so)",
-            self.info.model_name,
-        )
-        self._trust.fmi_reset_works = False
+        """The FMU reports a terminated run right after fmi reset: ``auto`` re-instantiates (True);
+        ``reset`` keeps the user's policy and says why its episodes will end at once (False)."""
+        self._distrust_reset("still reports a terminated run after fmi reset and initialisation")
+        if self.reset_policy != "auto":
+            return False
         self._reinstantiate(checked)
         return True
+
+    def _distrust_reset(self, why: str) -> None:
+        self._trust.fmi_reset_works = False
+        if self.reset_policy == "auto":
+            fix = "re-instantiating instead (set reset_policy to restore or reinstantiate to say so)"
+        else:
+            fix = "episodes after a reset end at once: set reset_policy to auto, restore or reinstantiate"
+        _log.warning("%s: the FMU %s; %s", self.info.model_name, why, fix)
 
     def _restored(self, key: tuple[Any, ...], snapshot: _Snapshot) -> bool:
         """Back to the snapshot of ``key``; False (snapshots dropped) where the FMU refused it under
@@ -501,14 +512,11 @@ class Model:
         first_step_ended = trust.origin == "fmi_reset" and ended and steps <= 1
         longer_when_fresh = trust.fresh_steps is None or trust.fresh_steps > 1
         if first_step_ended and trust.fmi_reset_works and longer_when_fresh:
-            _log.warning(
-                "%s: the FMU asked to terminate at the first step after fmi reset, though a fresh "
-                "instance ran %s steps: its reset keeps a terminated run; re-instantiating instead "
-                "(set reset_policy to restore or reinstantiate to say so)",
-                self.info.model_name,
-                trust.fresh_steps if trust.fresh_steps is not None else "more",
+            ran = trust.fresh_steps if trust.fresh_steps is not None else "more"
+            self._distrust_reset(
+                f"asked to terminate at the first step after fmi reset, though a fresh instance ran "
+                f"{ran} steps: its reset keeps a terminated run"
             )
-            trust.fmi_reset_works = False
         pending, trust.pending = trust.pending, None
         if pending is None:
             return

@@ -91,3 +91,15 @@ def test_the_env_with_auto_reset_gives_full_length_episodes(fmu: Path, tmp_path:
                 steps, done = steps + 1, terminated or truncated
             lengths.append(steps)
     assert lengths == [STEPS] * 4
+
+
+def test_the_reset_policy_says_why_its_episodes_end_at_once(
+    fmu: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """``reset`` keeps the user's choice, but an evaluation's wrong mean no longer comes without a word."""
+    with caplog.at_level("WARNING", logger="bridge.fmu.model"):
+        runs = episodes(fmu, "reset", ONE_SET, KEEPS_TERMINATED)
+    assert [len(xs) for xs in runs] == [STEPS, 1, 1, 1]
+    said = [r.getMessage() for r in caplog.records if "terminated run" in r.getMessage()]
+    assert len(said) == 1, "said once"
+    assert "set reset_policy to auto, restore or reinstantiate" in said[0]
