@@ -15,7 +15,7 @@ keeps its terminated flag through fmi reset and refuses state functions once res
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +45,7 @@ class Setting:
     step_size: float = 0.1
     high: float = 2.0
     keys: tuple[str, ...] = ()  # the settings a path may refuse (named in its error)
-    extra: dict[str, Any] = field(default_factory=dict)
+    prepare: Callable[[Path], dict[str, Any]] | None = None  # more model keys, made in tmp_path
 
 
 def _arrays() -> Path:
@@ -54,6 +54,24 @@ def _arrays() -> Path:
 
 def _reset() -> Path:
     return strict_reset_fmu()
+
+
+def _slow_init() -> Path:
+    return example_fmu("slow_init", "2.0", "cs")
+
+
+def _saved_state(tmp_path: Path) -> dict[str, Any]:
+    """A state file of slow_init after 20 steps from ambient: every episode starts there."""
+    from bridge.fmu import Model, state_file
+
+    path = tmp_path / "warm.state"
+    with Model(_slow_init(), step_size_s=0.05) as model:
+        model.initialize({"warmup_steps": 0})
+        for k in range(20):
+            model.set({"power": 10.0 + k})
+            model.advance(1)
+        state_file.write(path, model.state_file())
+    return {"reset_policy": {"state_file": str(path)}}
 
 
 def _cartpole(version: str, interface: str) -> Callable[[], Path]:
@@ -97,6 +115,16 @@ SETTINGS: dict[str, Setting] = {
         )
         for policy in ("auto", "restore", "reinstantiate", "reset")
     },
+    "fmi2-state-file": Setting(
+        _slow_init,
+        {"parameters": {"warmup_steps": 0}},
+        ["power"],
+        ["T"],
+        step_size=0.05,
+        high=20.0,
+        keys=("state_file",),
+        prepare=_saved_state,
+    ),
     "fmi2-cs": Setting(_cartpole("2.0", "cs"), {"parameters": {"theta0": 0.05}}, **CART),
     "fmi2-me": Setting(_cartpole("2.0", "me"), {"interface": "me"}, **CART, keys=("interface",)),
     "fmi1-cs": Setting(_cartpole("1.0", "cs"), {"parameters": {"theta0": 0.05}}, **CART, keys=("fmu",)),
@@ -113,6 +141,7 @@ def experiment(setting: Setting, tmp_path: Path, **model: Any) -> dict[str, Any]
             "sampling_time": setting.step_size,
             "episode_duration": 100 * setting.step_size,
             **setting.model,
+            **(setting.prepare(tmp_path) if setting.prepare else {}),
             **model,
         },
         "actions": {
