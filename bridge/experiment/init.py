@@ -367,10 +367,13 @@ def _reward_and_termination(observed: list[Variable]) -> list[str]:
 
 
 def _parameters(info: ModelInfo) -> list[str]:
-    params = [
+    params = [  # an FMI 3.0 array parameter by its elements, as check and the model take it
         v
-        for v in info.variables.values()
-        if v.causality == "parameter" and v.variability != "constant" and v.settable_at_init
+        for v in with_elements(info.variables).values()
+        if v.causality == "parameter"
+        and v.variability != "constant"
+        and v.settable_at_init
+        and not v.dimensions
     ]
     if not params:
         return [""]

@@ -6,6 +6,7 @@ import json
 import re
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -209,12 +210,50 @@ def _cached_fmus() -> list[Path]:
     return sorted(root.rglob("*.fmu")) if root.is_dir() else []
 
 
+def _with_suggestions(text: str) -> dict[str, Any]:
+    """The config ``init`` wrote, with the parameter defaults it suggests in comments given."""
+    data: dict[str, Any] = yaml.safe_load(text)
+    suggested = {}
+    lines = text.splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith("  parameters: {}")), len(lines))
+    for line in lines[start + 1 :]:
+        if not line.lstrip().startswith("#"):
+            break
+        if line.startswith("  #   "):  # '  #   "name": value  # description'
+            suggested.update(yaml.safe_load("{" + line[6:].split("  #")[0] + "}"))
+    data["model"]["parameters"] = {**(data["model"].get("parameters") or {}), **suggested}
+    return data
+
+
 def test_init_writes_names_and_values_check_accepts_for_every_cached_fmu(tmp_path: Path) -> None:
+    """Every FMU the tests have cached: the config as written, and with every suggested value."""
     fmus = _cached_fmus()
     if not fmus:
         pytest.skip("no FMU cached yet under FMU_BRIDGE_CACHE")
     for i, fmu in enumerate(fmus):
         config = tmp_path / f"e{i}.yaml"
-        config.write_text(starting_config(fmu, relative_to=tmp_path))
-        exp = load_experiment(config)
-        check_experiment(exp, read_model_info(fmu))
+        text = starting_config(fmu, relative_to=tmp_path)
+        config.write_text(text)
+        check_experiment(load_experiment(config), read_model_info(fmu))
+        config.write_text(yaml.safe_dump(_with_suggestions(text)))
+        check_experiment(load_experiment(config), read_model_info(fmu))
+
+
+def test_init_suggests_an_array_parameter_by_its_elements_and_the_model_takes_them(tmp_path: Path) -> None:
+    """Before: init suggested ``"A": "1 0 0 1"`` (the XML's start string), which nothing accepts."""
+    from bridge.models.strict import strict_arrays_fmu
+
+    fmu = strict_arrays_fmu()
+    data = _with_suggestions(starting_config(fmu, relative_to=tmp_path))
+    assert {k: v for k, v in data["model"]["parameters"].items() if k.startswith("A")} == {
+        "A[1,1]": 1.0,
+        "A[1,2]": 0.0,
+        "A[2,1]": 0.0,
+        "A[2,2]": 1.0,
+    }
+    config = tmp_path / "e.yaml"
+    config.write_text(yaml.safe_dump(data))
+    check_experiment(load_experiment(config), read_model_info(fmu))
+    with FmuEnv(config) as env:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
