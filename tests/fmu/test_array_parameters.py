@@ -127,3 +127,19 @@ def test_isolated_plant_sets_array_elements_of_model_parameters(fmu: Path, tmp_p
         for seed in (0, 1):
             obs, _ = env.reset(seed=seed)
             assert obs[0] == DET
+
+
+def test_what_a_node_reports_keeps_which_start_values_may_be_set(fmu: Path) -> None:
+    """Before, a node's model summary dropped ``initial``: a remote env refused start values of
+    ``x`` (a local with initial exact) that the in-process env takes."""
+    import json
+
+    from bridge.fmu import read_model_info
+    from bridge.fmu.vocab import info_from_summary, summary_of
+
+    info = read_model_info(fmu)
+    again = info_from_summary(json.loads(json.dumps(summary_of(info))))
+    for name, var in info.variables.items():
+        assert again.variables[name].initial == var.initial
+        assert again.variables[name].settable_at_init == var.settable_at_init
+    assert again.variables["x"].settable_at_init
