@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AfterValidator, Field, ValidationError, field_validator, model_validator
 
 from bridge.errors import ConfigError
+from bridge.experiment.model_settings import ModelSettings, Scalar, StateFilePolicy
 from bridge.experiment.profiles import PROFILE_KINDS, Distribution, Profile
 from bridge.experiment.reward import RewardSection
 from bridge.experiment.safe import check_safe_name
@@ -42,13 +43,13 @@ __all__ = [
     "Distribution",
     "Experiment",
     "Profile",
+    "StateFilePolicy",
     "format_validation_error",
     "load_experiment",
     "parse_experiment",
     "sampling_ratio",
 ]
 
-Scalar = FiniteFloat | int | bool | str
 MAX_SAMPLES = 10**7
 """Samples per episode at most: each reference and input profile is precomputed as one float64 per
 sample (80 MB per signal at this limit), and an episode longer than this is almost always a
@@ -77,56 +78,23 @@ class LicenceSection(Strict):
     per_instance: PositiveFloat = Field(default=1.0, description="seats one FMU instance takes")
 
 
-class StateFilePolicy(Strict):
-    """``model.reset_policy: {state_file: PATH}``: every episode starts from an FMU state saved by
-    ``fmu-bridge state save`` instead of initialising (a path relative to the experiment file)."""
+class ModelSection(ModelSettings):
+    """``model:``: the model's settings (:class:`ModelSettings`, shared with system components)
+    and the experiment's own: time grid of the agent, episode, isolation, licence."""
 
-    state_file: str = Field(min_length=1, description="state file (relative to the experiment file)")
-
-
-class ModelSection(Strict):
     fmu: str = Field(
         default="",
         description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
-    step_size: PositiveFloat | None = None
     sampling_time: PositiveFloat | None = None
     episode_duration: PositiveFloat
     start_time: FiniteFloat = 0.0
-    parameters: dict[str, Scalar] = {}
-    start_values: dict[str, Scalar] = {}
-    structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(
-        default={},
-        description="FMI 3.0 structural parameters (array sizes), set in configuration mode per instance",
-    )
-    reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] | StateFilePolicy = "auto"
-    tolerance: PositiveFloat | None = None
-    solver: Literal["cvode", "rk4", "euler"] = Field(
-        default="cvode",
-        description="model exchange: CVode (variable step), or rk4/euler: fixed steps in native code",
-    )
-    solver_substeps: Annotated[int, Field(ge=1)] = Field(
-        default=1, description="fixed-step solvers: integration steps per FMU step (step_size)"
-    )
-    clock_intervals: dict[str, PositiveFloat] = Field(
-        default={}, description="FMI 3.0 fixed/tunable input clocks: the interval (s) set at initialisation"
-    )
-    clock_schedule: dict[str, list[FiniteFloat]] = Field(
-        default={}, description="FMI 3.0 triggered input clocks: the times (s) they tick at, per episode"
-    )
     isolation: IsolationSection | None = None
     licence: LicenceSection | None = None
 
     @model_validator(mode="after")
     def _samples(self) -> ModelSection:
         check_samples("episode_duration", self.episode_duration, self.sampling_time or self.step_size)
-        if self.solver != "cvode" and self.interface == "cs":
-            raise invalid(
-                "solver",
-                f"{self.solver!r} integrates model exchange, but interface is 'cs' (the FMU's own "
-                "solver): set interface: me, or drop solver",
-            )
         return self
 
 

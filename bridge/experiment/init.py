@@ -20,6 +20,7 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
+from bridge.experiment.safe import safe_name
 from bridge.experiment.validate import with_elements
 from bridge.fmu.vocab import ModelInfo, Variable
 
@@ -172,7 +173,7 @@ def _header(info: ModelInfo, shown: Path) -> list[str]:
         f"# Experiment for {' '.join(info.model_name.split())} (FMI {info.fmi_version}, "
         f"{'/'.join(i.upper() for i in info.interfaces)})",
         f"# written by `fmu-bridge init` from {shown.name}; check it with `fmu-bridge check <this file>`.",
-        f"name: {q(info.model_name.lower())}",
+        f"name: {q(safe_name(info.model_name.lower()))}",
         "",
         "model:",
         f"  fmu: {q(str(shown))}",
@@ -372,10 +373,13 @@ def _reward_and_termination(observed: list[Variable]) -> list[str]:
 
 
 def _parameters(info: ModelInfo) -> list[str]:
-    params = [
+    params = [  # an FMI 3.0 array parameter by its elements, as check and the model take it
         v
-        for v in info.variables.values()
-        if v.causality == "parameter" and v.variability != "constant" and v.settable_at_init
+        for v in with_elements(info.variables).values()
+        if v.causality == "parameter"
+        and v.variability != "constant"
+        and v.settable_at_init
+        and not v.dimensions
     ]
     if not params:
         return [""]

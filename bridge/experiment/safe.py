@@ -24,6 +24,8 @@ MAX_NAME_CHARS = 100
 ALLOW_ENV = "FMU_BRIDGE_ALLOWED_MODULES"
 _PACKAGES = {"site-packages", "dist-packages"}
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
+_UNSAFE = re.compile(r"[^A-Za-z0-9._-]+")
+_LEADING = re.compile(r"^[^A-Za-z0-9]+")
 
 
 def check_safe_name(value: str) -> str:
@@ -39,6 +41,19 @@ def check_safe_name(value: str) -> str:
             "with a letter or digit (it becomes part of file names)"
         )
     return value
+
+
+def safe_name(text: str, fallback: str = "experiment") -> str:
+    """``text`` made into a name :func:`check_safe_name` accepts (for ``init``: a model's name).
+
+    Runs of anything but letters, digits, ``.``, ``_`` and ``-`` become one ``_``; leading
+    characters that cannot start a name are dropped; the result is cut to :data:`MAX_NAME_CHARS`.
+    ``"van der pol oscillator"`` gives ``"van_der_pol_oscillator"``; a name with nothing usable
+    gives ``fallback``.
+    """
+    name = _UNSAFE.sub("_", text.strip())
+    name = _LEADING.sub("", name)[:MAX_NAME_CHARS].rstrip("._-") or fallback
+    return check_safe_name(name)
 
 
 def _shown(value: str) -> str:

@@ -10,13 +10,12 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
+from bridge.experiment.model_settings import EXPERIMENT_KEYS, ModelSettings
 from bridge.experiment.reward import RewardSection
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 CONNECTION = re.compile(r"^\s*([A-Za-z_][\w]*)\.(\S+)\s*->\s*([A-Za-z_][\w]*)\.(\S+)\s*$")
 SYSTEM_SUFFIXES = (".ssp", ".ssd")
 
@@ -25,8 +24,9 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class ComponentSection(_Strict):
-    """One FMU of the system. ``step_size`` must divide the macro step (multi-rate); ``node``
+class ComponentSection(ModelSettings):
+    """One FMU of the system: every key of a model (:class:`ModelSettings`, as under ``model:``)
+    and its place in the system. ``step_size`` must divide the macro step (multi-rate); ``node``
     serves the component from a node of that name instead of this process."""
 
     fmu: str = Field(
@@ -34,24 +34,24 @@ class ComponentSection(_Strict):
         description="Path to the .fmu (relative to the experiment file) or example:NAME; may be left "
         "out for a component of the SSP that model.fmu names",
     )
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
-    step_size: PositiveFloat | None = None
-    parameters: dict[str, Scalar] = {}
-    structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(
-        default={}, description="FMI 3.0 structural parameters (array sizes), set in configuration mode"
-    )
-    clock_intervals: dict[str, PositiveFloat] = Field(
-        default={}, description="FMI 3.0 fixed/tunable input clocks: the interval (s) set at initialisation"
-    )
-    clock_schedule: dict[str, list[FiniteFloat]] = Field(
-        default={}, description="FMI 3.0 triggered input clocks: the times (s) they tick at, per episode"
-    )
     feedthrough: bool | None = Field(
         default=None,
         description="whether an output depends directly on an input; default: the FMU's declared "
         "dependencies, else true (FMI's rule for undeclared dependencies)",
     )
     node: str | None = None
+
+    @model_validator(mode="before")
+    @classmethod
+    def _experiment_keys(cls, data: Any) -> Any:
+        given = [key for key in EXPERIMENT_KEYS if isinstance(data, dict) and key in data]
+        if given:
+            key = given[0]
+            raise ValueError(
+                f"{key} is a setting of the whole experiment, not of one component: give it once as "
+                f"model.{key} (a component takes every other key of model:)"
+            )
+        return data
 
 
 class IterationSection(_Strict):

@@ -22,8 +22,10 @@ if TYPE_CHECKING:
     from bridge.fmu.archive import sha256
     from bridge.fmu.batch import BatchOutcome, ModelBatch
     from bridge.fmu.description import read_model_info
-    from bridge.fmu.model import RESET_POLICIES, Model, ModelState, ResetPolicy
+    from bridge.fmu.model import RESET_POLICIES, Model, ModelState
+    from bridge.fmu.opening import open_model
     from bridge.fmu.signals import SignalGroup
+    from bridge.fmu.spec import ModelSpec, ResetPolicy
 
 _RUNTIME = {
     "sha256": "bridge.fmu.archive",
@@ -33,8 +35,10 @@ _RUNTIME = {
     "RESET_POLICIES": "bridge.fmu.model",
     "Model": "bridge.fmu.model",
     "ModelState": "bridge.fmu.model",
-    "ResetPolicy": "bridge.fmu.model",
+    "ResetPolicy": "bridge.fmu.spec",
     "SignalGroup": "bridge.fmu.signals",
+    "ModelSpec": "bridge.fmu.spec",
+    "open_model": "bridge.fmu.opening",
 }
 
 __all__ = [
@@ -44,10 +48,12 @@ __all__ = [
     "Model",
     "ModelBatch",
     "ModelInfo",
+    "ModelSpec",
     "ModelState",
     "ResetPolicy",
     "SignalGroup",
     "Variable",
+    "open_model",
     "read_model_info",
     "sha256",
 ]

@@ -171,6 +171,11 @@ class Backend:
     def terminated_after_discard(self) -> bool:
         return False
 
+    def reports_terminated(self) -> bool:
+        """Whether the FMU says now, outside a step, that it has terminated (FMI 2.0 co-simulation's
+        fmi2Terminated status; False where there is no such query or the FMU does not answer)."""
+        return False
+
     def get_state(self) -> ctypes.c_void_p:
         raise FmuError(f"{self.info.model_name}: FMI {self.info.fmi_version} cannot get/set FMU states")
 
@@ -373,6 +378,11 @@ class Fmi2Backend(Backend):
             self.component, fmi2.fmi2Terminated, ctypes.byref(flag)
         )
         return bool(status <= WARNING and flag.value)
+
+    def reports_terminated(self) -> bool:
+        if self.functions.get("fmi2GetBooleanStatus") is None or not self.component:
+            return False
+        return self.terminated_after_discard()
 
     def get_state(self) -> ctypes.c_void_p:
         state = ctypes.c_void_p()

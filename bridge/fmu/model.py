@@ -31,19 +31,32 @@ from bridge.fmu.events import EventCalls
 from bridge.fmu.fixed_step import METHODS, FixedStepper
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.solver import MeStepper
+from bridge.fmu.spec import ResetPolicy, Solver
 from bridge.fmu.state_file import MAX_STATE_BYTES, StateFile
 from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
 
-ResetPolicy = Literal["auto", "reset", "restore", "reinstantiate"]
 RESET_POLICIES: tuple[str, ...] = ("auto", "reset", "restore", "reinstantiate")
-Solver = Literal["cvode", "rk4", "euler"]
 SOLVERS: tuple[str, ...] = ("cvode", *METHODS)
 _counter = itertools.count(1)
 _MAX_SNAPSHOTS = 8
 # An FMU state and, for model exchange, the next time event it had announced (not part of the state).
 _Snapshot = tuple[ctypes.c_void_p, float | None]
+
+
+@dataclass
+class _ResetTrust:
+    """What ``reset_policy: auto`` has seen of the FMU's reset: a snapshot is taken of a fresh
+    instance's initialisation, never of a state not yet seen to work. An fmi reset is trusted until
+    an episode begun by it terminates at its first step where a fresh instance ran longer (the FMU
+    kept its terminated flag); then ``auto`` re-instantiates instead."""
+
+    origin: Literal["fresh", "fmi_reset", "restore"] = "fresh"  # how the current episode began
+    fresh_steps: int | None = None  # steps of a fresh instance's episode that ended by termination
+    fmi_reset_works: bool = True
+    snapshots_work: bool = True  # get_state after an fmi reset succeeded (or was not tried)
+    pending: tuple[tuple[Any, ...], _Snapshot] | None = None  # candidate snapshot after fmi reset
 
 
 @dataclass
@@ -133,6 +146,7 @@ class Model:
         self._closed = False
         self._failed_status = 0
         self._snapshots: OrderedDict[tuple[Any, ...], _Snapshot | None] = OrderedDict()
+        self._trust = _ResetTrust()
         self._me: MeStepper | FixedStepper | None = None
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
@@ -364,19 +378,24 @@ class Model:
     def _to_c(self, var: Variable, value: Any) -> Any:
         return to_c(var, value, self.info.model_name, self._backend.major)
 
-    def _lookup(self, name: str, role: str = "variable") -> Variable:
-        var = self.info.variables.get(name)
-        if var is None:
-            raise unknown_variable_error(name, self.info, role)
-        if var.is_array:
-            raise VariableError(
-                f"{role} {name!r} is an FMI 3.0 array: parameters and start values are scalars here; "
-                f"set its elements between steps with Model.set({{'{var.element_names()[0]}': ...}})"
-            )
-        return var
-
-    def _write(self, variables: Sequence[Variable], values: Mapping[str, Any]) -> None:
-        flat = {v.name: [self._to_c(v, values[v.name])] for v in variables}
+    def _write(self, variables: Sequence[Variable], values: Mapping[Variable, Any]) -> None:
+        """Initial values: scalars, whole arrays, and array elements over the array's current values."""
+        if not variables:
+            return
+        partial = [v for v in variables if isinstance(values[v], _Elements)]
+        current = access.read(self._backend, partial, self._where) if partial else {}
+        flat: dict[str, list[Any]] = {}
+        for v in variables:
+            value = values[v]
+            if isinstance(value, _Elements):
+                row = [self._to_c(v, x) for x in current[v.name]]
+                for index, x in value.items:
+                    row[index] = self._to_c(v, x)
+                flat[v.name] = row
+            elif v.dimensions:
+                flat[v.name] = [self._to_c(v, x) for x in _whole_array(v, value)]
+            else:
+                flat[v.name] = [self._to_c(v, value)]
         access.write(self._backend, list(variables), flat, self._where)
 
     def _inputs_written(self) -> None:
@@ -396,6 +415,7 @@ class Model:
             if self._backend.component is None:
                 self._backend.instantiate()
             self._initialize(checked)
+        self._trust.origin = "fresh"
         self._remember(_freeze(checked))
 
     @property
@@ -415,30 +435,100 @@ class Model:
             return
         checked = self._check_init_values(values) if values else {}
         key = _freeze(checked) if checked else ()
+        if self.reset_policy in ("auto", "reset"):
+            self._judge_episode()
         snapshot = self._snapshots.get(key) if self._failed_status == 0 else None
-        if snapshot is not None and self.reset_policy in ("auto", "restore"):
-            self._snapshots.move_to_end(key)
-            state, next_event_s = snapshot
-            self._backend.set_state(state)
-            self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
-            if self._me is not None:
-                self._me.restart(self.start_time_s)
-                self._me.next_event_s = next_event_s
-            if self._clocks is not None:
-                self._clocks.rewind(self.start_time_s)
+        restoring = snapshot is not None and self.reset_policy in ("auto", "restore")
+        if restoring and self._restored(key, snapshot):  # type: ignore[arg-type]
             return
         policy = self.reset_policy
-        if policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1:
+        trust = self._trust
+        fresh = policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1
+        if fresh or (policy == "auto" and not trust.fmi_reset_works):
             self._reinstantiate(checked)
         else:
             try:
                 self._backend.reset()
                 self._initialize(checked)
+                if policy in ("auto", "reset") and self._kept_termination():
+                    fresh = self._reset_kept_termination(checked)
             except FmuError as exc:
                 said = str(exc).partition(FMU_LOG_HEADER)[0]  # the log comes with the error, if it stays
                 _log.warning("%s: the FMU's reset failed (%s); re-instantiating", self.info.model_name, said)
                 self._reinstantiate(checked)
+                fresh = True
+        trust.origin = "fresh" if fresh or not trust.fmi_reset_works else "fmi_reset"
         self._remember(key)
+
+    def _kept_termination(self) -> bool:
+        trusted = self._trust.fmi_reset_works
+        return trusted and self.interface == "cs" and self._backend.reports_terminated()
+
+    def _reset_kept_termination(self, checked: dict[Variable, Any]) -> bool:
+        """The FMU reports a terminated run right after fmi reset: ``auto`` re-instantiates (True);
+        ``reset`` keeps the user's policy and says why its episodes will end at once (False)."""
+        self._distrust_reset("still reports a terminated run after fmi reset and initialisation")
+        if self.reset_policy != "auto":
+            return False
+        self._reinstantiate(checked)
+        return True
+
+    def _distrust_reset(self, why: str) -> None:
+        self._trust.fmi_reset_works = False
+        if self.reset_policy == "auto":
+            fix = "re-instantiating instead (set reset_policy to restore or reinstantiate to say so)"
+        else:
+            fix = "episodes after a reset end at once: set reset_policy to auto, restore or reinstantiate"
+        _log.warning("%s: the FMU %s; %s", self.info.model_name, why, fix)
+
+    def _restored(self, key: tuple[Any, ...], snapshot: _Snapshot) -> bool:
+        """Back to the snapshot of ``key``; False (snapshots dropped) where the FMU refused it under
+        ``auto`` (some FMUs refuse their state functions once fmi-reset)."""
+        self._snapshots.move_to_end(key)
+        state, next_event_s = snapshot
+        try:
+            self._backend.set_state(state)
+        except FmuError as exc:
+            if self.reset_policy != "auto":
+                raise
+            _log.warning("%s: restoring a snapshot failed (%s); re-instantiating", self.info.model_name, exc)
+            self._drop_snapshots()
+            self._trust.fmi_reset_works = False  # the reset left state functions unusable
+            return False
+        self._clock.value, self.terminated = 0, False  # _restart() inlined: the reset hot path
+        if self._me is not None:
+            self._me.restart(self.start_time_s)
+            self._me.next_event_s = next_event_s
+        if self._clocks is not None:
+            self._clocks.rewind(self.start_time_s)
+        self._trust.origin = "restore"
+        return True
+
+    def _judge_episode(self) -> None:
+        """``auto``: what the episode now ending shows (:class:`_ResetTrust`); a candidate snapshot
+        taken after an fmi reset is kept only if its episode ran a step without terminating."""
+        trust, steps, ended = self._trust, self.step_index, self.terminated
+        if trust.origin == "fresh" and ended:
+            trust.fresh_steps = steps
+        first_step_ended = trust.origin == "fmi_reset" and ended and steps <= 1
+        longer_when_fresh = trust.fresh_steps is None or trust.fresh_steps > 1
+        if first_step_ended and trust.fmi_reset_works and longer_when_fresh:
+            ran = trust.fresh_steps if trust.fresh_steps is not None else "more"
+            self._distrust_reset(
+                f"asked to terminate at the first step after fmi reset, though a fresh instance ran "
+                f"{ran} steps: its reset keeps a terminated run"
+            )
+        pending, trust.pending = trust.pending, None
+        if pending is None:
+            return
+        key, snapshot = pending
+        ran = steps > 1 or (steps == 1 and not ended)
+        if trust.fmi_reset_works and trust.origin == "fmi_reset" and ran:
+            self._snapshots[key] = snapshot
+            self._snapshots.move_to_end(key)
+            self._evict()
+        else:
+            self._backend.free_state(snapshot[0])
 
     def _reinstantiate(self, values: dict[Variable, Any]) -> None:
         self._drop_snapshots()
@@ -473,20 +563,22 @@ class Model:
         self._backend.log.clear()
         if self._structural and not self._fresh_configuration():
             self._configure()  # instantiated or fmi reset: structural parameters are back at their starts
-        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode.
+        # FMI 1.0 takes every start value before fmiInitialize; 2.0/3.0 calculated ones in init mode,
+        # and array elements there too: the other elements are read first, which FMI 3.0 allows
+        # only from initialisation mode on.
         early = [
             v
             for v in values
-            if self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx")
+            if not isinstance(values[v], _Elements)
+            and (self._backend.major == 1 or v.causality == "input" or v.initial in ("exact", "approx"))
         ]
         late = [v for v in values if v not in early]
-        by_name = {v.name: value for v, value in values.items()}
-        self._init_values = by_name
-        self._write(early, by_name)
+        self._init_values = _by_name(values)
+        self._write(early, values)
         # Tolerance steers a co-simulation FMU's own solver; for model exchange it is ours (CVode).
         tolerance = self.tolerance if self.interface == "cs" else None
         self._backend.enter_initialization(self.start_time_s, self.stop_time_s, tolerance)
-        self._write(late, by_name)
+        self._write(late, values)
         if self._clocks is not None:
             self._clocks.configure(self.start_time_s)
         self._backend.exit_initialization()
@@ -545,30 +637,58 @@ class Model:
             self._me.restart(self.start_time_s)
 
     def _check_init_values(self, values: Mapping[str, Any]) -> dict[Variable, Any]:
+        """Parameters and start values by variable: scalars, whole FMI 3.0 arrays, and array
+        elements (``A[1,2]``, named as actions name them) gathered per array as :class:`_Elements`."""
         checked: dict[Variable, Any] = {}
+        elements: dict[Variable, dict[int, Any]] = {}
         for name, value in values.items():
-            var = self._lookup(name, "parameter or start value")
+            var, index = self._element(name, "parameter or start value")
             if not var.settable_at_init:
                 raise VariableError(_not_settable_at_init(var, self.info))
-            self._to_c(var, value)
+            if index is not None:
+                self._to_c(var, value)
+                elements.setdefault(var, {})[index] = value
+                continue
+            for x in _whole_array(var, value) if var.dimensions else [value]:
+                self._to_c(var, x)
             checked[var] = value
+        for var, items in elements.items():
+            if var in checked:
+                raise VariableError(
+                    f"{var.name!r} of {self.info.model_name} is given both whole and by element; "
+                    f"give one or the other"
+                )
+            checked[var] = _Elements(tuple(sorted(items.items())))
         return checked
 
     def _remember(self, key: tuple[Any, ...]) -> None:
-        """Snapshot the state right after initialisation for value sets that recur."""
+        """Snapshot the state right after initialisation: ``restore`` always; ``auto`` after an
+        initialisation of a fresh instance, and after an fmi reset for value sets that recur, as a
+        candidate kept once its episode has run (:meth:`_judge_episode`)."""
         if not self.can_restore or self.reset_policy not in ("auto", "restore"):
             return
-        if key in self._snapshots:
-            if self._snapshots[key] is not None:
-                return
-        elif self.reset_policy == "auto":
-            self._snapshots[key] = None  # first sighting: remember the key, snapshot on the next
-            self._evict()
+        if self._snapshots.get(key) is not None:
+            return
+        if self.reset_policy == "auto" and self._trust.origin != "fresh":
+            if key not in self._snapshots:
+                self._snapshots[key] = None  # first sighting: remember the key, a candidate on the next
+                self._evict()
+            elif self._trust.snapshots_work and (candidate := self._candidate()) is not None:
+                self._trust.pending = (key, candidate)
             return
         next_event_s = self._me.next_event_s if self._me is not None else None
         self._snapshots[key] = (self._backend.get_state(), next_event_s)
         self._snapshots.move_to_end(key)
         self._evict()
+
+    def _candidate(self) -> _Snapshot | None:
+        try:
+            state = self._backend.get_state()
+        except FmuError as exc:  # some FMUs refuse their state functions once fmi-reset
+            _log.info("%s: no snapshot after fmi reset (%s)", self.info.model_name, exc)
+            self._trust.snapshots_work = False
+            return None
+        return (state, self._me.next_event_s if self._me is not None else None)
 
     def _evict(self) -> None:
         while len(self._snapshots) > _MAX_SNAPSHOTS:
@@ -577,7 +697,8 @@ class Model:
                 self._backend.free_state(snapshot[0])
 
     def _drop_snapshots(self) -> None:
-        for snapshot in self._snapshots.values():
+        pending, self._trust.pending = self._trust.pending, None
+        for snapshot in [*self._snapshots.values(), pending[1] if pending else None]:
             if snapshot is not None:
                 self._backend.free_state(snapshot[0])
         self._snapshots.clear()
@@ -903,6 +1024,35 @@ def _step_size(info: ModelInfo, step_size_s: float | None) -> float:
     if not (math.isfinite(h) and h > 0):
         raise ConfigError(f"step size must be a positive finite number of seconds, got {h!r}")
     return float(h)
+
+
+@dataclass(frozen=True)
+class _Elements:
+    """Some elements of an FMI 3.0 array to set at initialisation: ``(flat index, value)``, sorted."""
+
+    items: tuple[tuple[int, Any], ...]
+
+
+def _whole_array(var: Variable, value: Any) -> list[Any]:
+    given: list[Any] = np.asarray(value, dtype=object).reshape(-1).tolist()
+    if len(given) != var.size:
+        raise VariableError(
+            f"{var.name!r} is an array of shape {var.dimensions} ({var.size} elements), got {len(given)} "
+            f"values; give all of them, or single elements as {var.element_names()[0]!r}"
+        )
+    return given
+
+
+def _by_name(values: Mapping[Variable, Any]) -> dict[str, Any]:
+    """Initial values by the names they were given: array elements by their element names."""
+    named: dict[str, Any] = {}
+    for var, value in values.items():
+        if isinstance(value, _Elements):
+            names = var.element_names()
+            named.update((names[index], x) for index, x in value.items)
+        else:
+            named[var.name] = value
+    return named
 
 
 def _freeze(values: Mapping[Variable, Any]) -> tuple[Any, ...]:

@@ -240,6 +240,7 @@ def summary_of(info: ModelInfo) -> dict[str, Any]:
                 "name": v.name,
                 "causality": v.causality,
                 "variability": v.variability,
+                "initial": v.initial,
                 "type": v.type,
                 "start": v.start,
                 "min": v.min,
@@ -282,7 +283,7 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
             type=v["type"],
             causality=v["causality"],
             variability=v["variability"],
-            initial=None,
+            initial=v.get("initial"),  # decides which start values a remote env may set
             start=v.get("start"),
             min=v.get("min"),
             max=v.get("max"),

@@ -167,7 +167,8 @@ class RemotePlant(Plant):
         self._time_s = self.timing.start_time_s
         self._node_inputs: list[str] = list(d["input_names"])
         self._node_outputs: list[str] = list(d["output_names"])
-        self._defaults = dict(role.component.parameters) if role is not None else {}
+        own = {**role.component.parameters, **role.component.start_values} if role is not None else {}
+        self._defaults = own
         self._u = np.zeros(len(self._node_inputs))
         self._held: Sequence[float] = []
         self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action

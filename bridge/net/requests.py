@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from bridge.errors import BridgeError, TransportError
+from bridge.experiment.validate import with_elements
 from bridge.fmu.vocab import Variable
 from bridge.net import protocol as proto
 from bridge.net.served import Served
@@ -115,7 +116,7 @@ class RequestRules:
     """What a node allows a client to set and send (``bridge.net.served``)."""
 
     def __init__(self, served: Served, variables: Mapping[str, Variable]) -> None:
-        self.variables = variables
+        self.variables = with_elements(variables)  # FMI 3.0 array elements are set by name too
         self.input_names = served.input_names
         self.settable = served.settable
         self.ranges = served.ranges

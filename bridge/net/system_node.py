@@ -142,6 +142,7 @@ def component_served(experiment: Experiment, system: SystemDescription, name: st
             f"(connected or driven by the task); {name!r} has none: run it in this process{system.where}"
         )
     low, high = declared_ranges({n: info.element(n)[0] for n in ins}, ins)  # u[2]: u's declared range
+    own_values = {**component.parameters, **component.start_values}  # the component's own settings
     prefix = f"{name}."  # what the system's experiment sets on this component, by its own names
     on_component = {prefix + k: v for k, v in info.variables.items()}
     settable = {n[len(prefix) :] for n in declared_names(experiment, on_component)}
@@ -150,11 +151,11 @@ def component_served(experiment: Experiment, system: SystemDescription, name: st
         version=experiment.version,
         input_names=tuple(ins),
         output_names=tuple(outs),
-        settable=frozenset(settable | (set(component.parameters) & set(info.variables))),
+        settable=frozenset(settable | (set(own_values) & set(with_elements(info.variables)))),
         low=tuple(low),
         high=tuple(high),
         timing=Timing(t.step_size_s / n, n, t.step_size_s, t.start_time_s),
-        nominal=dict(component.parameters),
+        nominal=own_values,
     )
     return ServedComponent(component_model(experiment, system, name, served), served)
 
@@ -184,6 +185,13 @@ def component_model(
             "structural_parameters": dict(component.structural_parameters),
             "clock_intervals": dict(component.clock_intervals),
             "clock_schedule": {k: list(v) for k, v in component.clock_schedule.items()},
+            "start_values": dict(component.start_values),
+            "reset_policy": (
+                {"state_file": str(component.state_file)} if component.state_file else component.reset_policy
+            ),
+            "tolerance": component.tolerance,
+            "solver": component.solver,
+            "solver_substeps": component.solver_substeps,
         },
         "actions": {  # bounds the model's checks ask for; the node checks served.low/high itself
             "inputs": list(served.input_names),

@@ -8,6 +8,8 @@
  *   der(x)[n]    dx_i/dt = u_i - k x_i
  *   y[2,n]       Float64 output array: row 1 is x, row 2 is der(x)
  *   total        Float64 output: the sum of x
+ *   A[2,2]       Float64 parameter (fixed) array, identity at the start; only its determinant is used
+ *   det_A        Float64 local (fixed, calculated): the determinant of A
  *
  * With u held: x_i(t) = u_i/k + (x_i(t0) - u_i/k) exp(-k (t - t0)). Co-simulation steps with this
  * closed form; model exchange leaves the integration to the importer.
@@ -34,6 +36,8 @@
 #define VR_DX 5
 #define VR_Y 6
 #define VR_TOTAL 7
+#define VR_A 8
+#define VR_DET_A 9
 #define N_START 3
 #define N_MAX 100000
 #define UNUSED(x) (void)(x)
@@ -48,6 +52,7 @@ typedef struct {
     double k;
     double* u;
     double* x;
+    double a[4]; /* A[2,2], row-major */
 } State;
 
 typedef struct {
@@ -97,11 +102,17 @@ static size_t count(const State* s, fmi3ValueReference vr) {
     switch (vr) {
         case VR_U: case VR_X: case VR_DX: return (size_t)s->n;
         case VR_Y: return 2 * (size_t)s->n;
+        case VR_A: return 4;
         default: return 1;
     }
 }
 
-static bool known(fmi3ValueReference vr) { return vr <= VR_TOTAL; }
+static bool known(fmi3ValueReference vr) { return vr <= VR_DET_A; }
+
+static void identity(double a[4]) {
+    a[0] = a[3] = 1.0;
+    a[1] = a[2] = 0.0;
+}
 
 /* The strict rule: nValues is the sum of the element counts of the value references. */
 static bool counts_match(Instance* m, const char* fn, const fmi3ValueReference vr[], size_t nvr, size_t nValues,
@@ -132,6 +143,7 @@ static Instance* instantiate(fmi3InstanceEnvironment env, fmi3LogMessageCallback
     m->log = log;
     m->s.cs = cs;
     m->s.k = 1.0;
+    identity(m->s.a);
     if (!size_arrays(&m->s, N_START)) {
         free(m->s.u);
         free(m->s.x);
@@ -277,6 +289,7 @@ fmi3Status fmi3Reset(fmi3Instance instance) {
     m->s.mode = INSTANTIATED;
     m->s.time = 0.0;
     m->s.k = 1.0;
+    identity(m->s.a);
     return size_arrays(&m->s, N_START) ? fmi3OK : fail(m, "fmi3Reset: out of memory");
 }
 
@@ -301,6 +314,8 @@ fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
         switch (vr[j]) {
             case VR_TIME: values[at++] = s->time; break;
             case VR_K: values[at++] = s->k; break;
+            case VR_A: memcpy(values + at, s->a, sizeof s->a); at += 4; break;
+            case VR_DET_A: values[at++] = s->a[0] * s->a[3] - s->a[1] * s->a[2]; break;
             case VR_U: memcpy(values + at, s->u, n * sizeof(double)); at += n; break;
             case VR_X: memcpy(values + at, s->x, n * sizeof(double)); at += n; break;
             case VR_DX: for (size_t i = 0; i < n; i++) values[at++] = derivative(s, i); break;
@@ -325,7 +340,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
     if (!counts_match(m, "fmi3SetFloat64", vr, nvr, nValues, false)) return fmi3Error;
     State* s = &m->s;
     for (size_t j = 0; j < nvr; j++) {
-        bool early = vr[j] == VR_K || vr[j] == VR_X;
+        bool early = vr[j] == VR_K || vr[j] == VR_X || vr[j] == VR_A;
         bool allowed = vr[j] == VR_U ? s->mode != CONFIGURATION && s->mode != TERMINATED
                                      : early && before_end_of_initialization(s->mode);
         if (!allowed) return fail(m, "fmi3SetFloat64: value reference %u cannot be set in mode %d", vr[j], s->mode);
@@ -335,6 +350,7 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference vr[], 
         size_t n = (size_t)s->n;
         switch (vr[j]) {
             case VR_K: s->k = values[at++]; break;
+            case VR_A: memcpy(s->a, values + at, sizeof s->a); at += 4; break;
             case VR_U: memcpy(s->u, values + at, n * sizeof(double)); at += n; break;
             default: memcpy(s->x, values + at, n * sizeof(double)); at += n; /* VR_X */
         }

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import json
+import re
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -154,3 +157,110 @@ def test_config_naming_an_array_element_runs_and_a_whole_array_is_refused(
         env.reset(seed=0)
         obs, *_ = env.step(np.array([0.5], dtype=np.float32))  # u[2] = 2.5
         assert obs.tolist() == pytest.approx([2.5, 10 * 2.5 + 0.1])
+
+
+# -- the name init writes is one check accepts ---------------------------------------------------
+MODEL_NAMES = [
+    "van der pol oscillator",
+    "robertson problem",
+    "Modelica.Blocks.Examples.PID_Controller",
+    "(weird) name/with\\slashes and ..dots",
+    "ünïcode model",
+    "...",
+]
+
+
+def _literal(text: str) -> Callable[[re.Match[str]], str]:
+    return lambda _: text
+
+
+def _renamed(fmu: Path, model_name: str, folder: Path) -> Path:
+    """A copy of ``fmu`` whose modelDescription.xml says ``modelName=model_name``."""
+    import zipfile
+    from xml.sax.saxutils import quoteattr
+
+    target = folder / "renamed.fmu"
+    with zipfile.ZipFile(fmu) as src, zipfile.ZipFile(target, "w") as dst:
+        for item in src.infolist():
+            data = src.read(item)
+            if item.filename == "modelDescription.xml":
+                text = re.sub(
+                    r'modelName="[^"]*"', _literal(f"modelName={quoteattr(model_name)}"), data.decode()
+                )
+                data = text.encode()
+            dst.writestr(item, data)
+    return target
+
+
+@pytest.mark.parametrize("model_name", MODEL_NAMES)
+def test_init_writes_a_name_check_accepts_whatever_the_model_is_called(
+    cartpole_fmu: Path, tmp_path: Path, model_name: str
+) -> None:
+    """Before: init wrote the model's name as is and check refused any with a space."""
+    fmu = _renamed(cartpole_fmu, model_name, tmp_path)
+    assert read_model_info(fmu).model_name == model_name
+    config = tmp_path / "e.yaml"
+    config.write_text(starting_config(fmu, relative_to=tmp_path))
+    exp = load_experiment(config)
+    check_experiment(exp, read_model_info(fmu))
+    assert exp.name and exp.name[0].isalnum() and " " not in exp.name
+    with FmuEnv(config) as env:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+
+
+def _cached_fmus() -> list[Path]:
+    """Every FMU archive the tests have cached so far (example models, third-party downloads)."""
+    import os
+
+    root = Path(os.environ.get("FMU_BRIDGE_CACHE", Path.home() / ".cache" / "fmu-bridge"))
+    return sorted(root.rglob("*.fmu")) if root.is_dir() else []
+
+
+def _with_suggestions(text: str) -> dict[str, Any]:
+    """The config ``init`` wrote, with the parameter defaults it suggests in comments given."""
+    data: dict[str, Any] = yaml.safe_load(text)
+    suggested = {}
+    lines = text.splitlines()
+    start = next((i for i, line in enumerate(lines) if line.startswith("  parameters: {}")), len(lines))
+    for line in lines[start + 1 :]:
+        if not line.lstrip().startswith("#"):
+            break
+        if line.startswith("  #   "):  # '  #   "name": value  # description'
+            suggested.update(yaml.safe_load("{" + line[6:].split("  #")[0] + "}"))
+    data["model"]["parameters"] = {**(data["model"].get("parameters") or {}), **suggested}
+    return data
+
+
+def test_init_writes_names_and_values_check_accepts_for_every_cached_fmu(tmp_path: Path) -> None:
+    """Every FMU the tests have cached: the config as written, and with every suggested value."""
+    fmus = _cached_fmus()
+    if not fmus:
+        pytest.skip("no FMU cached yet under FMU_BRIDGE_CACHE")
+    for i, fmu in enumerate(fmus):
+        config = tmp_path / f"e{i}.yaml"
+        text = starting_config(fmu, relative_to=tmp_path)
+        config.write_text(text)
+        check_experiment(load_experiment(config), read_model_info(fmu))
+        config.write_text(yaml.safe_dump(_with_suggestions(text)))
+        check_experiment(load_experiment(config), read_model_info(fmu))
+
+
+def test_init_suggests_an_array_parameter_by_its_elements_and_the_model_takes_them(tmp_path: Path) -> None:
+    """Before: init suggested ``"A": "1 0 0 1"`` (the XML's start string), which nothing accepts."""
+    from bridge.models.strict import strict_arrays_fmu
+
+    fmu = strict_arrays_fmu()
+    data = _with_suggestions(starting_config(fmu, relative_to=tmp_path))
+    assert {k: v for k, v in data["model"]["parameters"].items() if k.startswith("A")} == {
+        "A[1,1]": 1.0,
+        "A[1,2]": 0.0,
+        "A[2,1]": 0.0,
+        "A[2,2]": 1.0,
+    }
+    config = tmp_path / "e.yaml"
+    config.write_text(yaml.safe_dump(data))
+    check_experiment(load_experiment(config), read_model_info(fmu))
+    with FmuEnv(config) as env:
+        env.reset(seed=0)
+        env.step(env.action_space.sample())

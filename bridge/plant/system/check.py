@@ -61,10 +61,9 @@ def check_system(
                 )
             except ConfigError as exc:
                 raise ConfigError(f"system.components.{name}: {exc}{system.where}") from None
-        for var_name in component.parameters:
-            var = _known(
-                Endpoint(name, var_name), infos[name], f"system.components.{name}.parameters", system
-            )
+        given = [("parameters", n) for n in component.parameters]
+        for key, var_name in given + [("start_values", n) for n in component.start_values]:
+            var = _known(Endpoint(name, var_name), infos[name], f"system.components.{name}.{key}", system)
             if not var.settable_at_init:
                 hint = (
                     f"; give it under system.components.{name}.structural_parameters"
@@ -72,7 +71,7 @@ def check_system(
                     else ""
                 )
                 raise ConfigError(
-                    f"system.components.{name}.parameters: {var_name!r} is a {var.variability} "
+                    f"system.components.{name}.{key}: {var_name!r} is a {var.variability} "
                     f"{var.causality} of {infos[name].model_name} and cannot be set{hint}{system.where}"
                 )
     for text in warnings:

@@ -13,8 +13,10 @@ from typing import Any
 
 from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
-from bridge.fmu import Model, read_model_info
+from bridge.fmu import read_model_info
+from bridge.fmu.opening import open_model
 from bridge.fmu.sample import sample_failure
+from bridge.fmu.spec import ModelSpec
 from bridge.plant.base import FloatArray
 from bridge.plant.instance import FmuInstancePlant
 from bridge.plant.system.description import Component
@@ -39,6 +41,27 @@ def steps_per_macro(component: Component, macro_step_s: float, default_s: float 
     return n
 
 
+def component_spec(component: Component, step_size_s: float, start_time_s: float) -> ModelSpec:
+    """The model a component describes, on its own time grid (``step_size_s`` divides the macro step)."""
+    return ModelSpec.of(
+        component.fmu,
+        step_size_s=step_size_s,
+        start_time_s=start_time_s,
+        interface=component.interface,
+        instance_name=component.name,
+        reset_policy=component.reset_policy if component.state_file is None else "restore",
+        state_file=component.state_file,
+        tolerance=component.tolerance,
+        solver=component.solver,
+        solver_substeps=component.solver_substeps,
+        structural_parameters=component.structural_parameters,
+        clock_intervals=component.clock_intervals,
+        clock_schedule=component.clock_schedule,
+        parameters=component.parameters,
+        start_values=component.start_values,
+    )
+
+
 class FmuComponent(FmuInstancePlant):
     """One component's FMU in this process; a sample is one macro step of ``macro_step_s``."""
 
@@ -51,20 +74,12 @@ class FmuComponent(FmuInstancePlant):
         self.name = f"component {component.name!r} ({component.fmu.name})"
         n = steps_per_macro(component, macro_step_s, None, where)  # default: one step per macro step
         self.timing = Timing(macro_step_s / n, n, macro_step_s, start_time_s)
-        self.model = Model(
-            component.fmu,
-            step_size_s=macro_step_s / n,
-            start_time_s=start_time_s,
-            interface=component.interface,
-            instance_name=component.name,
-            structural_parameters=component.structural_parameters or None,
-            clock_intervals=component.clock_intervals,
-            clock_schedule=component.clock_schedule,
-        )
+        self.spec = component_spec(component, macro_step_s / n, start_time_s)
+        self.model = open_model(self.spec)
         self.info = self.model.info  # the array sizes after configuration mode
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
-        return {**self.component.parameters, **values}
+        return {**self.spec.initial_values(), **values}
 
     def native_done(self, k: int, terminated: bool) -> None:
         """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""

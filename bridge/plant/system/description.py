@@ -98,6 +98,7 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
             for key in ("structural_parameters", "clock_intervals", "clock_schedule")
         )
         # a key the section leaves out keeps the file's value (its step size above all)
+        policy = spec.reset_policy
         components[name] = Component(
             name,
             fmu,
@@ -110,6 +111,14 @@ def from_experiment(experiment: Experiment, *, check_files: bool = True) -> Syst
             sizes,
             intervals,
             schedule,
+            start_values=dict(spec.start_values),
+            reset_policy=policy if isinstance(policy, str) else "auto",
+            state_file=None
+            if isinstance(policy, str)
+            else _path(policy.state_file, experiment, f"system.components.{name}.reset_policy.state_file"),
+            tolerance=spec.tolerance,
+            solver=spec.solver,
+            solver_substeps=spec.solver_substeps,
         )
     if not components:
         raise ConfigError(f"system.components: a system needs at least one component{where}")

@@ -83,6 +83,13 @@ class Component:
     structural_parameters: dict[str, int] = field(default_factory=dict)  # FMI 3.0 array sizes
     clock_intervals: dict[str, float] = field(default_factory=dict)  # FMI 3.0 clocks (docs/clocks.md)
     clock_schedule: dict[str, list[float]] = field(default_factory=dict)
+    # the rest of a model's settings, as under model: (bridge.experiment.model_settings)
+    start_values: dict[str, Any] = field(default_factory=dict)
+    reset_policy: Literal["auto", "reset", "restore", "reinstantiate"] = "auto"
+    state_file: Path | None = None  # every episode from this saved state (resolved path)
+    tolerance: float | None = None
+    solver: Literal["cvode", "rk4", "euler"] = "cvode"
+    solver_substeps: int = 1
 
 
 @dataclass(frozen=True)

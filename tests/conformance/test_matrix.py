@@ -1,0 +1,316 @@
+"""The conformance matrix: every model setting on every path, held to the in-process ``FmuEnv``.
+
+Two tables: :data:`SETTINGS` (a model description: FMU, ``model:`` keys, the signals it is
+driven and read by) and :data:`PATHS` (a way of running it). For every cell the path runs two
+episodes of a fixed action sequence and its observations must equal ``FmuEnv``'s in this
+process bit for bit, or the path refuses with a :class:`ConfigError` naming the setting. A
+setting or a path added to a table is tested everywhere at once. In-process paths are the fast
+tier; paths that start processes are ``integration``.
+
+The strict models (bridge/models/strict.py) misbehave as real exporters do: ``strict_reset``
+keeps its terminated flag through fmi reset and refuses state functions once reset;
+``strict_arrays`` refuses element-wise calls.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from bridge.env.batch import BatchEnv
+from bridge.env.fmu_env import FmuEnv
+from bridge.errors import ConfigError
+from bridge.experiment.config import Experiment, parse_experiment
+from bridge.models.strict import strict_arrays_fmu, strict_reset_fmu
+from tests.conftest import example_fmu
+
+STEPS = 6  # per episode: within every model's own episode (strict_reset stops after 10)
+EPISODES = (0, 1)  # seeds of the two episodes
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A model description under test: its FMU, its ``model:`` keys, and the signals."""
+
+    fmu: Callable[[], Path]
+    model: dict[str, Any]
+    inputs: list[str]
+    outputs: list[str]
+    step_size: float = 0.1
+    high: float = 2.0
+    keys: tuple[str, ...] = ()  # the settings a path may refuse (named in its error)
+    prepare: Callable[[Path], dict[str, Any]] | None = None  # more model keys, made in tmp_path
+
+
+def _arrays() -> Path:
+    return strict_arrays_fmu()
+
+
+def _reset() -> Path:
+    return strict_reset_fmu()
+
+
+def _slow_init() -> Path:
+    return example_fmu("slow_init", "2.0", "cs")
+
+
+def _saved_state(tmp_path: Path) -> dict[str, Any]:
+    """A state file of slow_init after 20 steps from ambient: every episode starts there."""
+    from bridge.fmu import Model, state_file
+
+    path = tmp_path / "warm.state"
+    with Model(_slow_init(), step_size_s=0.05) as model:
+        model.initialize({"warmup_steps": 0})
+        for k in range(20):
+            model.set({"power": 10.0 + k})
+            model.advance(1)
+        state_file.write(path, model.state_file())
+    return {"reset_policy": {"state_file": str(path)}}
+
+
+def _cartpole(version: str, interface: str) -> Callable[[], Path]:
+    return lambda: example_fmu("cartpole", version, interface)
+
+
+# high 4: a node refuses reset inputs outside the action range, and u's start (u[3] = 3) is one
+ARRAY_SIGNALS: dict[str, Any] = {
+    "inputs": ["u[1]", "u[3]"],
+    "outputs": ["total", "y[1,2]", "y[2,3]", "det_A"],
+    "high": 4.0,
+}
+CART: dict[str, Any] = {
+    "inputs": ["force"],
+    "outputs": ["x", "theta", "theta_dot"],
+    "step_size": 0.02,
+    "high": 5.0,
+}
+
+SETTINGS: dict[str, Setting] = {
+    "fmi3-cs-parameters": Setting(_arrays, {"interface": "cs", "parameters": {"k": 0.5}}, **ARRAY_SIGNALS),
+    "fmi3-array-element-parameters": Setting(
+        _arrays, {"parameters": {"A[1,1]": 2.0, "A[2,1]": 3.0}}, **ARRAY_SIGNALS, keys=("parameters",)
+    ),
+    "fmi3-start-values": Setting(_arrays, {"start_values": {"x[2]": 4.0}}, **ARRAY_SIGNALS),
+    "fmi3-structural-parameters": Setting(
+        _arrays, {"structural_parameters": {"n": 4}}, **ARRAY_SIGNALS, keys=("structural_parameters",)
+    ),
+    "fmi3-me-cvode-tolerance": Setting(
+        _arrays, {"interface": "me", "tolerance": 1e-8}, **ARRAY_SIGNALS, keys=("interface", "tolerance")
+    ),
+    "fmi3-me-rk4-substeps": Setting(
+        _arrays,
+        {"interface": "me", "solver": "rk4", "solver_substeps": 3},
+        **ARRAY_SIGNALS,
+        keys=("solver",),
+    ),
+    **{
+        f"fmi2-reset-{policy}": Setting(
+            _reset, {"reset_policy": policy}, ["u"], ["x"], keys=("reset_policy",)
+        )
+        for policy in ("auto", "restore", "reinstantiate", "reset")
+    },
+    "fmi2-state-file": Setting(
+        _slow_init,
+        {"parameters": {"warmup_steps": 0}},
+        ["power"],
+        ["T"],
+        step_size=0.05,
+        high=20.0,
+        keys=("state_file",),
+        prepare=_saved_state,
+    ),
+    "fmi2-cs": Setting(_cartpole("2.0", "cs"), {"parameters": {"theta0": 0.05}}, **CART),
+    "fmi2-me": Setting(_cartpole("2.0", "me"), {"interface": "me"}, **CART, keys=("interface",)),
+    "fmi1-cs": Setting(_cartpole("1.0", "cs"), {"parameters": {"theta0": 0.05}}, **CART, keys=("fmu",)),
+    "fmi3-cs-cartpole": Setting(_cartpole("3.0", "cs"), {"start_values": {"theta0": 0.1}}, **CART),
+}
+
+
+def experiment(setting: Setting, tmp_path: Path, **model: Any) -> dict[str, Any]:
+    inputs = setting.inputs
+    return {
+        "model": {
+            "fmu": str(setting.fmu()),
+            "step_size": setting.step_size,
+            "sampling_time": setting.step_size,
+            "episode_duration": 100 * setting.step_size,
+            **setting.model,
+            **(setting.prepare(tmp_path) if setting.prepare else {}),
+            **model,
+        },
+        "actions": {
+            "inputs": inputs,
+            "low": dict.fromkeys(inputs, 0.0),
+            "high": dict.fromkeys(inputs, setting.high),
+        },
+        "observations": {"outputs": setting.outputs, "scale": "none"},
+        "reward": {"terms": [{"alive": 1.0}]},
+    }
+
+
+def actions(setting: Setting) -> np.ndarray:
+    """A fixed action sequence in [-1, 1] that moves every input."""
+    k = np.arange(STEPS, dtype=np.float32)[:, None]
+    j = np.arange(len(setting.inputs), dtype=np.float32)[None, :]
+    return np.sin(0.7 * k + 1.3 * j).astype(np.float32)
+
+
+def run_env(env: Any, setting: Setting) -> np.ndarray:
+    rows = []
+    for seed in EPISODES:
+        obs, _ = env.reset(seed=seed)
+        rows.append(obs)
+        for action in actions(setting):
+            obs, *_ = env.step(action)
+            rows.append(obs)
+    return np.asarray(rows, dtype=np.float64)
+
+
+def run_batch(exp: Experiment, setting: Setting, n: int) -> np.ndarray:
+    env = BatchEnv(exp, n)
+    try:
+        rows = []
+        for seed in EPISODES:
+            obs = env.reset_all([seed] * n)[0]
+            rows.append(obs)
+            for action in actions(setting):
+                obs = env.step(np.repeat(action[None, :], n, axis=0))[0]
+                rows.append(obs.copy())  # the env's own buffer, written again at the next call
+    finally:
+        env.close()
+    every = np.asarray(rows, dtype=np.float64)  # (time, env, signal)
+    for i in range(1, n):
+        np.testing.assert_array_equal(every[:, i], every[:, 0])  # the instances agree
+    return every[:, 0]
+
+
+def in_process(setting: Setting, tmp_path: Path) -> np.ndarray:
+    exp = parse_experiment(experiment(setting, tmp_path), source=tmp_path / "e.yaml")
+    with FmuEnv(exp) as env:
+        rows = run_env(env, setting)
+    return rows
+
+
+def isolated(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    data = experiment(setting, tmp_path, isolation={"timeout": 60.0})
+    with FmuEnv(parse_experiment(data, source=tmp_path / "e.yaml")) as env:
+        assert env.unwrapped.plant.isolated  # type: ignore[attr-defined]
+        rows = run_env(env, setting)
+    return rows
+
+
+def batch_of(n: int) -> Callable[[Setting, Path], np.ndarray]:
+    def run(setting: Setting, tmp_path: Path) -> np.ndarray:
+        exp = parse_experiment(experiment(setting, tmp_path), source=tmp_path / "e.yaml")
+        return run_batch(exp, setting, n)
+
+    return run
+
+
+def as_component(setting: Setting, tmp_path: Path) -> dict[str, Any]:
+    """The model as the one component ``a`` of a system, its settings under system.components.a."""
+    data = experiment(setting, tmp_path)
+    model = data["model"]
+    component = {k: v for k, v in model.items() if k not in ("sampling_time", "episode_duration")}
+    data["model"] = {k: model[k] for k in ("step_size", "sampling_time", "episode_duration")}
+    data["system"] = {"components": {"a": component}, "connections": []}
+    data["actions"] = {
+        "inputs": [f"a.{n}" for n in setting.inputs],
+        "low": {f"a.{n}": 0.0 for n in setting.inputs},
+        "high": {f"a.{n}": setting.high for n in setting.inputs},
+    }
+    data["observations"] = {"outputs": [f"a.{n}" for n in setting.outputs], "scale": "none"}
+    return data
+
+
+def system_component(setting: Setting, tmp_path: Path) -> np.ndarray:
+    data = as_component(setting, tmp_path)
+    with FmuEnv(parse_experiment(data, source=tmp_path / "s.yaml")) as env:
+        rows = run_env(env, setting)
+    return rows
+
+
+def node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge node`` serving the experiment, driven by RemoteFmuEnv over loopback Zenoh."""
+    from bridge.env import RemoteFmuEnv
+    from tests.conftest import node_process
+
+    path = tmp_path / "node.yaml"
+    path.write_text(yaml.safe_dump(experiment(setting, tmp_path)))
+    with node_process(path, "matrix", net):
+        remote = RemoteFmuEnv(path, "matrix", session=net.session, prefix=net.prefix)
+        try:
+            return run_env(remote, setting)
+        finally:
+            remote.close()
+
+
+def component_in_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """The component ``a`` served by ``fmu-bridge system serve``, the system stepped here."""
+    from bridge.net.system_node import NodeComponents
+    from bridge.plant.system.plant import SystemPlant
+    from tests.plant.test_system_nodes import serve
+
+    data = as_component(setting, tmp_path)
+    data["system"]["components"]["a"]["node"] = "a-matrix"
+    path = tmp_path / "nodes.yaml"
+    path.write_text(yaml.safe_dump(data))
+    exp = parse_experiment(data, source=path)
+    with serve(path, net, "a"):
+        remote = NodeComponents(session=net.session, prefix=net.prefix, timeout_s=60.0)
+        with FmuEnv(exp, plant=SystemPlant(exp, remote=remote)) as env:
+            rows = run_env(env, setting)
+    return rows
+
+
+PATHS: dict[str, Callable[[Setting, Path], np.ndarray]] = {
+    "batch-1": batch_of(1),
+    "batch-3": batch_of(3),
+    "system-component": system_component,
+}
+PROCESS_PATHS: dict[str, Callable[[Setting, Path, Any], np.ndarray]] = {
+    "isolated": isolated,
+    "node": node,
+    "component-in-node": component_in_node,
+}
+
+
+def check_cell(setting_name: str, path: Callable[[Setting, Path], np.ndarray], tmp_path: Path) -> None:
+    """Run one cell: the path's two episodes equal the in-process FmuEnv's, or a named refusal."""
+    setting = SETTINGS[setting_name]
+    reference = in_process(setting, tmp_path)
+    assert np.isfinite(reference).all() and len(reference) == len(EPISODES) * (STEPS + 1)
+    try:
+        got = path(setting, tmp_path)
+    except ConfigError as exc:  # a refusal must name the setting it refuses
+        named = [key for key in setting.keys if key in str(exc)]
+        assert named, f"the refusal names none of {setting.keys}: {exc}"
+        return
+    np.testing.assert_array_equal(got, reference)
+
+
+@pytest.mark.parametrize("path", list(PATHS))
+@pytest.mark.parametrize("setting", list(SETTINGS))
+def test_in_process_path_equals_fmu_env(setting: str, path: str, tmp_path: Path) -> None:
+    check_cell(setting, PATHS[path], tmp_path)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("path", list(PROCESS_PATHS))
+@pytest.mark.parametrize("setting", list(SETTINGS))
+def test_process_path_equals_fmu_env(setting: str, path: str, tmp_path: Path, loopback: Any) -> None:
+    check_cell(setting, lambda s, p: PROCESS_PATHS[path](s, p, loopback), tmp_path)
+
+
+def test_two_episodes_of_the_reference_repeat_where_the_seed_does_not_matter(tmp_path: Path) -> None:
+    """The reference itself: no randomisation, so both episodes are equal (the reset policy works)."""
+    for name in ("fmi2-reset-auto", "fmi2-reset-restore", "fmi2-reset-reinstantiate", "fmi3-cs-parameters"):
+        rows = in_process(SETTINGS[name], tmp_path)
+        first, second = rows[: STEPS + 1], rows[STEPS + 1 :]
+        np.testing.assert_array_equal(first, second)
