@@ -35,6 +35,9 @@ def check_ordered(key: str, low: float | None, high: float | None) -> None:
 
 
 # -- training -------------------------------------------------------------------------------------
+REPLACE_WAIT_S = 30.0  # how long a vector env waits for a dead node's replacement, by default
+
+
 class RemoteSection(Strict):
     """``training.remote``: the FMU nodes a ``vec: remote`` run trains on."""
 
@@ -45,7 +48,7 @@ class RemoteSection(Strict):
     zenoh_mode: Literal["client", "peer"] | None = None
     timeout_s: PositiveFloat = 5.0
     replace_dead: bool = False
-    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = 0.0
+    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = REPLACE_WAIT_S
 
 
 class NormalizeSection(Strict):
