@@ -81,12 +81,22 @@ class TrainingSection(Strict):
     seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
     hyperparams: dict[str, Any] = Field(default={}, description="passed to the SB3 algorithm as is")
     normalize: bool | NormalizeSection = False
-    checkpoint_every: Count = 50_000
+    checkpoint_every: Count | None = Field(
+        default=None, description="steps between checkpoints; default: a tenth of the run, at most 50,000"
+    )
     eval_every: Count = 10_000
     eval_episodes: Annotated[int, Field(ge=1, le=10**6)] = 5
     eval_scenarios: list[str] | None = None
     residual: ResidualSection | None = None
     remote: RemoteSection = RemoteSection()
+
+    @property
+    def checkpoint_steps(self) -> int:
+        """Steps between checkpoints: ``checkpoint_every``, else a tenth of ``timesteps`` (at most
+        50,000), so that a short run can be resumed too."""
+        if self.checkpoint_every is not None:
+            return self.checkpoint_every
+        return max(1, min(50_000, self.timesteps // 10))
 
 
 # -- evaluation -----------------------------------------------------------------------------------
