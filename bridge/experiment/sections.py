@@ -23,8 +23,10 @@ def check_import_path(value: str) -> str:
     """``module:function``, or a ValueError saying what was expected."""
     module, sep, attr = value.partition(":")
     if not sep or not module or not attr:
-        raise ValueError(f"expected 'module:function', got {value!r}")
+        raise ValueError(f"expected 'module:function', got {ascii(value)[:80]}")
     check_own_module(module)
+    if not all(part.isidentifier() for part in attr.split(".")):
+        raise ValueError(f"{ascii(attr)[:60]} is not a function name (expected 'module:function')")
     return value
 
 
