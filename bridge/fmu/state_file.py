@@ -138,6 +138,7 @@ def write(path: Path, state: StateFile) -> None:
     """Write atomically: a reader sees the old file or the whole new one, never a part."""
     data = encode(state.header, state.payload)
     path = Path(path)
+    tmp = ""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -145,7 +146,12 @@ def write(path: Path, state: StateFile) -> None:
             f.write(data)
         os.replace(tmp, path)
     except OSError as exc:
-        raise StateFileError(f"cannot write the state file: {exc} [{path}]") from exc
+        if tmp:  # a failed write leaves no temporary file behind
+            Path(tmp).unlink(missing_ok=True)
+        raise StateFileError(
+            f"cannot write the state file: {exc.strerror or exc}; free some space or write it "
+            f"elsewhere [{path}]"
+        ) from exc
 
 
 def check_fits(header: StateHeader, info: ModelInfo, interface: str, source: str) -> None:
