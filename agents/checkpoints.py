@@ -9,6 +9,7 @@ disk), saying which.
 from __future__ import annotations
 
 import contextlib
+import json
 import logging
 import os
 import re
@@ -35,6 +36,11 @@ def save_atomically(write: Callable[[Path], Any], path: Path) -> None:
         with contextlib.suppress(OSError):
             temporary.unlink()
         raise
+
+
+def write_run_info(run_dir: Path, info: dict[str, Any]) -> None:
+    """``run.json``, written atomically: a reader (``compare``, a monitor) never sees half of it."""
+    save_atomically(lambda path: path.write_text(json.dumps(info, indent=2)), run_dir / "run.json")
 
 
 def atomic_checkpoints(save_freq: int, folder: Path, *, save_vecnormalize: bool) -> Any:

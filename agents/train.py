@@ -23,7 +23,13 @@ from typing import Any
 import gymnasium as gym
 from pydantic import ValidationError
 
-from agents.checkpoints import atomic_checkpoints, load_newest, resume_candidates, save_atomically
+from agents.checkpoints import (
+    atomic_checkpoints,
+    load_newest,
+    resume_candidates,
+    save_atomically,
+    write_run_info,
+)
 from agents.run_state import GONE, training_lock
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
 from bridge.env.fmu_env import FmuEnv
@@ -320,7 +326,7 @@ def _train_new(
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir, fmu=fmu)
     info = _run_info(settings, experiment, residual)
     with training_lock(run_dir), _marked(run_dir, info):
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         return _train_in(
             run_dir,
             info,
@@ -352,12 +358,12 @@ def _marked(run_dir: Path, info: dict[str, Any]) -> Iterator[None]:
         yield
     except KeyboardInterrupt:
         info["status"] = "interrupted"
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         raise
     except BaseException as exc:
         info["status"] = "failed"
         info["error"] = f"{type(exc).__name__}: {exc}"
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         raise
 
 
@@ -439,7 +445,7 @@ def _learn(
 
     start = time.perf_counter()
     info["status"] = "running"
-    (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    write_run_info(run_dir, info)
     really = announce(model, timesteps)
     if progress:
         bar = train_progress(really)
@@ -464,7 +470,7 @@ def _learn(
         env = model.get_env()
         if env is not None and hasattr(env, "save") and hasattr(env, "obs_rms"):
             save_atomically(lambda path: env.save(str(path)), run_dir / "vecnormalize.pkl")
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         if env is not None:
             env.close()
     return TrainResult(run_dir, int(model.num_timesteps), info["wall_time_s"], run_dir / "model.zip")
