@@ -285,3 +285,24 @@ def test_with_a_state_key_only_files_signed_with_it_are_loaded(
     assert state_file.read(tmp_path / "signed.state").header.mac == signed.header.mac
     monkeypatch.delenv(state_file.KEY_FILE_ENV)
     assert state_file.read(good).header.mac == ""  # without a secret: files load as before
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+@pytest.mark.parametrize("change", [-8, 8])
+def test_a_state_of_the_wrong_size_is_named_as_such(good: Path, version: str, change: int) -> None:
+    """A resealed state of the wrong size is reported as a state the FMU refused, with its size,
+    not as whatever FMI call failed after the refusal."""
+    fmu = example_fmu("slow_init", version, "cs")
+    with Model(fmu, step_size_s=0.05) as m:
+        m.initialize(FAST)
+        snapshot = m.save_state()
+        saved = m.state_file(snapshot)
+        m.free_state(snapshot)
+    payload = saved.payload[:change] if change < 0 else saved.payload + bytes(change)
+    with Model(fmu, step_size_s=0.05) as m:
+        m.start_from(state_file.seal(saved.header, payload), "crafted.state")
+        with pytest.raises(FmuError) as caught:
+            m.reset()
+    message = str(caught.value)
+    assert f"slow_init refused the state it was given: its {len(payload)} bytes" in message, message
+    assert "[crafted.state]" in message and "not a serialised state of slow_init" in message
