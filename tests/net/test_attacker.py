@@ -34,7 +34,7 @@ from bridge.net import protocol as proto
 from bridge.net.node import FmuNode
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.state_run import save_state
-from tests.conftest import free_port, router_on_loopback
+from tests.conftest import free_port, router_on_loopback, wait_until
 from tests.net.test_transport import client_config, make_certificates, render, router_config
 
 pytestmark = pytest.mark.integration
@@ -324,3 +324,79 @@ def _sealed(header: Any, payload: bytes) -> tuple[Any, bytes]:
     from bridge.fmu import state_file
 
     return state_file.seal(header, payload).header, payload
+
+
+ACL = """
+  access_control: {
+    enabled: true,
+    default_permission: "deny",
+    rules: [
+      { id: "serve_and_drive", permission: "allow", flows: ["egress", "ingress"],
+        messages: ["put", "delete", "declare_subscriber", "declare_queryable", "query", "reply",
+                   "liveliness_token", "liveliness_query", "declare_liveliness_subscriber"],
+        key_exprs: ["PREFIX/**"] },
+      { id: "watch", permission: "allow", flows: ["egress", "ingress"],
+        messages: ["put", "declare_subscriber", "query", "reply", "liveliness_token", "liveliness_query",
+                   "declare_liveliness_subscriber"],
+        key_exprs: ["PREFIX/*/outputs", "PREFIX/*/info", "PREFIX/*/alive"] },
+    ],
+    subjects: [ { id: "workers", usernames: ["worker"] }, { id: "viewers", usernames: ["viewer"] } ],
+    policies: [
+      { id: "workers_serve", rules: ["serve_and_drive"], subjects: ["workers"] },
+      { id: "viewers_watch", rules: ["watch"], subjects: ["viewers"] },
+    ],
+  },
+}"""
+
+
+def test_zenoh_access_control_keeps_a_viewer_away_from_the_node_keys(tmp_path: Path) -> None:
+    """docs/protocol.md's per-user access control on the user/password router: a ``viewer`` may
+    list the node and watch its outputs, but never receives a reset request and cannot act."""
+    port, prefix = str(free_port()), f"acl_{uuid.uuid4().hex[:8]}"
+    (tmp_path / "credentials.txt").write_text("worker:s3cret\nviewer:look\n")
+    router_cfg = render(
+        "router_usrpwd.json5", tmp_path, **{"0.0.0.0:7447": f"127.0.0.1:{port}", "CHANGE_ME": "routerpw"}
+    )
+    text = router_cfg.read_text().rstrip()
+    router_cfg.write_text(text[: text.rindex("}")] + ACL.replace("PREFIX", prefix) + "\n")
+    user = {"ROUTER_HOST": "127.0.0.1", ":7447": f":{port}"}
+    (tmp_path / "w").mkdir()
+    (tmp_path / "v").mkdir()
+    worker = render("client_usrpwd.json5", tmp_path / "w", CHANGE_ME="s3cret", **user)
+    viewer = render("client_usrpwd.json5", tmp_path / "v", CHANGE_ME="look", **user)
+    viewer.write_text(viewer.read_text().replace('"worker"', '"viewer"'))
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        router = open_session(ZenohOptions(config_file=router_cfg))
+    finally:
+        os.chdir(cwd)
+    served = _experiment(tmp_path, "served")
+    victim_session = open_session(ZenohOptions(config_file=worker))
+    viewer_session = open_session(ZenohOptions(config_file=viewer))
+    keys = proto.Keys(prefix, "guarded")
+    attacker = Attacker(viewer_session, keys)
+    seen: list[bytes] = []
+    watcher = viewer_session.declare_subscriber(keys.outputs, lambda s: seen.append(s.payload.to_bytes()))
+    try:
+        options = ZenohOptions(config_file=worker)
+        with (
+            FmuNode(served, name="guarded", options=options, prefix=prefix) as node,
+            RemoteFmuEnv(served, "guarded", session=victim_session, prefix=prefix, timeout_s=30) as env,
+        ):
+            with FmuEnv(served) as local:
+                reference = _episode(local, 4)
+            np.testing.assert_array_equal(_episode(env, 4), reference)
+            forged = proto.encode_values(proto.ACTION, 1, 9, 0, [0.0])
+            viewer_session.put(keys.actions, forged)  # denied by the router: never reaches the node
+            np.testing.assert_array_equal(_episode(env, 4), reference)
+            wait_until(lambda: len(seen) >= 2 * (len(ACTIONS) + 1), 30, "the viewer watching the outputs")
+            assert attacker.frames("reset") == []  # its queryable was refused by the router
+            assert [p for p, _ in attacker.frames("actions")] in ([], [forged])  # its own put only
+            assert "rejected_not_holder" not in node.counters and "malformed" not in str(node.counters)
+    finally:
+        watcher.undeclare()
+        attacker.close()
+        viewer_session.close()
+        victim_session.close()
+        router.close()
