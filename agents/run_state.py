@@ -65,10 +65,10 @@ def training_alive(run_dir: Path) -> bool:
 
 
 def run_status(run_dir: Path, info: dict[str, Any]) -> str:
-    """The run's status: ``run.json``'s, except ``interrupted`` for a ``running`` run whose
-    training process is gone."""
+    """The run's status: ``run.json``'s, except ``interrupted`` for a ``running`` (or ``starting``)
+    run whose training process is gone."""
     status = str(info.get("status", ""))
-    if status == "running" and not training_alive(run_dir):
+    if status in ("running", "starting") and not training_alive(run_dir):
         return "interrupted"
     return status
 

@@ -11,8 +11,9 @@ from __future__ import annotations
 import contextlib
 import json
 import logging
-import re
 import shutil
+import signal
+import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -22,6 +23,13 @@ from typing import Any
 import gymnasium as gym
 from pydantic import ValidationError
 
+from agents.checkpoints import (
+    atomic_checkpoints,
+    load_newest,
+    resume_candidates,
+    save_atomically,
+    write_run_info,
+)
 from agents.run_state import GONE, training_lock
 from agents.settings import TrainingSettings, linear_schedule_kwargs, package_versions
 from bridge.env.fmu_env import FmuEnv
@@ -272,8 +280,43 @@ def train(
 ) -> TrainResult:
     """Train an agent; returns where everything went. The run folder's experiment names its files
     by absolute path, or (``fmu="copy"``) holds a copy of the FMU (see :func:`write_run_experiment`)."""
-    if resume is not None:
-        return _resume(resume, overrides or {}, progress)
+    with terminate_interrupts():
+        if resume is not None:
+            return _resume(resume, overrides or {}, progress)
+        return _train_new(experiment_path, overrides, run_dir, version=version, progress=progress, fmu=fmu)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM during training: handled as Ctrl-C is (the model so far saved, ``interrupted``)."""
+
+
+@contextlib.contextmanager
+def terminate_interrupts() -> Iterator[None]:
+    """While training in the main thread, SIGTERM (``kill``, a scheduler's stop) interrupts it the
+    way Ctrl-C does: a checkpoint of the model so far and ``status: interrupted`` in run.json."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: Any) -> None:
+        raise Terminated(f"signal {signal.Signals(signum).name}")
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _train_new(
+    experiment_path: Path | None,
+    overrides: dict[str, Any] | None,
+    run_dir: Path | None,
+    *,
+    version: str | None,
+    progress: bool,
+    fmu: str,
+) -> TrainResult:
     if experiment_path is None:
         raise ConfigError("train: give an experiment file, or resume= a run directory")
     experiment = load_experiment(experiment_path, version=version)
@@ -283,7 +326,7 @@ def train(
     run_dir = prepare_run_dir(settings, experiment, experiment_path, run_dir, fmu=fmu)
     info = _run_info(settings, experiment, residual)
     with training_lock(run_dir), _marked(run_dir, info):
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         return _train_in(
             run_dir,
             info,
@@ -315,12 +358,12 @@ def _marked(run_dir: Path, info: dict[str, Any]) -> Iterator[None]:
         yield
     except KeyboardInterrupt:
         info["status"] = "interrupted"
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         raise
     except BaseException as exc:
         info["status"] = "failed"
         info["error"] = f"{type(exc).__name__}: {exc}"
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+        write_run_info(run_dir, info)
         raise
 
 
@@ -358,7 +401,7 @@ def _callbacks(settings: TrainingSettings, eval_env: Any, run_dir: Path) -> Any:
     A resumed run carries on with the evaluations it has (``evaluations.npz``): ``best_model.zip``
     is replaced only by a model that evaluates better than the best one so far."""
     import numpy as np
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
 
     per_env = max(1, settings.n_envs)
     evaluation = EvalCallback(
@@ -378,9 +421,9 @@ def _callbacks(settings: TrainingSettings, eval_env: Any, run_dir: Path) -> Any:
             evaluation.evaluations_length = [list(n) for n in data["ep_lengths"]]
         if evaluation.evaluations_results:
             evaluation.best_mean_reward = max(float(np.mean(r)) for r in evaluation.evaluations_results)
-    checkpoints = CheckpointCallback(
-        max(settings.checkpoint_every // per_env, 1),
-        str(run_dir / "checkpoints"),
+    checkpoints = atomic_checkpoints(
+        max(settings.checkpoint_steps // per_env, 1),
+        run_dir / "checkpoints",
         save_vecnormalize=bool(settings.normalize),
     )
     return CallbackList([checkpoints, evaluation])
@@ -402,7 +445,7 @@ def _learn(
 
     start = time.perf_counter()
     info["status"] = "running"
-    (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+    write_run_info(run_dir, info)
     really = announce(model, timesteps)
     if progress:
         bar = train_progress(really)
@@ -423,11 +466,11 @@ def _learn(
         wall = time.perf_counter() - start
         info["wall_time_s"] = info.get("wall_time_s", 0.0) + wall
         info["timesteps"] = int(model.num_timesteps)
-        model.save(run_dir / "model.zip")
+        save_atomically(model.save, run_dir / "model.zip")
         env = model.get_env()
         if env is not None and hasattr(env, "save") and hasattr(env, "obs_rms"):
-            env.save(str(run_dir / "vecnormalize.pkl"))
-        (run_dir / "run.json").write_text(json.dumps(info, indent=2))
+            save_atomically(lambda path: env.save(str(path)), run_dir / "vecnormalize.pkl")
+        write_run_info(run_dir, info)
         if env is not None:
             env.close()
     return TrainResult(run_dir, int(model.num_timesteps), info["wall_time_s"], run_dir / "model.zip")
@@ -460,6 +503,7 @@ def _run_info(
 ) -> dict[str, Any]:
     fmu, fmu_sha256 = model_fingerprint(experiment)
     return {
+        "status": "starting",  # from the first write on: a run killed before its first step says so
         "experiment": experiment.name,
         "version": experiment.version,
         "algo": settings.algo,
@@ -491,7 +535,10 @@ def _resume_held(
 
     from agents.policies import load_model
 
-    model_file, stats_file = _resume_from(run_dir, info)
+    _mark_gone(run_dir, info)
+    model, _, stats_file = load_newest(
+        run_dir, lambda path: load_model(path, info["algo"]), resume_candidates(run_dir)
+    )
     experiment_path = run_dir / "experiment.yaml"
     experiment = load_experiment(experiment_path, version=info["version"])
     given = {k: v for k, v in overrides.items() if v is not None}  # unset options keep the run's values
@@ -507,7 +554,6 @@ def _resume_held(
         eval_env = VecNormalize(  # its statistics follow the training env's at each evaluation
             eval_env, training=False, norm_reward=False, **settings.normalize_kwargs(eval_env=True)
         )
-    model = load_model(model_file, info["algo"])
     model.set_env(env)
     from stable_baselines3.common.logger import configure
 
@@ -517,29 +563,9 @@ def _resume_held(
     return _learn(model, settings.timesteps, callbacks, run_dir, info, progress=progress, reset=False)
 
 
-def _resume_from(run_dir: Path, info: dict[str, Any]) -> tuple[Path, Path | None]:
-    """The model (and VecNormalize statistics) a resumed run continues from: ``model.zip``, or,
-    when the training ended before saving it (killed or crashed), the newest checkpoint."""
-    if info.get("status") == "running":  # no live process holds the lock: we do now
+def _mark_gone(run_dir: Path, info: dict[str, Any]) -> None:
+    """A run whose run.json still says ``running`` or ``starting`` lost its process (we hold the
+    lock now): it was interrupted."""
+    if info.get("status") in ("running", "starting"):
         info["status"] = "interrupted"
         _log.warning("run %s was interrupted: %s; resuming it", run_dir.name, GONE)
-    stats = run_dir / "vecnormalize.pkl"
-    if (run_dir / "model.zip").is_file():
-        return run_dir / "model.zip", stats if stats.is_file() else None
-    saved = sorted(
-        ((int(m.group(1)), p) for p in (run_dir / "checkpoints").glob("*_steps.zip")
-         if (m := re.search(r"_(\d+)_steps\.zip$", p.name)) and "vecnormalize" not in p.name),
-    )  # fmt: skip
-    if not saved:
-        raise ConfigError(
-            f"--resume {run_dir}: the run has no model.zip and no checkpoint to continue from "
-            "(its training ended before the first checkpoint); train it again"
-        )
-    steps, newest = saved[-1]
-    _log.warning(
-        "run %s has no model.zip: resuming from its checkpoint at %s steps", run_dir.name, f"{steps:,}"
-    )
-    checkpoint_stats = newest.with_name(
-        newest.name.replace(f"_{steps}_steps.zip", f"_vecnormalize_{steps}_steps.pkl")
-    )
-    return newest, checkpoint_stats if checkpoint_stats.is_file() else None

@@ -33,6 +33,7 @@ from bridge.env.remote import RemoteFmuEnv
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepTimeout
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.sections import REPLACE_WAIT_S
 from bridge.net import protocol as proto
 from bridge.net.remote import list_nodes
 from bridge.net.transport import ZenohOptions, open_session
@@ -214,9 +215,10 @@ class RemoteVecEnv(PlantVecEnv):
             pattern) or by the same name coming back, and truncate its episode, instead of raising;
             the replacement goes on with the dead env's random generator (a seeded run draws the
             same episodes as one without the replacement).
-        replace_wait_s: with ``replace_dead``, how long to wait for a replacement when none is up;
-            only then the error is raised (the healthy envs' results of that step are kept in
-            ``partial_results``).
+        replace_wait_s: with ``replace_dead``, how long to wait for a replacement when none is up
+            (default 30 s: a node restarted under its name, by hand or by a supervisor, is picked
+            up); only then the error is raised (the healthy envs' results of that step are kept
+            in ``partial_results``). 0 raises at once.
         on_error: what a failed model step does (``"truncate"``, the default, or ``"raise"``);
             dead and hung nodes are replaced first where ``replace_dead`` allows.
         claim: lease each node as it is taken (a first reset): a node another client holds is
@@ -237,7 +239,7 @@ class RemoteVecEnv(PlantVecEnv):
         replace_dead: bool = False,
         on_error: OnError = "truncate",
         discovery_timeout_s: float = 10.0,
-        replace_wait_s: float = 0.0,
+        replace_wait_s: float = REPLACE_WAIT_S,
         claim: bool = False,
     ) -> None:
         self.experiment = as_experiment(experiment)

@@ -5,8 +5,11 @@ folder names (recordings, training runs), so it is restricted to letters, digits
 ``-``, starting with a letter or digit, at most :data:`MAX_NAME_CHARS` long: no separators, no
 ``..``, no control or bidirectional characters. Its ``module:function`` references
 (``reward.callable``, ``hooks.*``, baselines, metrics) are called with the env's values, so they
-may only name the user's own modules: not the standard library and not installed packages
-(``os:system`` would run a shell command per step), unless the user lists a module in the
+may only name the user's own modules: not the standard library, not installed packages
+(``os:system`` would run a shell command per step), not fmu-bridge's own packages (``bridge``,
+``agents``: its CLI and training are not rewards) and not ``__main__`` (whatever program runs);
+names must be absolute dotted Python names (no relative ``.mod``, no control characters), unless
+the user lists a module in the
 environment variable :data:`ALLOW_ENV` (comma-separated module names; a name allows its
 submodules). The list lives outside the file on purpose: a file cannot allow itself.
 """
@@ -62,11 +65,31 @@ def _shown(value: str) -> str:
     return ascii(text)
 
 
+_PROJECT = ("bridge", "agents")  # fmu-bridge's own packages
+
+
+def check_module_name(module: str) -> None:
+    """Raise ValueError unless ``module`` is an absolute dotted name of Python identifiers."""
+    if not module or not all(part.isidentifier() for part in module.split(".")):
+        raise ValueError(
+            f"{_shown(module)} is not a module name: use an absolute dotted Python name such as "
+            "'my_rewards' or 'my_package.rewards' (no leading dot, spaces or control characters)"
+        )
+
+
 def check_own_module(module: str) -> None:
     """Raise ValueError unless ``module`` is the user's own code or allowed through ALLOW_ENV."""
+    check_module_name(module)
     if _allowed(module):
         return
     top = module.partition(".")[0]
+    if top == "__main__" or top in _PROJECT:
+        what = "the program that is running" if top == "__main__" else "part of fmu-bridge itself"
+        raise ValueError(
+            f"{module!r} is {what}, not a module of your own; experiment files may call only your "
+            f"own modules: put the function in a module of yours (to allow it anyway, list it in "
+            f"the environment variable {ALLOW_ENV})"
+        )
     where = _origin(top)
     if top in sys.stdlib_module_names or top in sys.builtin_module_names:
         where = "library"

@@ -23,8 +23,10 @@ def check_import_path(value: str) -> str:
     """``module:function``, or a ValueError saying what was expected."""
     module, sep, attr = value.partition(":")
     if not sep or not module or not attr:
-        raise ValueError(f"expected 'module:function', got {value!r}")
+        raise ValueError(f"expected 'module:function', got {ascii(value)[:80]}")
     check_own_module(module)
+    if not all(part.isidentifier() for part in attr.split(".")):
+        raise ValueError(f"{ascii(attr)[:60]} is not a function name (expected 'module:function')")
     return value
 
 
@@ -35,6 +37,9 @@ def check_ordered(key: str, low: float | None, high: float | None) -> None:
 
 
 # -- training -------------------------------------------------------------------------------------
+REPLACE_WAIT_S = 30.0  # how long a vector env waits for a dead node's replacement, by default
+
+
 class RemoteSection(Strict):
     """``training.remote``: the FMU nodes a ``vec: remote`` run trains on."""
 
@@ -45,7 +50,7 @@ class RemoteSection(Strict):
     zenoh_mode: Literal["client", "peer"] | None = None
     timeout_s: PositiveFloat = 5.0
     replace_dead: bool = False
-    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = 0.0
+    replace_wait_s: Annotated[float, Field(ge=0, le=3600, allow_inf_nan=False)] = REPLACE_WAIT_S
 
 
 class NormalizeSection(Strict):
@@ -78,12 +83,22 @@ class TrainingSection(Strict):
     seed: Annotated[int, Field(ge=0, lt=2**32)] = 0
     hyperparams: dict[str, Any] = Field(default={}, description="passed to the SB3 algorithm as is")
     normalize: bool | NormalizeSection = False
-    checkpoint_every: Count = 50_000
+    checkpoint_every: Count | None = Field(
+        default=None, description="steps between checkpoints; default: a tenth of the run, at most 50,000"
+    )
     eval_every: Count = 10_000
     eval_episodes: Annotated[int, Field(ge=1, le=10**6)] = 5
     eval_scenarios: list[str] | None = None
     residual: ResidualSection | None = None
     remote: RemoteSection = RemoteSection()
+
+    @property
+    def checkpoint_steps(self) -> int:
+        """Steps between checkpoints: ``checkpoint_every``, else a tenth of ``timesteps`` (at most
+        50,000), so that a short run can be resumed too."""
+        if self.checkpoint_every is not None:
+            return self.checkpoint_every
+        return max(1, min(50_000, self.timesteps // 10))
 
 
 # -- evaluation -----------------------------------------------------------------------------------

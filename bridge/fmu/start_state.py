@@ -17,7 +17,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from bridge.errors import FmuError, StateFileError
+from bridge.errors import FMU_LOG_HEADER, FmuError, StateFileError
 from bridge.fmu import serial, state_file
 from bridge.fmu.abi import FATAL
 from bridge.fmu.state_file import StateFile, StateHeader
@@ -95,13 +95,16 @@ def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
         start.handle = None
     try:
         _set(backend, start)
-    except FmuError:
+    except FmuError as first:
         if model._initialized:
-            raise
+            raise _refused(model, start, first) from first
         # An FMU that reads or sets a state only once initialised (the standard allows both
         # straight after instantiation): initialised with the saving run's start values, then set.
-        model._initialize(model._check_init_values(start.file.header.start_values))
-        _set(backend, start)
+        try:
+            model._initialize(model._check_init_values(start.file.header.start_values))
+            _set(backend, start)
+        except FmuError as exc:  # the FMU refused the bytes: say so, not what failed after it
+            raise _refused(model, start, first) from exc
     header = start.file.header
     model.start_time_s = start.start_time_s
     model.step_index, model.terminated = start.step_index, header.terminated
@@ -114,6 +117,20 @@ def _set(backend: Any, start: StartState) -> None:
     if start.handle is None or start.component is not backend.component:
         start.handle, start.component = serial.deserialize(backend, start.file.payload), backend.component
     backend.set_state(start.handle)
+
+
+def _refused(model: Model, start: StartState, exc: FmuError) -> FmuError:
+    """The FMU refused a state's bytes: the size, whose state it claims to be, and the FMU's words
+    (an FMU left broken by the refusal fails whatever comes next, e.g. its setup call)."""
+    header = start.file.header
+    cause = str(exc).split(FMU_LOG_HEADER)[0]
+    return FmuError(
+        f"{model.info.model_name} refused the state it was given: its {len(start.file.payload)} bytes "
+        f"(saved by {header.model_name} at t = {header.time_s:g} s) are not a state this FMU "
+        f"deserialises ({cause}); a state is accepted only from the same FMU build, uncut and "
+        f"unchanged [{start.source}]",
+        log=exc.log,
+    )
 
 
 def free(model: Model, start: StartState) -> None:

@@ -17,13 +17,21 @@ A reader never trusts a length it has not checked: the header length and the sta
 weighed against a budget before anything is read, the file must end exactly after the state, and
 the checksum must match, so a cut, padded or corrupted file is refused before the FMU sees a byte.
 The header names the FMU (instantiation token / GUID, model identifier, FMI version, interface), so a
-state is only ever handed to the FMU that made it. This module imports no FMPy: the node and the
+state is only ever handed to the FMU that made it.
+
+The checksum detects damage, not intent: anyone can reseal a crafted file, and the FMU deserialises
+the state's raw bytes, so a state file is as trusted as the FMU binary. For files that cross a
+trust boundary, set a secret of your own in ``FMU_BRIDGE_STATE_KEY`` (or a file holding it in
+``FMU_BRIDGE_STATE_KEY_FILE``): files written then carry ``mac``, an HMAC-SHA256 of their checksum
+under that secret, and while a secret is set every file read without the right ``mac`` is refused
+before the FMU sees it. This module imports no FMPy: the node and the
 CLI read headers without loading an FMU.
 """
 
 from __future__ import annotations
 
 import hashlib
+import hmac
 import json
 import os
 import struct
@@ -66,6 +74,7 @@ class StateHeader:
     sha256: str
     start_values: dict[str, Any] = field(default_factory=dict)
     format_version: int = FORMAT_VERSION
+    mac: str = ""  # HMAC-SHA256 of ``sha256`` under the user's state key ("": not signed)
 
 
 @dataclass(frozen=True)
@@ -76,10 +85,44 @@ class StateFile:
     payload: bytes = field(repr=False)
 
 
+KEY_ENV: Final = "FMU_BRIDGE_STATE_KEY"
+KEY_FILE_ENV: Final = "FMU_BRIDGE_STATE_KEY_FILE"
+MIN_KEY_BYTES: Final = 16
+
+
+def state_key() -> bytes | None:
+    """The user's secret for state files (``FMU_BRIDGE_STATE_KEY``, else the content of the file
+    ``FMU_BRIDGE_STATE_KEY_FILE``); None when neither is set."""
+    text = os.environ.get(KEY_ENV, "")
+    where = KEY_ENV
+    if not text and os.environ.get(KEY_FILE_ENV):
+        where = os.environ[KEY_FILE_ENV]
+        try:
+            text = Path(where).read_text().strip()
+        except OSError as exc:
+            raise StateFileError(f"cannot read the state key: {exc.strerror or exc} [{where}]") from exc
+    if not text:
+        return None
+    key = text.encode()
+    if len(key) < MIN_KEY_BYTES:
+        raise StateFileError(
+            f"the state key in {where} is {len(key)} bytes; use a secret of at least {MIN_KEY_BYTES} "
+            "(e.g. `python -c 'import secrets; print(secrets.token_hex(32))'`)"
+        )
+    return key
+
+
+def _mac(key: bytes, sha256: str) -> str:
+    return hmac.new(key, b"fmu-bridge state v1\0" + sha256.encode(), hashlib.sha256).hexdigest()
+
+
 def seal(header: StateHeader, payload: bytes) -> StateFile:
-    """``header`` with the ``size`` and ``sha256`` of ``payload`` filled in, and the payload."""
-    sized = replace(header, size=len(payload), sha256="")
-    return StateFile(replace(sized, sha256=_digest(sized, payload)), payload)
+    """``header`` with the ``size`` and ``sha256`` of ``payload`` filled in (and ``mac`` when the
+    user has a state key: :func:`state_key`), and the payload."""
+    sized = replace(header, size=len(payload), sha256="", mac="")
+    digest = _digest(sized, payload)
+    key = state_key()
+    return StateFile(replace(sized, sha256=digest, mac=_mac(key, digest) if key else ""), payload)
 
 
 def encode(header: StateHeader, payload: bytes) -> bytes:
@@ -92,6 +135,7 @@ def encode(header: StateHeader, payload: bytes) -> bytes:
 
 def _digest(header: StateHeader, payload: bytes) -> str:
     values = asdict(replace(header, sha256=""))
+    values.pop("mac")  # the MAC covers the digest; files from before it existed keep theirs
     text = json.dumps(values, sort_keys=True, separators=(",", ":"), allow_nan=False)
     return hashlib.sha256(text.encode() + payload).hexdigest()
 
@@ -104,6 +148,15 @@ def _verified(header: StateHeader, payload: bytes, source: str) -> StateFile:
     if not intact:
         raise StateFileError(
             f"the saved state is corrupted: its SHA-256 does not match the header's; save it again [{source}]"
+        )
+    key = state_key()
+    if key is not None and not hmac.compare_digest(header.mac, _mac(key, header.sha256)):
+        what = "is not signed" if not header.mac else "is signed with another key"
+        raise StateFileError(
+            f"the state file {what}, and {KEY_ENV} is set: only files written with your key are "
+            "loaded (a state is as trusted as the FMU binary: the FMU deserialises its bytes); save "
+            f"it again with the key set, or unset {KEY_ENV} and {KEY_FILE_ENV} to load files you "
+            f"trust without one [{source}]"
         )
     return StateFile(header, payload)
 
@@ -138,6 +191,7 @@ def write(path: Path, state: StateFile) -> None:
     """Write atomically: a reader sees the old file or the whole new one, never a part."""
     data = encode(state.header, state.payload)
     path = Path(path)
+    tmp = ""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -145,7 +199,12 @@ def write(path: Path, state: StateFile) -> None:
             f.write(data)
         os.replace(tmp, path)
     except OSError as exc:
-        raise StateFileError(f"cannot write the state file: {exc} [{path}]") from exc
+        if tmp:  # a failed write leaves no temporary file behind
+            Path(tmp).unlink(missing_ok=True)
+        raise StateFileError(
+            f"cannot write the state file: {exc.strerror or exc}; free some space or write it "
+            f"elsewhere [{path}]"
+        ) from exc
 
 
 def check_fits(header: StateHeader, info: ModelInfo, interface: str, source: str) -> None:
@@ -243,6 +302,7 @@ _TYPES: Final[dict[str, type | tuple[type, ...]]] = {
     "sha256": str,
     "start_values": dict,
     "format_version": int,
+    "mac": str,
 }
 
 

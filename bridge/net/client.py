@@ -8,6 +8,7 @@ for an answer is a strategy (``bridge.net.channel``).
 
 from __future__ import annotations
 
+import hmac
 import json
 import logging
 import math
@@ -21,7 +22,8 @@ from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, Transp
 from bridge.net import protocol as proto
 from bridge.net.channel import EventWaiting, Waiting
 from bridge.net.discovery import every_reply, query_info, query_target, replier
-from bridge.net.lease import NO_TOKEN, reset_proof
+from bridge.net.handshake import KeyPair, reply_proof, request_proof
+from bridge.net.lease import NO_TOKEN
 from bridge.net.transport import undeclare
 from bridge.plant.base import Plant
 
@@ -58,7 +60,9 @@ class NodeClient:
         self.deadline = 0.0
         self.frame: proto.Frame | None = None
         self.alive = True
-        self.key: bytes | None = None  # the session key of the lease, from the reset reply
+        self.key: bytes | None = None  # the session key of the lease, agreed by the reset reply
+        self.start_state = ""  # the SHA-256 of the sent state the node's episodes start from
+        self._seq = 0  # this session's last request number (each is used once)
         # the token first: it reaches the node before any reset (a lease needs it), and its
         # declaration has gone through long before the info query's round trip is over
         token = session.liveliness().declare_token(self.keys.client(self.client_id))
@@ -148,6 +152,7 @@ class NodeClient:
         if not self.alive:
             raise self._dead(plant, step=None)
         episode = plant.episode
+        pair = KeyPair()  # a grant agrees a new key with it; a held reset ignores it
         request: dict[str, Any] = {
             "episode": episode,
             "values": values,
@@ -155,11 +160,13 @@ class NodeClient:
             "client": self.client_id,
             "zid": str(self.session.zid()),
             "take_over": self.take_over,
+            "pub": pair.public.hex(),
         }
-        if self.key is not None:  # the holder shows it holds the session key
-            request["proof"] = reset_proof(self.key, self.client_id, episode)
+        if self.key is not None:  # the holder numbers its request; the attachment signs it
+            request["seq"] = self._seq = self._seq + 1
         self.want = (episode, 0)
         payload = proto.encode_json(request)
+        proof = request_proof(self.key, "reset", payload) if self.key is not None else None
         start = time.monotonic()
         while True:
             sent = time.monotonic()
@@ -167,6 +174,7 @@ class NodeClient:
             replies = self.session.get(
                 self.keys.reset,
                 payload=payload,
+                attachment=proof,
                 target=query_target(),
                 consolidation=every_reply(),
                 timeout=self.timeout_s,
@@ -175,7 +183,7 @@ class NodeClient:
                 if self.node_zid and replier(reply) not in (None, self.node_zid):
                     continue  # another session answering for the node: not believed
                 if reply.ok is not None:
-                    return self._session(plant, reply.ok, episode)
+                    return self._session(plant, reply.ok, episode, pair, payload)
                 refusal = reply.err.payload.to_bytes().decode(errors="replace")
                 break
             if NO_TOKEN in refusal and time.monotonic() - start < 0.5 * self.timeout_s:
@@ -203,22 +211,29 @@ class NodeClient:
 
     def send_state(self, data: bytes) -> dict[str, Any]:
         """Hand the node a state file (its bytes) to start its episodes from, from the next reset
-        on (``bridge.net.node_start``); the node's JSON answer, or TransportError saying why not."""
-        from bridge.net.node_start import encode_request
-
-        return self._state_request(encode_request(self.client_id, self.key, data), "the state file")
+        on, for as long as this client holds it (``bridge.net.node_start``); the node's JSON
+        answer, or TransportError saying why not."""
+        return self._state_request(data, "the state file")
 
     def clear_state(self) -> dict[str, Any]:
         """Drop the state sent to the node: its episodes start as its own experiment says again."""
-        from bridge.net.node_start import encode_clear
+        return self._state_request(None, "clearing its state")
 
-        return self._state_request(encode_clear(self.client_id, self.key), "clearing its state")
+    def _state_request(self, data: bytes | None, what: str) -> dict[str, Any]:
+        from bridge.net.node_start import encode_request
 
-    def _state_request(self, payload: bytes, what: str) -> dict[str, Any]:
         key, limit = self.keys.state, proto.MAX_REQUEST_BYTES
+        if self.key is None:
+            raise TransportError(
+                f"node {self.name!r}: only the holder of a node may send it {what}; reset it first "
+                f"(the reset starts this client's lease) [{key}]"
+            )
+        self._seq += 1
+        payload = encode_request(self.client_id, self._seq, data)
         replies = self.session.get(
-            key, payload=payload, target=query_target(), consolidation=every_reply(), timeout=self.timeout_s
-        )
+            key, payload=payload, attachment=request_proof(self.key, "state", payload),
+            target=query_target(), consolidation=every_reply(), timeout=self.timeout_s,
+        )  # fmt: skip
         for reply in replies:
             if self.node_zid and replier(reply) not in (None, self.node_zid):
                 continue
@@ -228,13 +243,26 @@ class NodeClient:
             raise TransportError(f"node {self.name!r} refused {what}: {message} [{key}]")
         raise TransportError(f"node {self.name!r} did not answer the state request [{key}]")
 
-    def _session(self, plant: Plant, sample: Any, episode: int) -> proto.Frame:
-        """The step-0 frame of a reset reply, and the session key beside it, both checked."""
+    def _session(self, plant: Plant, sample: Any, episode: int, pair: KeyPair, request: bytes) -> proto.Frame:
+        """The step-0 frame of a reset reply and the session key, both checked: a new lease's
+        key is agreed with the node's ``pub``; the reply proves it answers ``request`` itself."""
         payload = sample.payload.to_bytes()
-        key = sample.attachment.to_bytes() if sample.attachment is not None else b""
+        attachment = sample.attachment.to_bytes() if sample.attachment is not None else b""
         try:
-            if len(key) != proto.KEY_SIZE:
-                raise TransportError(f"a session key of {len(key)} bytes, expected {proto.KEY_SIZE}")
+            words = proto.decode_json(attachment or b"null", "its attachment", limit=1024)
+            pub, state, proof = (words.get(k) for k in ("pub", "state", "proof"))
+            if not all(isinstance(w, str) for w in (pub, state, proof)):
+                raise TransportError("its attachment lacks the strings pub, state and proof")
+            key = self.key
+            if pub:
+                node_pub = bytes.fromhex(str(pub))
+                key = pair.session_key(
+                    node_pub, client_pub=pair.public, node_pub=node_pub, client=self.client_id
+                )
+            if key is None:
+                raise TransportError("it starts no lease (no 'pub'), and this client holds none")
+            if not hmac.compare_digest(bytes.fromhex(str(proof)), reply_proof(key, request, str(state))):
+                raise TransportError("it does not prove it answers this request under the session key")
             if not proto.verify(payload, key):
                 raise TransportError("its step-0 frame is not signed with the session key")
             frame = proto.decode(payload, expected_values=self.outputs)
@@ -243,9 +271,11 @@ class NodeClient:
                     f"a {proto.KIND_NAMES[frame.kind]} frame for step {frame.step} of episode "
                     f"{frame.episode}, expected the outputs of step 0 of episode {episode}"
                 )
-        except TransportError as exc:
+        except (TransportError, ValueError) as exc:
             raise TransportError(f"{plant.name}: the reset reply is malformed: {exc}") from None
-        self.key = key
+        if pub:
+            self._seq = 0
+        self.key, self.start_state = key, str(state)
         return frame
 
     def _reset_refused(self, plant: Plant, message: str) -> BridgeError:

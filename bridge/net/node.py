@@ -106,6 +106,7 @@ class FmuNode:
         self.lockstep = ls.Lockstep(self.lease, self.rules.inputs)
         self._inputs = len(self.input_names)
         self.saved = SavedState(plant, mode)
+        self.sent = node_start.SentState()  # a state the holder sent (ends with its lease)
         self.counters: Counter[str] = Counter()
         self.health = Health(name, self.step_timeout_s, self.counters)
         self._lock = threading.Lock()

@@ -15,6 +15,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from bridge.errors import BridgeError, TransportError
+from bridge.net import node_start
 from bridge.net import protocol as proto
 from bridge.net.lease import Lease
 from bridge.net.requests import redact
@@ -117,6 +118,11 @@ class NodeLink:
             return  # not a client id: nothing a lease could be backed by
         if self.lease.token(client, alive=sample.kind != zenoh.SampleKind.DELETE):
             _log.info("node %s: the lease ended, its holder's session is gone", self.keys.node)
+            if self.node.sent.sha256:  # its sent state ends with it, off Zenoh's callback thread
+                ended = self.lease.leases
+                threading.Thread(
+                    target=node_start.end_with_lease, args=(self.node, ended), daemon=True
+                ).start()
 
     def unhealthy(self) -> None:
         """Declare the ``unhealthy`` liveliness token (the FMU hung); it lives until the node ends."""
@@ -193,7 +199,7 @@ def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
     """``~/reset``: back to t0 with the nominal values and, unless ``keep_inputs``
     (``ros.reset_keeps_inputs``), the inputs' start values: an action of the last episode is not
     held into the next."""
-    refusal = node.lease.acquire(0, "", False)
+    refusal = node.lease.acquire(0, "", False).refusal
     if refusal is not None:
         return False, f"reset refused: {refusal}"
     inputs = None if keep_inputs else list(node.start_inputs)

@@ -17,7 +17,9 @@ from typing import TYPE_CHECKING, Any
 
 from bridge.errors import BridgeError, StepError
 from bridge.fmu.vocab import summary_of
+from bridge.net import node_start
 from bridge.net import protocol as proto
+from bridge.net.handshake import reply_proof
 from bridge.net.requests import BadRequest, Refused, check_empty, parse_reset, redact
 
 if TYPE_CHECKING:
@@ -30,7 +32,7 @@ def answer_reset(node: FmuNode, query: Any) -> None:
     """Reply to a reset query: the step-0 OUTPUTS frame, or an error reply saying why not."""
     try:
         payload = query.payload.to_bytes() if query.payload is not None else b""
-        reply, key = checked_reset(node, payload)
+        reply, attachment = checked_reset(node, payload, attached(query))
     except BadRequest as exc:
         return _reply_err(node, query, "bad_request", str(exc))
     except Refused as exc:
@@ -44,9 +46,16 @@ def answer_reset(node: FmuNode, query: Any) -> None:
         return _reply_err(
             node, query, "internal", f"the node could not handle the reset ({type(exc).__name__})"
         )
-    # the session key goes to the querier alone, beside the step-0 frame it signs
-    query.reply(node.keys.reset, reply, attachment=key)
+    # the node's half of the key agreement and the reply's proof travel beside the step-0 frame
+    query.reply(node.keys.reset, reply, attachment=attachment)
     return None
+
+
+def attached(query: Any, limit: int = 64) -> bytes:
+    """A query's attachment (a holder's request signature); longer than ``limit``: none."""
+    attachment = query.attachment
+    data = attachment.to_bytes() if attachment is not None else b""
+    return data if len(data) <= limit else b""
 
 
 MODEL_FAILED_CODE = "model_failed"
@@ -60,9 +69,11 @@ def model_failure(exc: StepError) -> str:
     return json.dumps(words, ensure_ascii=False)
 
 
-def checked_reset(node: FmuNode, payload: bytes) -> tuple[bytes, bytes | None]:
-    """Parse and check a reset request, take or keep the lease, reset; the step-0 frame and
-    the lease's session key (None for an anonymous reset)."""
+def checked_reset(node: FmuNode, payload: bytes, proof: bytes = b"") -> tuple[bytes, bytes | None]:
+    """Parse and check a reset request, take or keep the lease, reset; the step-0 frame and the
+    reply's attachment (None for an anonymous reset): JSON with the node's key-agreement key
+    ``pub`` (when the reset starts a lease), the checksum of the sent ``state`` its episodes start
+    from ("" for none) and ``proof``, both bound to this request under the session key."""
     request = parse_reset(payload)
     values = node.rules.values(request.values)
     if request.inputs is not None:
@@ -74,14 +85,37 @@ def checked_reset(node: FmuNode, payload: bytes) -> tuple[bytes, bytes | None]:
         reason = node.rules.inputs(request.inputs)
         if reason is not None:
             raise BadRequest(f"reset request: {reason}")
-    lease = node.lease
-    refusal = lease.acquire(
-        request.client, request.zid, request.take_over, episode=request.episode, proof=request.proof
-    )
-    if refusal is not None:
-        raise Refused("busy", refusal)
-    frame = node.reset(values, request.inputs, request.episode)
-    return frame, lease.key if request.client else None
+    admission = node.lease.acquire(
+        request.client, request.zid, request.take_over,
+        pub=request.pub, seq=request.seq, proof=proof, payload=payload,
+    )  # fmt: skip
+    if admission.refusal is not None:
+        raise Refused("busy", admission.refusal)
+    if admission.repeat:
+        frame = _served_again(node, request.episode)
+    else:
+        if admission.node_pub:  # a new lease: a state sent in the last one ends with it
+            node_start.end_with_lease(node)
+        frame = node.reset(values, request.inputs, request.episode)
+    key = node.lease.key
+    if not request.client or key is None:
+        return frame, None
+    state = node_start.active_state(node)
+    words = {"pub": admission.node_pub.hex(), "state": state, "proof": reply_proof(key, payload, state).hex()}
+    return frame, proto.encode_json(words)
+
+
+def _served_again(node: FmuNode, episode: int) -> bytes:
+    """The step-0 frame of the holder's last reset, asked again before anything else happened."""
+    state = node.lockstep
+    if (state.episode, state.step) != (episode, 0) or not state.last_frame:
+        raise Refused(
+            "busy",
+            f"node {node.name!r}: this reset was served already and its episode has moved on "
+            f"(episode {state.episode}, step {state.step}): a replayed request",
+        )
+    node.counters["resets_repeated"] += 1
+    return state.last_frame
 
 
 def _reply_err(node: FmuNode, query: Any, code: str, message: str) -> None:
@@ -127,6 +161,7 @@ def describe(node: FmuNode) -> dict[str, Any]:
         "health": health,
         "health_detail": health_detail,
         "holder": node.lease.describe(),
+        "start_state": node_start.active_state(node),
         "isolated": node.isolated,
         "can_save_state": node.saved.available,
         "save_state_refusal": node.saved.refusal or "",

@@ -7,7 +7,8 @@ key expression                        kind       payload
 ====================================  =========  ===============================================
 ``<prefix>/<node>/outputs``           put        ``Frame`` kind OUTPUTS, ERROR or REJECT
 ``<prefix>/<node>/actions``           put        ``Frame`` kind ACTION (FMU input values)
-``<prefix>/<node>/reset``             query      request: JSON (``ResetRequest``); reply: OUTPUTS (step 0)
+``<prefix>/<node>/reset``             query      request: JSON (``ResetRequest``); reply: OUTPUTS (step 0);
+                                                 attachments: the holder's proof / the node's key half
 ``<prefix>/<node>/info``              query      no payload; reply: JSON (model, health, holder, counters)
 ``<prefix>/<node>/state``             query      request: a state file to start episodes from (``node_start``)
 ``<prefix>/<node>/clock``             put        int64 LE simulation time in ns (real-time mode)
@@ -32,6 +33,8 @@ A frame flagged SIGNED ends in a 16-byte MAC (keyed BLAKE2b) of everything befor
 session key of the node's lease (``bridge.net.lease``): the holder signs its actions, the node
 signs what it sends in the session, and each side believes only what verifies (:func:`verify`).
 :func:`decode` reads a signed frame without its MAC (recorders and the deployed agent need no key).
+The whole session protocol (threat model, the key agreement, signed and numbered requests) is
+docs/protocol.md.
 """
 
 from __future__ import annotations
@@ -62,7 +65,7 @@ RESTORE_STATE = 16  # (ACTION) back to the saved state (the step before this act
 SIGNED = 32  # the frame ends in a MAC of everything before it, keyed by the lease's session key
 ACTION_FLAGS = SAVE_STATE | RESTORE_STATE | SIGNED
 MAC_SIZE = 16  # keyed BLAKE2b, 128 bits
-KEY_SIZE = 32  # a session key: random, learnt only from the reset reply
+KEY_SIZE = 32  # a session key: agreed by the reset that grants a lease, never sent (handshake)
 
 MAX_REQUEST_BYTES = 64 * 1024  # a reset request larger than this is refused unread
 MAX_INFO_BYTES = 16 * 1024 * 1024  # an info reply larger than this is refused unread

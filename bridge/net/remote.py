@@ -11,6 +11,7 @@ against them.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import threading
 from collections.abc import Mapping, Sequence
@@ -140,7 +141,7 @@ class RemotePlant(Plant):
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._time_s = 0.0
-        self._pending_state: bytes | None = None  # sent after the first reset (take_over)
+        self._state: bytes | None = None  # the state file its episodes start from, sent as the holder
         try:
             self.client = NodeClient(
                 self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over, waiting=waiting
@@ -153,14 +154,8 @@ class RemotePlant(Plant):
                 assert experiment is not None, "a remote env's plant needs its experiment"
                 check_experiment(experiment, self.info)
                 self.timing = timing(experiment, self.info)
-            if experiment is not None:
-                data = _state_file_bytes(experiment)
-                if data is not None and take_over:
-                    # a node held by another client refuses a state from anyone but its holder:
-                    # the first reset takes the node over, then the state goes as its holder
-                    self._pending_state = data
-                elif data is not None:
-                    self.client.send_state(data)
+            if experiment is not None:  # only a holder may send a state: it goes at the first reset
+                self._state = _state_file_bytes(experiment)
         except BaseException:
             self.close()
             raise
@@ -175,14 +170,30 @@ class RemotePlant(Plant):
 
     def start_from(self, data: bytes) -> dict[str, Any]:
         """Hand the node a state file's bytes: its episodes start from that state from the next
-        reset on (``bridge.net.node_start``)."""
-        self._pending_state = None
+        reset on (``bridge.net.node_start``). Only the holder may send one, and a state ends with
+        the lease it was sent in: before the first reset it is checked here and sent with it
+        (the answer says ``"pending": true``), and it is sent again whenever a reset reply
+        names another state (a new lease: the node restarted, or was taken over and back)."""
+        saved = state_file.decode(data, source="the state to send", max_bytes=len(data))
+        self._state = data
+        if self.client.key is None:
+            header = saved.header
+            sha = hashlib.sha256(data).hexdigest()
+            return {
+                "model": header.model_name,
+                "time_s": header.time_s,
+                "size": header.size,
+                "sha256": sha,
+                "pending": True,
+            }
         return self.client.send_state(data)
 
     def clear_start(self) -> dict[str, Any]:
         """Drop the state sent to the node: from the next reset on its episodes start as its own
         experiment says (its state file, else initialisation)."""
-        self._pending_state = None
+        self._state = None
+        if self.client.key is None:
+            return {"cleared": True}
         return self.client.clear_state()
 
     @property
@@ -249,11 +260,11 @@ class RemotePlant(Plant):
         if inputs is not None:
             self._u[self._in_index] = inputs
         self._held = held = self._u.tolist()
-        if self._pending_state is not None:
-            self.client.reset(self, merged, held)  # takes the node over
-            self.client.send_state(self._pending_state)
-            self._pending_state = None
         frame = self.client.reset(self, merged, held)
+        state = self._state
+        if state is not None and self.client.start_state != hashlib.sha256(state).hexdigest():
+            self.client.send_state(state)  # the holder now: its state, then the reset again
+            frame = self.client.reset(self, merged, held)
         self._time_s = frame.sim_time_ns / 1e9
         return frame.values if self._all_outputs else frame.values[self._out_index]
 

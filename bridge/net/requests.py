@@ -28,7 +28,8 @@ from bridge.net.served import Served
 
 MAX_STRING = 1024
 MAX_VALUES = 1000
-REQUEST_KEYS = {"episode", "values", "inputs", "client", "zid", "take_over", "proof"}
+_HEX64 = re.compile(r"[0-9a-f]{64}")
+REQUEST_KEYS = {"episode", "values", "inputs", "client", "zid", "take_over", "pub", "seq"}
 
 
 class BadRequest(TransportError):
@@ -45,7 +46,8 @@ class ResetRequest:
     client: int
     zid: str
     take_over: bool
-    proof: str = ""  # a holder's reset: the MAC that shows it holds the session key
+    pub: bytes = b""  # the client's key-agreement key (``bridge.net.handshake``)
+    seq: int = 0  # the holder's request number (its signature travels as the query's attachment)
 
 
 def parse_reset(payload: bytes) -> ResetRequest:
@@ -66,9 +68,11 @@ def parse_reset(payload: bytes) -> ResetRequest:
     zid = data.get("zid", "")
     if not isinstance(zid, str) or len(zid) > 64:
         raise BadRequest("reset request: 'zid' must be a string of at most 64 characters")
-    proof = data.get("proof", "")
-    if not isinstance(proof, str) or len(proof) > 64:
-        raise BadRequest("reset request: 'proof' must be a string of at most 64 characters")
+    pub = data.get("pub", "")
+    if not isinstance(pub, str) or not _HEX64.fullmatch(pub or "0" * 64):
+        raise BadRequest(
+            f"reset request: 'pub' must be 64 hex digits (an X25519 public key), got {_show(pub)}"
+        )
     take_over = data.get("take_over", False)
     if not isinstance(take_over, bool):
         raise BadRequest(f"reset request: 'take_over' must be true or false, got {_show(take_over)}")
@@ -79,7 +83,8 @@ def parse_reset(payload: bytes) -> ResetRequest:
         client=_int_in(data.get("client", 0), "client", 0, proto.CLIENT_MAX),
         zid=zid,
         take_over=take_over,
-        proof=proof,
+        pub=bytes.fromhex(pub),
+        seq=_int_in(data.get("seq", 0), "seq", 0, proto.CLIENT_MAX),
     )
 
 

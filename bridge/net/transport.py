@@ -1,9 +1,13 @@
 """Zenoh sessions from command-line style options (peer/client/router, endpoints, config files).
 
-Safe by default: a session opened without endpoints, a configuration file or ``network`` listens
-on 127.0.0.1 only (an ephemeral port), does not scout or answer scouting, and connects to the local
-router (``fmu-bridge router``, which listens on 127.0.0.1:7447 by default; ``FMU_BRIDGE_LOCAL_ROUTER``
-names another endpoint). Serving on the network is asked for explicitly: ``network`` (the
+One resolution for the command line and the Python API (:class:`ZenohOptions`, which both
+build): loopback unless a network is asked for. A session opened without endpoints, a
+configuration file or ``network`` listens on 127.0.0.1 only (an ephemeral port), does not scout
+or answer scouting, and connects to the local router (``fmu-bridge router``, which listens on
+127.0.0.1:7447 by default; ``FMU_BRIDGE_LOCAL_ROUTER`` names another endpoint). A session that
+only connects (``connect``, no ``listen``) is a client of what it connects to
+(:func:`session_mode`) and listens nowhere; one in peer or router mode without ``listen``
+listens on 127.0.0.1 only. Serving on the network is asked for explicitly: ``network`` (the
 ``--network`` option: Zenoh's own defaults, every interface and multicast scouting), endpoints
 (``--listen``/``--connect``) or a configuration file, such as the TLS and user/password set-ups of
 docs/zenoh.md.
@@ -51,6 +55,15 @@ class ZenohOptions:
     network: bool = False
 
     @property
+    def resolved_mode(self) -> str | None:
+        """The session's mode: ``mode`` when given, else as :func:`session_mode` resolves it for
+        the command line (client when the session only connects); None: the configuration
+        file's, or Zenoh's default (peer)."""
+        if self.mode is not None:
+            return self.mode
+        return session_mode(None, self.listen, self.connect, self.config_file)
+
+    @property
     def loopback_only(self) -> bool:
         """No endpoints, file or ``network`` given: the session stays on 127.0.0.1."""
         return not (self.network or self.listen or self.connect or self.config_file)
@@ -63,9 +76,10 @@ class ZenohOptions:
         except Exception as exc:
             raise TransportError(f"cannot read the Zenoh configuration {self.config_file}: {exc}") from exc
         try:
-            if self.mode:
-                config.insert_json5("mode", json.dumps(self.mode))
-            if self.loopback_only and self.mode != "client":
+            mode = self.resolved_mode
+            if mode:
+                config.insert_json5("mode", json.dumps(mode))
+            if not (self.network or self.listen or self.config_file) and mode != "client":
                 config.insert_json5("listen/endpoints", json.dumps([LOOPBACK_LISTEN]))
             if self.loopback_only:
                 config.insert_json5("connect/endpoints", json.dumps([local_router()]))
@@ -85,7 +99,7 @@ class ZenohOptions:
         return config
 
     def describe(self) -> str:
-        parts = [f"mode={self.mode or 'peer'}"]
+        parts = [f"mode={self.resolved_mode or 'peer'}"]
         if self.loopback_only:
             parts.append(f"loopback only, via the local router {local_router()}")
         if self.listen:

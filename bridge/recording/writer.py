@@ -260,7 +260,10 @@ class McapWriter:
         """Write the current chunk and flush the file (no fsync): a crash now loses nothing."""
         self._check_open()
         self.rotate()
-        self._file.flush()
+        try:
+            self._file.flush()
+        except OSError as exc:  # a full disk shows here first: buffered writes succeeded
+            raise self._failed(exc) from exc
 
     # -- end -------------------------------------------------------------------------------------
     def close(self) -> Path:
@@ -322,10 +325,15 @@ class McapWriter:
         try:
             item.write(self._sink)
         except OSError as exc:
-            raise BridgeError(
-                f"writing the recording failed: {exc.strerror or exc}; what was written so far is in "
-                f"{self.part_path} (`fmu-bridge recover` rewrites its readable part)"
-            ) from exc
+            raise self._failed(exc) from exc
+
+    def _failed(self, exc: OSError) -> BridgeError:
+        """The one error of a failed write (a full disk, a file size limit, an I/O error)."""
+        return BridgeError(
+            f"writing the recording failed: {exc.strerror or exc}; free some space or record to "
+            f"another folder; what was written so far is in {self.part_path} (`fmu-bridge recover` "
+            "rewrites its readable part)"
+        )
 
     def __enter__(self) -> McapWriter:
         return self

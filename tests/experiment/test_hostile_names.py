@@ -158,3 +158,30 @@ def test_fmu_bridge_simulate_reports_a_refused_callable_as_exit_code_2(tmp_path:
     assert result.returncode == 2, result.stderr
     assert "not a module of your own" in result.stderr and "Traceback" not in result.stderr
     assert not (tmp_path / "rec").exists()
+
+
+@pytest.mark.parametrize(
+    ("spec", "says"),
+    [
+        ("__main__:main", "the program that is running"),
+        ("bridge.cli:main", "part of fmu-bridge itself"),
+        ("agents.train:train", "part of fmu-bridge itself"),
+        (".rewards:reward", "not a module name"),
+        ("..x:y", "not a module name"),
+        ("rewards\x00:reward", "not a module name"),
+        ("rewards_for_tests:half\x00", "not a function name"),
+    ],
+)
+def test_main_the_projects_own_packages_relative_names_and_nul_bytes_are_config_errors(
+    tmp_path: Path, spec: str, says: str
+) -> None:
+    """These passed the allow-list (``__main__``, fmu-bridge's packages) or raised a traceback
+    (relative names, a NUL byte); each is now a ConfigError naming the key."""
+    quoted = json.dumps(spec)  # YAML reads JSON's escapes
+    path = edited(tmp_path, "reward:\n  terms:", f"reward:\n  callable: {quoted}\n  terms:")
+    with pytest.raises(ConfigError, match=says) as caught:
+        load_experiment(path)
+    assert "reward.callable" in str(caught.value)
+    if ":" in spec and "\x00" not in spec.partition(":")[2]:
+        with pytest.raises(ConfigError, match=says):
+            load_callable(spec, "reward.callable")

@@ -251,3 +251,58 @@ def test_fmu_that_takes_a_state_only_once_initialised_is_initialised_first(
     for episode in episodes:
         assert np.array_equal(episode, restored)
     assert np.array_equal(restored, continued) and restored[-1, 1] != restored[0, 1]
+
+
+def test_with_a_state_key_only_files_signed_with_it_are_loaded(
+    good: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A resealed file passes the checksum (anyone can compute one); with the user's secret set,
+    a file must carry the MAC under that secret, or it is refused before the FMU sees it."""
+    unsigned = state_file.read(good)
+    monkeypatch.setenv(state_file.KEY_ENV, "alice's secret, 32 bytes long!!")
+    with pytest.raises(StateFileError, match="is not signed, and FMU_BRIDGE_STATE_KEY is set"):
+        state_file.read(good)
+    signed = state_file.seal(unsigned.header, unsigned.payload)
+    state_file.write(tmp_path / "signed.state", signed)
+    assert state_file.read(tmp_path / "signed.state").payload == unsigned.payload
+    crafted = dataclasses.replace(signed.header, time_s=signed.header.time_s + 1.0)
+    forged = dataclasses.replace(  # a crafted file resealed, with a MAC copied from a signed one
+        state_file.seal(crafted, signed.payload).header, mac=signed.header.mac
+    )
+    (tmp_path / "forged.state").write_bytes(state_file.encode(forged, signed.payload))
+    with pytest.raises(StateFileError, match="is signed with another key"):
+        state_file.read(tmp_path / "forged.state")
+    monkeypatch.setenv(state_file.KEY_ENV, "mallory's secret, also 32 bytes!")
+    with pytest.raises(StateFileError, match="is signed with another key"):
+        state_file.read(tmp_path / "signed.state")
+    monkeypatch.setenv(state_file.KEY_ENV, "short")
+    with pytest.raises(StateFileError, match="at least 16"):
+        state_file.read(tmp_path / "signed.state")
+    monkeypatch.delenv(state_file.KEY_ENV)
+    key_file = tmp_path / "key"
+    key_file.write_text("alice's secret, 32 bytes long!!\n")
+    monkeypatch.setenv(state_file.KEY_FILE_ENV, str(key_file))
+    assert state_file.read(tmp_path / "signed.state").header.mac == signed.header.mac
+    monkeypatch.delenv(state_file.KEY_FILE_ENV)
+    assert state_file.read(good).header.mac == ""  # without a secret: files load as before
+
+
+@pytest.mark.parametrize("version", ["2.0", "3.0"])
+@pytest.mark.parametrize("change", [-8, 8])
+def test_a_state_of_the_wrong_size_is_named_as_such(good: Path, version: str, change: int) -> None:
+    """A resealed state of the wrong size is reported as a state the FMU refused, with its size,
+    not as whatever FMI call failed after the refusal."""
+    fmu = example_fmu("slow_init", version, "cs")
+    with Model(fmu, step_size_s=0.05) as m:
+        m.initialize(FAST)
+        snapshot = m.save_state()
+        saved = m.state_file(snapshot)
+        m.free_state(snapshot)
+    payload = saved.payload[:change] if change < 0 else saved.payload + bytes(change)
+    with Model(fmu, step_size_s=0.05) as m:
+        m.start_from(state_file.seal(saved.header, payload), "crafted.state")
+        with pytest.raises(FmuError) as caught:
+            m.reset()
+    message = str(caught.value)
+    assert f"slow_init refused the state it was given: its {len(payload)} bytes" in message, message
+    assert "[crafted.state]" in message and "not a serialised state of slow_init" in message

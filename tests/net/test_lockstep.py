@@ -9,7 +9,8 @@ import pytest
 
 from bridge.net import lockstep as ls
 from bridge.net import protocol as proto
-from bridge.net.lease import Lease, reset_proof
+from bridge.net.handshake import KeyPair, reply_proof, request_proof
+from bridge.net.lease import Lease
 
 HOLDER, OTHER = 0x1111, 0x2222
 STATE_OK = None
@@ -22,8 +23,17 @@ def in_range(values: Sequence[float]) -> str | None:
 def held() -> Lease:
     lease = Lease("n")
     lease.token(HOLDER, alive=True)
-    assert lease.acquire(HOLDER, "zid", False) is None
+    assert lease.acquire(HOLDER, "zid", False, pub=KeyPair().public).refusal is None
     return lease
+
+
+def granted(lease: Lease, client: int, payload: bytes = b"{}", take_over: bool = False) -> bytes:
+    """Start a lease for ``client`` as NodeClient does; the session key the client derives."""
+    pair = KeyPair()
+    admission = lease.acquire(client, "zid", take_over, pub=pair.public, payload=payload)
+    assert admission.refusal is None and len(admission.node_pub) == 32
+    pub = admission.node_pub
+    return pair.session_key(pub, client_pub=pair.public, node_pub=pub, client=client)
 
 
 def action(
@@ -202,25 +212,101 @@ def test_a_peer_with_the_holders_id_but_not_its_session_key_is_not_the_holder() 
 
 def test_a_lease_needs_a_live_token_and_ends_with_it() -> None:
     lease = Lease("n")
-    refusal = lease.acquire(OTHER, "zid", False)
+    refusal = lease.acquire(OTHER, "zid", False, pub=KeyPair().public).refusal
     assert refusal is not None and "no liveliness token" in refusal and lease.holder is None
     lease.token(OTHER, alive=True)
-    assert lease.acquire(OTHER, "zid", False) is None and lease.key is not None
+    assert granted(lease, OTHER) == lease.key
     assert lease.token(OTHER, alive=False) and lease.holder is None
 
 
-def test_a_reset_by_the_holder_must_prove_its_session_and_a_take_over_gets_a_new_key() -> None:
-    lease = held()
-    key = lease.key
-    assert key is not None
-    refusal = lease.acquire(HOLDER, "zid", False, episode=2)
-    assert refusal is not None and "does not prove" in refusal
-    assert lease.acquire(HOLDER, "zid", False, episode=2, proof=reset_proof(key, HOLDER, 2)) is None
-    assert lease.key == key
+def test_the_session_key_is_agreed_on_both_sides_and_never_in_a_reply() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    pair = KeyPair()
+    admission = lease.acquire(HOLDER, "zid", False, pub=pair.public, payload=b"grant")
+    key = pair.session_key(
+        admission.node_pub, client_pub=pair.public, node_pub=admission.node_pub, client=HOLDER
+    )
+    assert key == lease.key and key not in admission.node_pub
+    thief = KeyPair()  # who captured both public keys derives another key
+    other = thief.session_key(
+        admission.node_pub, client_pub=pair.public, node_pub=admission.node_pub, client=HOLDER
+    )
+    assert other != key
+
+
+def test_a_grant_without_a_key_agreement_key_is_refused() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    refusal = lease.acquire(HOLDER, "zid", False).refusal
+    assert refusal is not None and "key-agreement key 'pub'" in refusal and lease.holder is None
+    refusal = lease.acquire(HOLDER, "zid", False, pub=b"\0" * 32).refusal  # a low-order point
+    assert refusal is not None and "not usable" in refusal and lease.holder is None
+
+
+def test_a_holders_reset_is_signed_numbered_and_accepted_once() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    key = granted(lease, HOLDER)
+    first = b'{"seq":1,"episode":2}'
+    unsigned = lease.acquire(HOLDER, "zid", False, seq=1, payload=first).refusal
+    assert unsigned is not None and "does not prove" in unsigned
+    proof = request_proof(key, "reset", first)
+    admission = lease.acquire(HOLDER, "zid", False, seq=1, proof=proof, payload=first)
+    assert admission.refusal is None and not admission.repeat and not admission.node_pub
+    assert lease.key == key  # a held reset keeps the key, and no key-agreement reply
+
+
+def test_a_replayed_or_altered_reset_of_the_holder_is_refused_and_a_repeat_does_nothing() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    key = granted(lease, HOLDER, b"grant")
+    first, second = b'{"seq":1}', b'{"seq":2}'
+    admit = lease.acquire(
+        HOLDER, "zid", False, seq=1, proof=request_proof(key, "reset", first), payload=first
+    )
+    assert admit.refusal is None and not admit.repeat
+    again = lease.acquire(
+        HOLDER, "zid", False, seq=1, proof=request_proof(key, "reset", first), payload=first
+    )
+    assert again.refusal is None and again.repeat  # the same request arriving twice: served once
+    altered = b'{"seq":1,"x":1}'
+    forged = lease.acquire(
+        HOLDER, "zid", False, seq=1, proof=request_proof(key, "reset", first), payload=altered
+    )
+    assert forged.refusal is not None and "signature is wrong" in forged.refusal
+    ok = lease.acquire(HOLDER, "zid", False, seq=2, proof=request_proof(key, "reset", second), payload=second)
+    assert ok.refusal is None and not ok.repeat
+    old = lease.acquire(HOLDER, "zid", False, seq=1, proof=request_proof(key, "reset", first), payload=first)
+    assert old.refusal is not None and "used already" in old.refusal
+    # the grant replayed after the lease has moved on: refused, and no key in sight
+    grant = lease.acquire(HOLDER, "zid", False, pub=lease.holder.client_pub, payload=b"grant")  # type: ignore[union-attr]
+    assert grant.refusal is not None and lease.key == key
+
+
+def test_a_state_request_is_the_holders_alone_and_single_use() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
     lease.token(OTHER, alive=True)
-    assert lease.acquire(OTHER, "z2", False) is not None  # held
-    assert lease.acquire(OTHER, "z2", True) is None and lease.key not in (None, key)
+    key = granted(lease, HOLDER)
+    payload = b"state-1"
+    assert lease.admit_request(HOLDER, 1, request_proof(key, "state", payload), payload, "state") is None
+    replay = lease.admit_request(HOLDER, 1, request_proof(key, "state", payload), payload, "state")
+    assert replay is not None and "used already" in replay
+    other = lease.admit_request(OTHER, 2, request_proof(key, "state", payload), payload, "state")
+    assert other is not None and "only the holder" in other
+    assert lease.admit_request(0, 2, b"", payload, "state") is not None
+    assert reply_proof(key, payload, "") != reply_proof(key, payload, "ab")  # the state is covered
+
+
+def test_a_take_over_gets_a_new_key_and_the_former_holder_is_told_with_its_own() -> None:
+    lease = Lease("n")
+    lease.token(HOLDER, alive=True)
+    key = granted(lease, HOLDER)
+    lease.token(OTHER, alive=True)
+    assert lease.acquire(OTHER, "z2", False, pub=KeyPair().public).refusal is not None  # held
+    assert granted(lease, OTHER, take_over=True) == lease.key != key
     old = proto.encode_values(proto.ACTION, 1, 1, HOLDER, [0.0], key=key)
     assert lease.former_key(HOLDER, old) == key  # the taken-over holder's reject is signed for it
     assert lease.former_key(HOLDER, proto.encode_values(proto.ACTION, 1, 1, HOLDER, [0.0])) is None
-    assert lease.acquire(0, "", False) is not None  # anonymous: never while held
+    assert lease.acquire(0, "", False).refusal is not None  # anonymous: never while held

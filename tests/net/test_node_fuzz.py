@@ -29,6 +29,7 @@ from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
+from bridge.net.handshake import KeyPair
 from bridge.net.remote import describe_nodes
 from tests.conftest import Loopback, _wait_for_node, wait_until
 from tests.reliability_table import counts_dir
@@ -84,7 +85,8 @@ def rss_mb(pid: int) -> float:
 # -- malformed requests ------------------------------------------------------------------------------
 def reset_payload(rng: np.random.Generator) -> bytes:
     good: dict[str, Any] = {
-        "episode": 3, "values": {"theta0": 0.05}, "inputs": [0.0], "client": 7, "take_over": True
+        "episode": 3, "values": {"theta0": 0.05}, "inputs": [0.0], "client": 7, "take_over": True,
+        "pub": KeyPair().public.hex(),
     }  # fmt: skip  # client 7 has a token (fuzz_node); taking over needs no proof of the last session
     kind = int(rng.integers(14))
     if kind == 0:

@@ -110,3 +110,41 @@ def test_network_options_are_explicit() -> None:
 )
 def test_explicit_endpoints_keep_scouting_off(options: ZenohOptions) -> None:
     assert json.loads(options.to_config().get_json("scouting/multicast/enabled")) is False
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("mode", [None, "peer"])
+def test_the_python_api_connecting_to_a_router_listens_on_no_network_interface(mode: str | None) -> None:
+    """``ZenohOptions(connect=[router])``, the form the docs show, once listened on every
+    interface while the command line kept the same options on loopback: both resolve alike now
+    (a client of the router, or a peer listening on 127.0.0.1 only)."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    code = (
+        "import sys\n"
+        "from bridge.net.transport import ZenohOptions, open_session\n"
+        "mode = sys.argv[2] or None\n"
+        "session = open_session(ZenohOptions(mode=mode, connect=(sys.argv[1],)))\n"
+        "print('ready', flush=True)\n"
+        "sys.stdin.read()\n"
+        "session.close()\n"
+    )
+    router = subprocess.Popen(
+        [sys.executable, "-m", "bridge.cli", "router", "--listen", endpoint],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )  # fmt: skip
+    try:
+        _wait_for_line(router, "listening", timeout_s=60)
+        process = subprocess.Popen(
+            [sys.executable, "-c", code, endpoint, mode or ""],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        )  # fmt: skip
+        try:
+            _wait_for_line(process, "ready", timeout_s=60)
+            listening, _ = sockets(process.pid)
+            assert all(is_loopback(ip) for ip, _ in listening), listening
+            assert ZenohOptions(mode=mode, connect=(endpoint,)).resolved_mode == (mode or "client")
+        finally:
+            stop_process(process, timeout_s=10)
+    finally:
+        stop_process(router, timeout_s=10)

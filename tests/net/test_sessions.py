@@ -23,6 +23,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import BridgeError, StepError, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
+from bridge.net.handshake import KeyPair, reply_proof
 from bridge.net.node import FmuNode
 from bridge.net.remote import answer, describe_nodes
 from bridge.net.transport import ZenohOptions, open_session
@@ -353,12 +354,21 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
     replies: dict[str, Any] = {}
 
     def on_reset(query: Any) -> None:
-        episode = json.loads(query.payload.to_bytes())["episode"]
-        made = replies["make"](episode)
+        nonlocal key
+        request = query.payload.to_bytes()
+        words = json.loads(request)
+        pair, client_pub = KeyPair(), bytes.fromhex(words["pub"])  # the key agreement done right
+        key = pair.session_key(
+            client_pub, client_pub=client_pub, node_pub=pair.public, client=words["client"]
+        )
+        made = replies["make"](words["episode"])
         if isinstance(made, bytes):  # an error reply
             query.reply_err(made)
             return
         payload, attachment = made
+        if attachment is not None:
+            proof = reply_proof(key, request, "").hex()
+            attachment = proto.encode_json({"pub": pair.public.hex(), "state": "", "proof": proof})
         query.reply(keys.reset, payload, attachment=attachment)
 
     entities = [
@@ -372,9 +382,9 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
             "expected 4 values, got 3",
         ),
         "a cut frame": (lambda e: (b"\x01\x02\x03", key), "malformed"),
-        "no session key": (
+        "no key agreement": (
             lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4), None),
-            "0 bytes",
+            "attachment",
         ),
         "an unsigned frame": (
             lambda e: (proto.encode_values(proto.OUTPUTS, e, 0, 0, [0.0] * 4), key),

@@ -9,6 +9,8 @@ to ``replace_wait_s`` for a spare or the same name before raising.
 from __future__ import annotations
 
 import signal
+import threading
+from typing import Any
 
 import numpy as np
 import pytest
@@ -17,6 +19,7 @@ from bridge.env import RemoteVecEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import PlantDied
 from bridge.experiment.examples import example_experiment
+from bridge.experiment.sections import REPLACE_WAIT_S
 from tests.conftest import Loopback, node_process, stop_process
 from tests.net.soak import soak, start_node
 
@@ -155,3 +158,35 @@ def test_a_node_found_dead_at_a_reset_is_replaced_and_the_episode_drawn_is_the_u
             vec.close()
             if restarted is not None:
                 stop_process(restarted, timeout_s=10)
+
+
+@pytest.mark.integration
+def test_by_default_a_node_restarted_under_its_name_replaces_itself(loopback: Loopback) -> None:
+    """``replace_wait_s`` once defaulted to 0: PlantDied the moment a node died, though the same
+    node restarted under its name would have replaced itself. The default now waits (30 s)."""
+    from bridge.net.node import FmuNode
+
+    options: Any = loopback.options()
+    first = FmuNode(CARTPOLE, name="again-0", options=options, prefix=loopback.prefix)
+    second = FmuNode(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
+    restarted: list[FmuNode] = []
+    vec = RemoteVecEnv(
+        CARTPOLE, ["again-0", "again-1"], session=loopback.session, prefix=loopback.prefix, replace_dead=True
+    )
+    try:
+        assert vec.replace_wait_s == REPLACE_WAIT_S >= 10
+        vec.reset()
+        second.close()  # the node stops; the same name comes back as soon as its FMU is loaded
+        thread = threading.Thread(
+            target=lambda: restarted.append(
+                FmuNode(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
+            )
+        )
+        thread.start()
+        _, _, dones, infos = vec.step(ACTION)
+        assert dones[1] and infos[1]["node_replaced"] == {**infos[1]["node_replaced"], "new": "again-1"}
+        thread.join()
+    finally:
+        vec.close()
+        for node in (first, *restarted):
+            node.close()

@@ -79,7 +79,7 @@ class RosContext:
     @classmethod
     def open(cls, options: ZenohOptions | None = None, **kwargs: Any) -> RosContext:
         """Open a session (default: peer connected to ``tcp/localhost:7447``, as rmw_zenoh does)."""
-        session = open_session(options or ZenohOptions(connect=(ROUTER_ENDPOINT,)))
+        session = open_session(options or ZenohOptions(mode="peer", connect=(ROUTER_ENDPOINT,)))
         return cls(session, own_session=True, **kwargs)
 
     def next_entity_id(self) -> int:
