@@ -26,7 +26,7 @@ def fmu_defaults() -> dict[str, float]:
 @pytest.mark.parametrize("example", ["vehicle_path", "vehicle_worn"])
 def test_the_mpc_plans_with_the_actuators_steering_rate(example: str) -> None:
     """The designs' rate limits are the actuator's (the FMU's steer_rate_max), never a faster one;
-    the tuned lqr goes without (with it, a limit cycle: docs/results.md)."""
+    the tuned lqr goes without (unstable with it: docs/control.md)."""
     experiment = load_experiment(example_experiment(example))
     rate = fmu_defaults()["steer_rate_max"]
     settings = baseline_settings(experiment)
