@@ -120,6 +120,7 @@ class LinearController:
     def _at(self, signals: Mapping[str, float]) -> _Blended:
         value = signals[self.spec.schedule.signal] if self.spec.schedule else 0.0
         lo, hi, t = blend(self.designs, self.points, value)
+        self._blend = (lo, hi, t)  # the mpc blends its two neighbouring plans the same way
         d0, d1 = self.designs[lo], self.designs[hi]
 
         def mix(get: Any) -> Matrix:

@@ -125,34 +125,30 @@ class Mpc(LinearController):
         super().build(limits)
         limits = list(self.spec.output_limits.values())
         self._qps = [_Qp(d, self.spec.horizon, self._rate, self.dt, limits) for d in self.designs]
-        self._nearest = 0
 
     def horizon_samples(self) -> int:
         return self.spec.horizon
 
-    def _at(self, signals: Any) -> _Blended:
-        value = signals[self.spec.schedule.signal] if self.spec.schedule else 0.0
-        self._nearest = int(np.argmin(np.abs(np.asarray(self.points) - value)))
-        saved, self.designs = self.designs, [self.designs[self._nearest]]
-        points, self.points = self.points, [self.points[self._nearest]]
-        try:
-            return super()._at(signals)
-        finally:
-            self.designs, self.points = saved, points
-
     def _law(
         self, m: _Blended, state: Matrix, x_star: Matrix, u_star: Matrix, u_prev: Matrix, *, w: Matrix
     ) -> Matrix:
+        """The first move of the plan of each neighbouring schedule point, blended with the weight
+        the LQR's gains get (one plan off the schedule or at a point): a plan on the nearest
+        point's model alone is off by half a point's spacing between two points."""
         h = self.spec.horizon
         changes = x_star[:h] - x_star[1 : h + 1]
         low = np.array([lo for lo, _ in self._limits])
         high = np.array([hi for _, hi in self._limits])
-        move = self._qps[self._nearest].solve(
-            state, changes, u_star=u_star, u0=m.u0, low=low, high=high, u_prev=u_prev, x_star=x_star, w=w
-        )
-        if move is None:  # the LQR law (clipped by the caller) when the solver gives no answer
-            return super()._law(m, state, x_star, u_star, u_prev, w=w)
-        return move
+        lo, hi, t = self._blend
+        moves = []
+        for index in (lo,) if t == 0.0 or lo == hi else (lo, hi):
+            move = self._qps[index].solve(
+                state, changes, u_star=u_star, u0=m.u0, low=low, high=high, u_prev=u_prev, x_star=x_star, w=w
+            )
+            if move is None:  # the LQR law (clipped by the caller) when a solver gives no answer
+                return super()._law(m, state, x_star, u_star, u_prev, w=w)
+            moves.append(move)
+        return moves[0] if len(moves) == 1 else (1.0 - t) * moves[0] + t * moves[1]
 
     @property
     def failures(self) -> int:

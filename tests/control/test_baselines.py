@@ -227,3 +227,28 @@ def test_output_limits_need_the_mpc(vehicle: FmuEnv) -> None:
         ModelBased("lqr", {**VEHICLE_DESIGN, "output_limits": {"lateral_accel": [-3.0, 3.0]}}, "lqr").reset(
             vehicle.task, 0
         )
+
+
+def test_unconstrained_scheduled_mpc_is_the_scheduled_lqr_between_points(vehicle: FmuEnv) -> None:
+    """Between two schedule points the lqr blends its gains; the mpc blends the first moves of its
+    two neighbours' plans, which without active limits are those gains' laws: the same command.
+    (An mpc planning on the nearest point's model alone is off between points.)"""
+    design = {
+        **VEHICLE_DESIGN,
+        "horizon": 25,
+        "limits": {"steer_cmd": [-10.0, 10.0]},
+        "schedule": {"input": "v_x", "signal": "speed", "points": [10.0, 20.0]},
+    }
+    lqr, mpc = controllers(design, vehicle)
+    rng = np.random.default_rng(2)
+    for speed in (10.0, 12.0, 14.9, 15.1, 18.0, 20.0):
+        signals = {
+            "lateral_error": rng.normal(0, 0.5), "heading_error": rng.normal(0, 0.05),
+            "yaw_rate": rng.normal(0, 0.1), "steer_angle": rng.normal(0, 0.05),
+            "curvature": rng.normal(0, 0.02), "speed": speed,
+            "kappa_ahead_05": rng.normal(0, 0.02), "kappa_ahead_10": rng.normal(0, 0.02), "lateral_ref": 0.0,
+        }  # fmt: skip
+        np.testing.assert_allclose(
+            mpc.controller.control(signals), lqr.controller.control(signals), atol=1e-5
+        )
+    assert mpc.controller.failures == 0
