@@ -365,9 +365,9 @@ def train_cmd(
     if engine not in ("sb3", "rllib"):
         raise ConfigError(f"--engine must be sb3 or rllib, got {engine!r}")
     if engine == "rllib":
-        overrides = {"algo": algo.upper() if algo else None, "timesteps": timesteps, "n_envs": n_envs}
-        overrides |= {"seed": seed, "sample_timeout_s": sample_timeout_s}
-        _train_rllib(experiment, overrides, run_dir, resume, version, runners, ray_address)
+        given: dict[str, Any] = {"algo": algo.upper() if algo else None, "timesteps": timesteps}
+        given |= {"n_envs": n_envs, "seed": seed, "sample_timeout_s": sample_timeout_s}
+        _train_rllib(experiment, given, run_dir, resume, version, runners, ray_address)
         return
     if sample_timeout_s is not None:
         raise ConfigError("--sample-timeout-s is an RLlib setting: use it with --engine rllib")

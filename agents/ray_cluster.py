@@ -72,7 +72,8 @@ def local_cluster(
         os.environ.setdefault(key, value)
     saved = {k: os.environ.get(k) for k in ("RAY_TMPDIR", "RAY_ADDRESS")}
     os.environ.pop("RAY_ADDRESS", None)
-    cluster, folder = None, ""
+    cluster: Any = None
+    folder = ""
     try:
         for attempt in range(1, attempts + 1):
             folder = tempfile.mkdtemp(prefix=prefix, dir="/tmp")  # short: socket paths must fit
@@ -92,11 +93,11 @@ def local_cluster(
         if cluster is not None:
             cluster.shutdown()
         shutil.rmtree(folder, ignore_errors=True)
-        for key, value in saved.items():
-            if value is None:
+        for key, before in saved.items():
+            if before is None:
                 os.environ.pop(key, None)
             else:
-                os.environ[key] = value
+                os.environ[key] = before
 
 
 def _start(cluster_class: Any, nodes: Sequence[Mapping[str, Any]]) -> Any:
