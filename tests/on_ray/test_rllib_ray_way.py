@@ -115,12 +115,6 @@ def test_train_resume_continues_an_rllib_run(ray_cluster: Any, example_run: Path
     assert (example_run / "checkpoints" / f"iter_{after['iterations']}").is_dir()
 
 
-def node_id(runner: Any) -> str:
-    import ray
-
-    return str(ray.get_runtime_context().get_node_id())
-
-
 SLOW_TRAINING = """training:
   algo: PPO
   timesteps: 16
@@ -141,6 +135,11 @@ def test_a_slow_plant_trains_on_two_ray_nodes_with_no_sample_timeout(
     settings = TrainingSettings.from_experiment(load_experiment(path), {})
     assert build_config(path, settings, runners=2).sample_timeout_s is None
     hosts: list[Any] = []
+
+    def node_id(runner: Any) -> str:  # defined here: Ray ships it by value, not by module name
+        import ray
+
+        return str(ray.get_runtime_context().get_node_id())
 
     def on_iteration(algo: Any, result: dict[str, Any]) -> None:
         hosts.extend(algo.env_runner_group.foreach_env_runner(node_id, local_env_runner=False))

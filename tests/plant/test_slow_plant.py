@@ -79,3 +79,19 @@ def test_slow_plant_vector_env_over_two_slow_plants(tmp_path: Path, where: str) 
         np.testing.assert_allclose(obs[:, 0], expected, rtol=0, atol=1e-6)
     finally:
         vec.close()
+
+
+def test_batch_env_over_slow_plants_follows_their_equation(tmp_path: Path) -> None:
+    from bridge.env.batch import BatchVectorEnv
+
+    exp = load_experiment(slow_experiment(tmp_path, step_delay_s=0.1, init_delay_s=0.2, duration_s=0.3))
+    env = BatchVectorEnv(exp, 2)  # 3 samples an episode: 2 steps stay inside the first
+    try:
+        obs, _ = env.reset(seed=3)
+        x0 = obs[:, 0].copy()
+        for _ in range(2):
+            obs, _, _, _, _ = env.step(np.full((2, 1), 0.5, dtype=np.float32))
+        expected = [lag(float(x), 0.5, 2)[-1] for x in x0]
+        np.testing.assert_allclose(obs[:, 0], expected, rtol=0, atol=1e-6)
+    finally:
+        env.close()
