@@ -309,13 +309,14 @@ def train_rllib(
 
     if resume is not None:
         run_dir, experiment_path, info, settings = _resumed(resume, overrides or {})
-        version, runners = info["version"], runners or int(info.get("runners", 1))
+        version = info["version"]
+        runners = int(info.get("runners", 1)) if runners is None else runners
     elif experiment_path is None:
         raise ConfigError("train --engine rllib: give an experiment file, or --resume RUN")
     experiment = load_experiment(experiment_path, version=version)
     if resume is None:
         settings = TrainingSettings.from_experiment(experiment, overrides or {})
-    runners = runners or 1
+    runners = 1 if runners is None else runners
     config = build_config(experiment_path, settings, runners=runners, version=version)
     ray = connect(ray_address)
     licence = experiment.model.licence
