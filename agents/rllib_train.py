@@ -117,6 +117,9 @@ _SAME = {
 }
 
 
+EMPTY_ITERATIONS = 10  # iterations in a row without samples (runners failing) before giving up
+
+
 class TrainingStalled(BridgeError):
     """An RLlib iteration brought no new samples: every env runner took longer than
     ``training.sample_timeout_s`` for its sample (RLlib drops late samples)."""
@@ -410,12 +413,19 @@ def _train_held(
         algo.restore_from_path(str(newest_checkpoint(run_dir)))
         info.setdefault("resumed", []).append({"at": base, "timesteps": settings.timesteps})
     start = time.perf_counter()
-    steps, iterations, done = base, int(info.get("iterations", 0)), False
+    steps, iterations, done, empty = base, int(info.get("iterations", 0)), False, 0
     try:
         while steps < base + settings.timesteps:
             result = algo.train()
             iterations += 1
-            steps = _sampled(result, steps, iterations, settings)
+            sampled = _sampled(result, steps, iterations, settings, _all_healthy(algo))
+            empty = 0 if sampled > steps else empty + 1
+            if empty >= EMPTY_ITERATIONS:
+                raise TrainingStalled(
+                    f"RLlib iterations {iterations - empty + 1}-{iterations} brought no samples: its "
+                    "env runners keep failing (see their errors above)"
+                )
+            steps = sampled
             algo.save_to_path(str((run_dir / "checkpoints" / f"iter_{iterations}").resolve()))
             if on_iteration is not None:
                 on_iteration(algo, result)
@@ -441,23 +451,31 @@ def _train_held(
     return RllibResult(run_dir, steps, iterations, info["wall_time_s"], checkpoint, onnx)
 
 
-def _sampled(result: dict[str, Any], before: int, iteration: int, settings: TrainingSettings) -> int:
-    """The env steps sampled so far, from an iteration's result; :class:`TrainingStalled` when
-    the iteration brought none (RLlib dropped every sample as later than ``sample_timeout_s``)."""
+def _sampled(
+    result: dict[str, Any], before: int, iteration: int, settings: TrainingSettings, healthy: bool
+) -> int:
+    """The env steps sampled so far, from an iteration's result. An iteration without new samples
+    while every env runner is healthy means they were slower than ``sample_timeout_s`` (RLlib
+    drops late samples): :class:`TrainingStalled`, naming the setting. One whose runners died is
+    logged: Ray restarts them for the next iteration."""
     steps = result.get("env_runners", {}).get("num_env_steps_sampled_lifetime")
-    if steps is None or int(steps) <= before:
-        limit = settings.sample_timeout_s
+    if steps is not None and int(steps) > before:
+        return int(steps)
+    limit = settings.sample_timeout_s
+    if healthy and limit is not None:
         raise TrainingStalled(
-            f"RLlib iteration {iteration} brought no new samples (env steps sampled: "
-            f"{before if steps is None else int(steps):,}, before it: {before:,}): every env runner took "
-            f"longer than training.sample_timeout_s = {limit:g} s for its sample, and RLlib drops late "
-            "samples. The plant is slower than that setting allows: raise training.sample_timeout_s "
-            "(--sample-timeout-s), or unset it to wait as long as the plant takes"
-            if limit is not None
-            else f"RLlib iteration {iteration} brought no new samples (env steps sampled: {before:,}) "
-            "although no sample timeout is set: its env runners failed (see their errors above)"
+            f"RLlib iteration {iteration} brought no new samples (env steps sampled: {before:,}): every "
+            f"env runner took longer than training.sample_timeout_s = {limit:g} s for its sample, and "
+            "RLlib drops late samples. The plant is slower than that setting allows: raise "
+            "training.sample_timeout_s (--sample-timeout-s), or unset it to wait as long as the plant takes"
         )
-    return int(steps)
+    _log.warning("RLlib iteration %d brought no samples: env runners failed, Ray restarts them", iteration)
+    return before
+
+
+def _all_healthy(algo: Any) -> bool:
+    group = algo.env_runner_group
+    return bool(group.num_healthy_remote_env_runners() == group.num_remote_env_runners())
 
 
 def restore(run_dir: Path, *, ray_address: str | None = None) -> Any:
