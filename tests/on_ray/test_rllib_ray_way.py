@@ -159,3 +159,19 @@ def test_a_sample_slower_than_the_set_sample_timeout_ends_the_run_naming_the_set
         train_rllib(path, run_dir=run, runners=1, overrides={"sample_timeout_s": 0.5})
     info = json.loads((run / "run.json").read_text())
     assert info["status"] == "failed" and "TrainingStalled" in info["error"], info
+
+
+@pytest.mark.slow
+def test_the_ray_tune_example_runs_a_grid_over_an_experiment(ray_cluster: Any, tmp_path: Path) -> None:
+    """examples/rllib_tune.py on the test cluster: two trials (two learning rates), each PPO over
+    the registered env until its env steps, each with a checkpoint."""
+    script = Path(__file__).parents[2] / "examples" / "rllib_tune.py"
+    args = [sys.executable, str(script), str(example_experiment("cartpole_balance"))]
+    args += ["--lr", "0.001", "--lr", "0.0003", "--timesteps", "256", "--runners", "0"]
+    args += ["--out", str(tmp_path / "tune"), "--ray-address", ray_cluster.address]
+    done = subprocess.run(args, capture_output=True, text=True, check=False)
+    assert done.returncode == 0, done.stderr[-4000:]
+    text = "\n" + done.stdout  # Tune prints its status first: the result list starts at the last "[" line
+    rows = json.loads(text[text.rindex("\n[\n") :])
+    assert sorted(row["lr"] for row in rows) == [0.0003, 0.001]
+    assert all(row["error"] is None and row["env_steps"] >= 256 and row["checkpoint"] for row in rows), rows
