@@ -53,9 +53,10 @@ The env is registered under a stable name, ``fmu_bridge/<experiment name>``
 run's checkpoint in a fresh process. ``train --resume RUN`` (:func:`train_rllib` with ``resume``)
 continues an RLlib run from its last checkpoint for ``timesteps`` more env steps.
 
-An iteration that brings no new samples (every env runner slower than ``sample_timeout_s``)
-ends the run with a :class:`TrainingStalled` that names the setting; the env runners are then
-stopped at once (killed), not waited for while they finish their slow samples.
+An iteration that brings no new samples while every env runner is healthy (each slower than
+``sample_timeout_s``) ends the run with a :class:`TrainingStalled` that names the setting; the env
+runners are then stopped at once (killed), not waited for while they finish their slow samples. One
+whose runner died is logged and training goes on (Ray restarts it), up to ``EMPTY_ITERATIONS``.
 
 The exported action is the one RLlib's env runners take with ``explore=False``: the arg max of
 the logits (discrete), else the distribution's deterministic value (the Gaussian mean, for SAC
