@@ -56,7 +56,8 @@ continues an RLlib run from its last checkpoint for ``timesteps`` more env steps
 An iteration that brings no new samples while every env runner is healthy (each slower than
 ``sample_timeout_s``) ends the run with a :class:`TrainingStalled` that names the setting; the env
 runners are then stopped at once (killed), not waited for while they finish their slow samples. One
-whose runner died is logged and training goes on (Ray restarts it), up to ``EMPTY_ITERATIONS``.
+whose runner died is logged and training goes on: Ray restarts the runner (within the
+``env_runner_restore_timeout_s`` set below).
 
 The exported action is the one RLlib's env runners take with ``explore=False``: the arg max of
 the logits (discrete), else the distribution's deterministic value (the Gaussian mean, for SAC
@@ -116,9 +117,6 @@ _SAME = {
     },
     "SAC": {"gamma": "gamma", "tau": "tau"},
 }
-
-
-EMPTY_ITERATIONS = 10  # iterations in a row without samples (runners failing) before giving up
 
 
 class TrainingStalled(BridgeError):
@@ -414,19 +412,12 @@ def _train_held(
         algo.restore_from_path(str(newest_checkpoint(run_dir)))
         info.setdefault("resumed", []).append({"at": base, "timesteps": settings.timesteps})
     start = time.perf_counter()
-    steps, iterations, done, empty = base, int(info.get("iterations", 0)), False, 0
+    steps, iterations, done = base, int(info.get("iterations", 0)), False
     try:
         while steps < base + settings.timesteps:
             result = algo.train()
             iterations += 1
-            sampled = _sampled(result, steps, iterations, settings, _all_healthy(algo))
-            empty = 0 if sampled > steps else empty + 1
-            if empty >= EMPTY_ITERATIONS:
-                raise TrainingStalled(
-                    f"RLlib iterations {iterations - empty + 1}-{iterations} brought no samples: its "
-                    "env runners keep failing (see their errors above)"
-                )
-            steps = sampled
+            steps = _sampled(result, steps, iterations, settings, _all_healthy(algo))
             algo.save_to_path(str((run_dir / "checkpoints" / f"iter_{iterations}").resolve()))
             if on_iteration is not None:
                 on_iteration(algo, result)
