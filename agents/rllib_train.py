@@ -327,6 +327,7 @@ def train_rllib(
     if resume is None:
         run_dir, info = _new_run(experiment, experiment_path, settings, run_dir, runners)
     assert run_dir is not None
+    info.pop("error", None)  # a resumed run's last failure is in its log, not its state
     info.update(runners=runners, status="running")
     with training_lock(run_dir):  # held while it trains: a killed run is found interrupted
         return _train_held(
