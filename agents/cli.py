@@ -338,9 +338,19 @@ def train_cmd(
         str,
         typer.Option(help="sb3 (stable-baselines3), or rllib: PPO or SAC on Ray, n_envs FMUs per runner."),
     ] = "sb3",
-    runners: Annotated[int, typer.Option(help="RLlib env runners (with --engine rllib).")] = 1,
+    runners: Annotated[
+        int | None, typer.Option(help="RLlib env runners (with --engine rllib; default 1, or the run's).")
+    ] = None,
     ray_address: Annotated[
         str | None, typer.Option("--ray-address", help="Ray cluster (default: $RAY_ADDRESS, else local).")
+    ] = None,
+    sample_timeout_s: Annotated[
+        float | None,
+        typer.Option(
+            "--sample-timeout-s",
+            help="RLlib: seconds an env runner may take for one sample (training.sample_timeout_s; "
+            "default: as long as the plant takes).",
+        ),
     ] = None,
 ) -> None:
     """Train an SB3 agent on an experiment (in-process, subprocess workers, or remote nodes).
@@ -355,8 +365,12 @@ def train_cmd(
     if engine not in ("sb3", "rllib"):
         raise ConfigError(f"--engine must be sb3 or rllib, got {engine!r}")
     if engine == "rllib":
-        _train_rllib(experiment, algo, timesteps, n_envs, seed, run_dir, version, runners, ray_address)
+        given: dict[str, Any] = {"algo": algo.upper() if algo else None, "timesteps": timesteps}
+        given |= {"n_envs": n_envs, "seed": seed, "sample_timeout_s": sample_timeout_s}
+        _train_rllib(experiment, given, run_dir, resume, version, runners, ray_address)
         return
+    if sample_timeout_s is not None:
+        raise ConfigError("--sample-timeout-s is an RLlib setting: use it with --engine rllib")
 
     overrides: dict[str, Any] = {
         "algo": algo.upper() if algo else None,
@@ -392,33 +406,26 @@ def train_cmd(
 
 def _train_rllib(
     experiment: Path | None,
-    algo: str | None,
-    timesteps: int | None,
-    n_envs: int | None,
-    seed: int | None,
+    overrides: dict[str, Any],
     run_dir: Path | None,
+    resume: Path | None,
     version: str | None,
-    runners: int,
+    runners: int | None,
     ray_address: str | None,
 ) -> None:
     from agents.rllib_train import train_rllib
     from bridge.errors import ConfigError
 
-    if experiment is None:
-        raise ConfigError("train --engine rllib needs an experiment file (--resume is for sb3 runs)")
-    overrides = {
-        "algo": algo.upper() if algo else None,
-        "timesteps": timesteps,
-        "n_envs": n_envs,
-        "seed": seed,
-    }
+    if experiment is None and resume is None:
+        raise ConfigError("train --engine rllib needs an experiment file, or --resume RUN")
     result = train_rllib(
-        experiment,
+        None if resume is not None else experiment,
         run_dir=run_dir,
         overrides=overrides,
         runners=runners,
         version=version,
         ray_address=ray_address,
+        resume=resume,
     )
     console.print(
         f"trained {result.timesteps:,} steps in {result.iterations} iterations, {result.wall_time_s:.1f} s"

@@ -4,6 +4,11 @@
 SB3 runs whole rollouts, so ``--timesteps 3000`` with PPO's 2,048 steps per rollout trains 4,096
 steps; the bar counts the steps that will really run, says so when the figure was rounded up, and
 its rate is env steps per second of wall time (data collection and learning updates together).
+
+The ETA follows that same rate (:class:`SteadyEta`): the remaining work divided by the whole run's
+average speed so far. Rich's own ETA divides by the speed of the last 30 s, which for PPO swings
+between a rollout's burst of steps and a learning update without any (an ETA that jumped between 10
+minutes and 3 hours while the rate stayed steady), and for a slow plant between episodes.
 """
 
 from __future__ import annotations
@@ -19,11 +24,33 @@ from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
     Progress,
+    ProgressColumn,
+    Task,
     TaskID,
     TextColumn,
     TimeElapsedColumn,
-    TimeRemainingColumn,
 )
+from rich.text import Text
+
+
+class SteadyEta(ProgressColumn):
+    """ETA from the task's average speed since it started (done / elapsed), not from the last
+    seconds' speed: steady through bursts of work and pauses (PPO's rollouts and updates)."""
+
+    def render(self, task: Task) -> Text:
+        eta = steady_eta_s(task.completed, task.total, task.elapsed)
+        if eta is None:
+            return Text("-:--:--", style="progress.remaining")
+        minutes, seconds = divmod(math.ceil(eta), 60)
+        hours, minutes = divmod(minutes, 60)
+        return Text(f"{hours}:{minutes:02d}:{seconds:02d}", style="progress.remaining")
+
+
+def steady_eta_s(done: float, total: float | None, elapsed_s: float | None) -> float | None:
+    """Seconds left at the average speed so far; None before there is one (or without a total)."""
+    if total is None or not elapsed_s or done <= 0:
+        return None
+    return max(total - done, 0.0) * elapsed_s / done
 
 
 def rounded_timesteps(model: Any, timesteps: int) -> tuple[int, str]:
@@ -80,7 +107,7 @@ def train_progress(total: int, console: Console | None = None) -> Any:
                 TextColumn("{task.fields[rate]}"),
                 TimeElapsedColumn(),
                 TextColumn("ETA"),
-                TimeRemainingColumn(),
+                SteadyEta(),
                 console=self._console,
             )
             self._bar.start()
@@ -117,7 +144,7 @@ def episode_bar(console: Console | None = None) -> Iterator[Callable[[int, int],
         TextColumn("episodes"),
         TimeElapsedColumn(),
         TextColumn("ETA"),
-        TimeRemainingColumn(),
+        SteadyEta(),
         console=console or Console(stderr=True),
     )
     task = bar.add_task("evaluate", total=None)

@@ -442,7 +442,9 @@ def _learn(
     from stable_baselines3.common.callbacks import CallbackList
 
     from agents.progress import announce, train_progress
+    from agents.threads import use_threads_for
 
+    use_threads_for(model.policy)  # one thread for a small policy: torch's pool spins against the envs
     start = time.perf_counter()
     info["status"] = "running"
     write_run_info(run_dir, info)

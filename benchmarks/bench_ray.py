@@ -27,10 +27,8 @@ import argparse
 import os
 
 os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")  # read when Ray is imported: keep 127.0.0.1
-import shutil
 import signal
 import statistics
-import tempfile
 import time
 from collections.abc import Callable
 from typing import Any
@@ -111,16 +109,10 @@ def rates(ks: list[int], steps: int, repeats: int) -> list[tuple[str, ...]]:
 
 
 def cluster_times() -> list[tuple[str, str]]:
-    import ray
-    from ray.cluster_utils import Cluster
+    from agents.ray_cluster import local_cluster
 
-    folder = tempfile.mkdtemp(prefix="fbbench", dir="/tmp")
-    os.environ["RAY_TMPDIR"] = folder
-    node = {"num_cpus": 1, "object_store_memory": 80 * 2**20, "node_ip_address": "127.0.0.1"}
-    cluster = Cluster(initialize_head=True, connect=True, head_node_args={**node, "include_dashboard": False})
-    cluster.add_node(**node, include_dashboard=False)
-    cluster.wait_for_nodes()
-    try:
+    node = {"num_cpus": 1, "object_store_memory": 80 * 2**20}
+    with local_cluster([node, node], prefix="fbbench"):  # startup waits, free ports, retries
         config = ppo_config(example_experiment("cartpole_balance"), envs_per_runner=8, num_env_runners=1)
         config = config.fault_tolerance(
             restart_failed_env_runners=True, delay_between_env_runner_restarts_s=0.0
@@ -146,10 +138,6 @@ def cluster_times() -> list[tuple[str, str]]:
             time.sleep(0.1)
         again = time.perf_counter() - killed
         algo.stop()
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
-        shutil.rmtree(folder, ignore_errors=True)
     return [
         ("time to first sample (build + 64 steps)", f"{first:.1f} s"),
         ("killed runner serving again", f"{again:.1f} s"),

@@ -3,6 +3,7 @@ runtime: the vector env over nodes imports it too)."""
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping
 from typing import Any
 
@@ -25,6 +26,32 @@ def autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:
         )
     assert value is not None
     return value
+
+
+def same_step_refusal(name: str, declared: Any) -> str:
+    """Why a vector env in ``declared`` autoreset mode cannot feed RLlib, and what to do instead."""
+    return (
+        f"RLlib's env runner reads vector envs by NEXT_STEP autoreset rules, but this {name} declares "
+        f"autoreset_mode {getattr(declared, 'value', declared)!r}: its episodes would end in the next "
+        f"episode's reset state and lose their first step. Build it with "
+        f"{name}(..., autoreset_mode=AutoresetMode.NEXT_STEP), or register the experiment with "
+        "bridge.env.rllib.register(experiment) (docs/ray.md)"
+    )
+
+
+def refuse_same_step_under_rllib(mode: AutoresetMode, name: str) -> None:
+    """ConfigError when a SAME_STEP vector env is being built by RLlib (an RLlib module calls its
+    constructor, e.g. an env runner over ``register_env(..., lambda cfg: BatchVectorEnv(...))``):
+    RLlib never reads ``metadata["autoreset_mode"]`` and would corrupt every episode silently.
+    Reads the caller frames once, at construction; Ray need not be installed."""
+    if mode is not AutoresetMode.SAME_STEP or "ray.rllib" not in sys.modules:
+        return
+    frame = sys._getframe(1)
+    while frame is not None:
+        if str(frame.f_globals.get("__name__", "")).startswith("ray.rllib."):
+            raise ConfigError(same_step_refusal(name, mode))
+        frame = frame.f_back  # type: ignore[assignment]
+    return
 
 
 def env_seeds(seed: int | list[int | None] | None, n: int) -> list[int | None]:

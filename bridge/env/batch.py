@@ -34,7 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
-from bridge.env.autoreset import env_scenarios
+from bridge.env.autoreset import env_scenarios, refuse_same_step_under_rllib
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
@@ -299,6 +299,7 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         experiment, n_envs, kwargs: as :class:`BatchEnv` (``autoreset`` follows the mode).
         autoreset_mode: ``AutoresetMode.SAME_STEP`` (default) or ``AutoresetMode.NEXT_STEP``
             (or their values ``"SameStep"`` / ``"NextStep"``); in ``metadata["autoreset_mode"]``.
+            RLlib reads vector envs by NEXT_STEP rules: SAME_STEP built by RLlib is refused.
 
     ``infos`` holds per-env arrays ``step`` and ``time_s``. SAME_STEP: for envs whose episode
     ended, the last observation and info in ``final_obs`` / ``final_info`` and the new episode's
@@ -318,6 +319,7 @@ class BatchVectorEnv(VectorEnv[ObsArray, Any, Any]):
         **kwargs: Any,
     ) -> None:
         mode = _autoreset_mode(autoreset_mode)
+        refuse_same_step_under_rllib(mode, "BatchVectorEnv")
         if "autoreset" in kwargs:
             raise ConfigError(
                 "BatchVectorEnv takes autoreset_mode (SAME_STEP or NEXT_STEP), not autoreset; "

@@ -35,7 +35,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
-from bridge.env.autoreset import env_scenarios
+from bridge.env.autoreset import env_scenarios, refuse_same_step_under_rllib
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.vec import RemoteVecEnv, Result
 from bridge.errors import PlantError
@@ -70,6 +70,7 @@ class NodeVectorEnv(VectorEnv[ObsArray, Any, Any]):
         **remote: Any,
     ) -> None:
         mode = _autoreset_mode(autoreset_mode)
+        refuse_same_step_under_rllib(mode, "NodeVectorEnv")
         self.nodes = RemoteVecEnv(experiment, nodes, n_envs=n_envs, **remote)
         self.metadata = {**type(self).metadata, "autoreset_mode": mode}
         self.autoreset_mode = mode

@@ -12,12 +12,19 @@ without an error. So:
   autoreset mode (:func:`check_next_step`), so a SAME_STEP env fails at creation, not silently;
 - :class:`NodeEnvCreator` builds a NEXT_STEP :class:`NodeVectorEnv` instead: each env runner
   drives ``num_envs`` nodes it leases from a pool (``claim``), a dead node replaced by a spare;
+- :func:`register` registers an experiment's env under a stable name, ``fmu_bridge/<name>``
+  (``fmu_bridge/<name>-<version>`` for a version other than v0), for any RLlib or Ray Tune config
+  (``PPOConfig().environment("fmu_bridge/cartpole-balance")``); registered again in a fresh process,
+  it lets ``Algorithm.from_checkpoint`` restore a checkpoint that names it;
 - :func:`algo_config` (PPO or SAC; :func:`ppo_config` for PPO) puts them together.
+
+A SAME_STEP ``BatchVectorEnv`` or ``NodeVectorEnv`` built by RLlib (a stock config over
+``register_env(..., lambda cfg: BatchVectorEnv(...))``) is refused at construction
+(``bridge.env.autoreset.refuse_same_step_under_rllib``), callback or not.
 """
 
 from __future__ import annotations
 
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -27,7 +34,9 @@ from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.algorithms.sac import SACConfig
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
+from bridge.env.autoreset import same_step_refusal
 from bridge.env.batch import BatchVectorEnv
+from bridge.env.fmu_env import FmuEnv
 from bridge.env.node_vector import NodeVectorEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, as_experiment
@@ -43,12 +52,7 @@ def check_next_step(env: Any) -> None:
         mode = None
     if mode is not AutoresetMode.NEXT_STEP:
         name = type(getattr(env, "unwrapped", env)).__name__
-        raise ConfigError(
-            f"RLlib's env runner reads vector envs by NEXT_STEP autoreset rules, but this {name} declares "
-            f"autoreset_mode {getattr(declared, 'value', declared)!r}: its episodes would end in the next "
-            "episode's reset state and lose their first step. Build it with "
-            "autoreset_mode=AutoresetMode.NEXT_STEP (BatchEnvCreator does for BatchVectorEnv)"
-        )
+        raise ConfigError(same_step_refusal(name, declared))
 
 
 class NextStepOnly(RLlibCallback):  # type: ignore[misc]
@@ -59,7 +63,9 @@ class NextStepOnly(RLlibCallback):  # type: ignore[misc]
 
 
 class BatchEnvCreator:
-    """RLlib env creator: a NEXT_STEP :class:`BatchVectorEnv` of ``env_config["num_envs"]`` instances.
+    """RLlib env creator: a NEXT_STEP :class:`BatchVectorEnv` of ``env_config["num_envs"]`` instances
+    (``gym_env_vectorize_mode="vector_entry_point"``), or, under RLlib's default vectorisation
+    (gymnasium's ``SyncVectorEnv``, NEXT_STEP), one :class:`FmuEnv` per call.
 
     Args:
         experiment: an :class:`Experiment` or the path of an experiment YAML file.
@@ -71,12 +77,9 @@ class BatchEnvCreator:
         self.experiment = as_experiment(experiment)
         self.kwargs = {"autoreset_mode": AutoresetMode.NEXT_STEP, **kwargs}
 
-    def __call__(self, env_config: Mapping[str, Any]) -> BatchVectorEnv:
-        if "num_envs" not in env_config:
-            raise ConfigError(
-                "BatchEnvCreator builds a vector env: configure RLlib with "
-                "env_runners(gym_env_vectorize_mode='vector_entry_point', num_envs_per_env_runner=K)"
-            )
+    def __call__(self, env_config: Mapping[str, Any]) -> BatchVectorEnv | FmuEnv:
+        if "num_envs" not in env_config:  # RLlib's default (sync) vectorisation: one env each,
+            return FmuEnv(self.experiment)  # in gymnasium's SyncVectorEnv (NEXT_STEP)
         return BatchVectorEnv(self.experiment, int(env_config["num_envs"]), **self.kwargs)
 
 
@@ -117,6 +120,37 @@ class NodeEnvCreator:
 
 
 ALGORITHMS = {"PPO": PPOConfig, "SAC": SACConfig}
+PREFIX = "fmu_bridge/"
+
+
+def env_name(experiment: Experiment | str | Path) -> str:
+    """The stable name :func:`register` gives the experiment's env: ``fmu_bridge/<name>``, or
+    ``fmu_bridge/<name>-<version>`` for a version other than v0 (``name``: the file's ``name:``)."""
+    exp = as_experiment(experiment)
+    return f"{PREFIX}{exp.name}" + ("" if exp.version == "v0" else f"-{exp.version}")
+
+
+def register(
+    experiment: Experiment | str | Path, *, nodes: str | list[str] | None = None, **env_kwargs: Any
+) -> str:
+    """Register the experiment's env with Ray Tune's registry under :func:`env_name` and return
+    that name: a NEXT_STEP batch env of ``num_envs_per_env_runner`` FMU instances per env runner
+    (:class:`BatchEnvCreator`), or, ``nodes`` given, a NEXT_STEP vector env over that many leased
+    nodes (:class:`NodeEnvCreator`); ``env_kwargs`` go to the creator. Configure RLlib with
+    ``gym_env_vectorize_mode="vector_entry_point"`` (:func:`algo_config` does).
+
+    Registration lives in the process (and its Ray cluster): a fresh process registers again
+    before ``Algorithm.from_checkpoint`` (``agents.rllib_train.restore`` does both for a run).
+    """
+    from ray.tune.registry import register_env
+
+    exp = as_experiment(experiment)
+    creator: Any = (
+        BatchEnvCreator(exp, **env_kwargs) if nodes is None else NodeEnvCreator(exp, nodes, **env_kwargs)
+    )
+    name = env_name(exp)
+    register_env(name, creator)
+    return name
 
 
 def algo_config(
@@ -132,17 +166,9 @@ def algo_config(
     ``envs_per_runner`` FMU instances, or (``nodes`` given) drive ``envs_per_runner`` leased nodes
     (:class:`NodeEnvCreator`), with :class:`NextStepOnly` installed (training settings are left to
     the caller). ``env_kwargs`` go to the creator."""
-    from ray.tune.registry import register_env
-
     if algo not in ALGORITHMS:
         raise ConfigError(f"RLlib algorithm {algo!r}: supported here are {sorted(ALGORITHMS)}")
-    creator: Any = (
-        BatchEnvCreator(experiment, **env_kwargs)
-        if nodes is None
-        else NodeEnvCreator(experiment, nodes, **env_kwargs)
-    )
-    name = f"fmu_bridge_batch_{uuid.uuid4().hex[:12]}"  # the Algorithm takes a registered name
-    register_env(name, creator)
+    name = register(experiment, nodes=nodes, **env_kwargs)
     return (
         ALGORITHMS[algo]()  # type: ignore[no-untyped-call]
         .environment(env=name)

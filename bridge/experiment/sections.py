@@ -91,6 +91,11 @@ class TrainingSection(Strict):
     eval_scenarios: list[str] | None = None
     residual: ResidualSection | None = None
     remote: RemoteSection = RemoteSection()
+    sample_timeout_s: PositiveFloat | None = Field(
+        default=None,
+        description="train --engine rllib: seconds an env runner may take for one sample (RLlib's "
+        "sample_timeout_s; late samples are dropped); unset: as long as the plant takes",
+    )
 
     @property
     def checkpoint_steps(self) -> int:

@@ -3,17 +3,23 @@
 An FMU is native code from someone else. In this process a segfault kills the trainer, an
 endless loop in ``doStep`` hangs it for good and a leak grows without bound. Here the FMU runs
 in a child process (a ``LocalFmuPlant`` there) and every reset and step waits at most
-``timeout_s``: a hung FMU becomes :class:`StepTimeout`, a crash :class:`PlantDied` naming the
-signal (or the exit code of an FMU that ends its process), and a child whose resident memory grows
-by more than ``memory_limit_mb`` after loading (a leak; checked every 32 samples) is stopped with
-:class:`PlantDied` saying so. The limit also holds before the fact: the child's address space is
-capped (``RLIMIT_AS``) at what it had after loading plus twice ``memory_limit_mb``, so one huge
-allocation fails instead of taking the machine's memory. The child leads a process group of its
-own (same session, so the same scheduling group as its parent):
+``timeout_s`` (``model.isolation.timeout``): a hung FMU becomes :class:`StepTimeout`, a crash
+:class:`PlantDied` naming the signal (or the exit code of an FMU that ends its process), and a
+child whose resident memory grows by more than ``memory_limit_mb`` after loading (a leak; checked
+every 32 samples) is stopped with :class:`PlantDied` saying so. The limit also holds before the
+fact: the child's address space is capped (``RLIMIT_AS``) at what it had after loading plus twice
+``memory_limit_mb``, so one huge allocation fails instead of taking the machine's memory. The
+child leads a process group of its own (same session, so the same scheduling group as its parent):
 on a deadline or ``close()`` its whole process group is killed (an FMU that forks leaves nothing
 behind), and a child whose parent dies kills its group too (no orphan burns a core). With
 ``restart=True`` the next ``reset()`` starts a fresh child, so a long training run survives an
 unstable FMU.
+
+Two waits have no deadline, because only the plant knows how long they take: the child's start
+(a fresh interpreter importing fmu-bridge and loading the FMU, slow on a loaded machine) and its first
+reset (the FMU's initialisation, minutes for a large model). Both last as long as the child lives:
+a child that dies is reported at once, one still busy is logged every 30 s. A later reset may
+initialise the FMU again: it may take ``timeout_s`` or four times the first reset, whichever is longer.
 
 Cost: one pipe round trip per sample (see ``benchmarks/bench_env.py --plant isolated``). Use it
 for untrusted or unstable FMUs; the in-process plant stays the default.
@@ -31,6 +37,7 @@ import multiprocessing as mp
 import os
 import signal
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -48,7 +55,8 @@ if TYPE_CHECKING:
     from bridge.plant.system.description import Component
 
 _log = logging.getLogger(__name__)
-_START_TIMEOUT_S = 60.0  # loading an FMU (unpacking, instantiating) in a fresh interpreter
+RESET_MARGIN = 4.0  # a later reset may take this many times the first (measured) one
+_START_REPORT_S = 30.0  # how often a child that is still starting is reported (INFO)
 
 
 class ChildComponent(NamedTuple):
@@ -65,7 +73,8 @@ class IsolatedFmuPlant(Plant):
 
     Args:
         experiment: the experiment (its ``model`` section, as for ``LocalFmuPlant``).
-        timeout_s: the longest a reset or one sample may take before :class:`StepTimeout`.
+        timeout_s: the longest a reset or one sample may take before :class:`StepTimeout` (not
+            the start, nor the first reset of a child, which initialises the FMU).
         memory_limit_mb: resident memory the child may add after loading the FMU (None: no limit).
         restart: start a fresh child at the next ``reset()`` after a hang or a crash.
         component: run this system component in the child instead of the experiment's model.
@@ -140,7 +149,7 @@ class IsolatedFmuPlant(Plant):
         child.close()
         self._conn, self._broken = parent, None
         try:
-            self._call(("hello",), timeout_s=_START_TIMEOUT_S, step=None)
+            self._await_start()
         except PlantDied as exc:
             raise PlantDied(
                 f"{self.name}: the plant's process could not start ({exc.detail}); {_start_hint()}",
@@ -151,8 +160,33 @@ class IsolatedFmuPlant(Plant):
             self._stop()
             raise
         self._rss_start = _rss_bytes(process.pid or 0)
+        self._initialised = False  # its first reset initialises the FMU: no deadline (_await_alive)
         if self._start_file is not None:  # a fresh child starts from the state it was given too
             self._call(("start", *self._start_file), step=None)
+
+    def _await_start(self) -> None:
+        """Wait for the child's first answer for as long as it lives (:meth:`_await_alive`)."""
+        conn = self._conn
+        assert conn is not None
+        try:
+            conn.send(("hello",))
+        except OSError:
+            raise self._died(None) from None
+        self._await_alive("starting", None)
+
+    def _await_alive(self, doing: str, step: int | None) -> FloatArray:
+        """The child's answer, waited for as long as the child lives: a fresh interpreter that
+        imports fmu-bridge and loads the FMU, and the FMU's first initialisation, take what they
+        take (minutes for a large model, longer on a loaded machine), and no deadline the user did
+        not set may end them. A child that dies is reported at once (its end of the pipe closes);
+        one still busy is logged every ``_START_REPORT_S``."""
+        conn = self._conn
+        assert conn is not None
+        waited_s = 0.0
+        while not conn.poll(_START_REPORT_S):
+            waited_s += _START_REPORT_S
+            _log.info("%s: its process is still %s after %.0f s", self.name, doing, waited_s)
+        return self._answer(0.0, step)
 
     def _stop(self) -> None:
         process, conn = self._process, self._conn
@@ -185,13 +219,36 @@ class IsolatedFmuPlant(Plant):
             self.restarts += 1
         self.episode += 1
         self.sample, self.terminated = 0, False
+        message = ("reset", dict(values), None if inputs is None else list(inputs))
         try:
-            outputs = self._call(("reset", dict(values), None if inputs is None else list(inputs)), step=None)
+            if self._initialised:  # a reset may initialise again: as slow as the first, measured
+                outputs = self._call(message, step=None, timeout_s=self._reset_deadline_s())
+            else:
+                outputs = self._first_reset(message)
         except BridgeError as exc:
             self._unusable = f"the last reset failed: {exc}"
             raise
         self._unusable = None
         return outputs
+
+    def _first_reset(self, message: tuple[Any, ...]) -> FloatArray:
+        """The child's first reset initialises the FMU: waited for as long as the child lives."""
+        if self._conn is None:
+            raise self._died(None)
+        try:
+            self._conn.send(message)
+        except OSError:
+            raise self._died(None) from None
+        start = time.perf_counter()
+        outputs = self._await_alive("initialising the FMU", None)
+        self._first_reset_s = time.perf_counter() - start
+        self._initialised = True
+        return outputs
+
+    def _reset_deadline_s(self) -> float:
+        """A later reset's deadline: ``timeout_s``, or ``RESET_MARGIN`` times the first reset
+        (the FMU's initialisation, measured) where that is longer."""
+        return max(self.timeout_s, RESET_MARGIN * self._first_reset_s)
 
     def send(self, inputs: Sequence[float] | None) -> None:
         if self._broken is not None:
@@ -246,6 +303,8 @@ class IsolatedFmuPlant(Plant):
         return self._unusable
 
     _unusable: str | None = None  # the child's own model failed to initialise
+    _initialised = False  # the child has initialised the FMU once (its first reset answered)
+    _first_reset_s = 0.0  # how long that took
 
     def provenance(self) -> dict[str, str]:
         from bridge.fmu import sha256
@@ -299,8 +358,9 @@ class IsolatedFmuPlant(Plant):
         error = self.failure(
             StepTimeout,
             f"no answer within {timeout_s:g} s",
-            "the FMU is stuck in a call; its process was stopped",
-            "raise timeout_s if the model is just slow"
+            "the FMU is stuck in a call, or slower than that; its process was stopped",
+            "if the model is just slow, raise the deadline: model.isolation.timeout in the "
+            "experiment (timeout_s in Python)"
             + ("; the next reset() starts a fresh process" if self.restart else ""),
             step=step,
             time_s=None,

@@ -73,3 +73,27 @@ def test_evaluate_from_the_command_line_shows_the_bar(tmp_path: Path) -> None:
     )  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     assert "2/2 episodes" in " ".join(result.stderr.split())
+
+
+def test_the_eta_follows_the_average_rate_through_rollouts_and_updates() -> None:
+    """PPO's pattern on a clock we drive: 1,000 steps in the first second (a rollout), then 9 s of
+    learning without a step. The ETA is the 9,000 steps left at the run's average speed so far
+    (250, 143, then 100 steps/s), not the rollout's 1,000 steps/s nor the update's none."""
+    from rich.progress import Progress
+
+    from agents.progress import SteadyEta
+
+    now = [0.0]
+    bar = Progress(SteadyEta(), get_time=lambda: now[0], auto_refresh=False)
+    task = bar.add_task("train", total=10_000)
+    column = SteadyEta()
+    assert column.render(bar.tasks[0]).plain == "-:--:--"  # no speed yet
+    seen = []
+    for t in (0.25, 0.5, 0.75, 1.0):  # the rollout: 250 steps every 0.25 s
+        now[0] = t
+        bar.update(task, completed=int(1000 * t))
+    for t in (4.0, 7.0, 10.0):  # the update: no steps
+        now[0] = t
+        bar.update(task, completed=1000)
+        seen.append(column.render(bar.tasks[0]).plain)
+    assert seen == ["0:00:36", "0:01:03", "0:01:30"]

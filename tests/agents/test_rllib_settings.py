@@ -82,9 +82,23 @@ def test_the_documented_subset_maps_onto_sac() -> None:
     assert training_kwargs(decay, 1)[0] == {"actor_lr": schedule, "critic_lr": schedule, "alpha_lr": schedule}
 
 
-def test_the_example_sections_own_schedules_are_refused_where_rllib_has_none() -> None:
-    with pytest.raises(ConfigError, match=r"clip_range: 'lin_0.2' is not a number"):
-        training_kwargs(settings(), runners=1)  # the example's clip_range: lin_0.2
+def test_the_example_sections_own_schedules_map_onto_ppo(caplog: pytest.LogCaptureFixture) -> None:
+    """examples/cartpole_balance.yaml as it is: lin_X learning rate a schedule, lin_X clip range
+    (RLlib's PPO has no clip schedule) its start value, said in the log."""
+    kwargs, _ = training_kwargs(settings(), runners=1)  # lr: lin_0.001, clip_range: lin_0.2
+    assert kwargs["lr"] == [[0, 0.001], [150_000, 0.0]]
+    assert kwargs["clip_param"] == 0.2
+    assert kwargs["train_batch_size_per_learner"] == 32 * 8
+    assert "RLlib's PPO has no clip schedule" in caplog.text
+    decay = training_kwargs(settings(hyperparams={"ent_coef": "lin_0.01"}, timesteps=400), runners=1)[0]
+    assert decay["entropy_coeff"] == [[0, 0.01], [400, 0.0]]
+
+
+def test_sample_timeout_is_a_setting_and_unset_by_default() -> None:
+    assert settings().sample_timeout_s is None  # RLlib's own 60 s would drop a slow plant's samples
+    assert settings(sample_timeout_s=900.0).sample_timeout_s == 900.0
+    with pytest.raises(ConfigError, match="sample_timeout_s"):
+        settings(sample_timeout_s=-1.0)
 
 
 @pytest.mark.parametrize(

@@ -717,6 +717,7 @@ def test_model_names_and_variants() -> None:
         "pi_controller",
         "slow_init",
         "slow_init_late",
+        "slow_plant",
         "stair",
         "typed",
         "typed3",
@@ -741,12 +742,13 @@ def test_model_names_and_variants() -> None:
     assert by_model["feedthrough"] == {("2.0", "cs"), ("3.0", "cs")}
     assert by_model["slow_init"] == {(v, i) for v in ("2.0", "3.0") for i in ("cs", "me")}
     assert by_model["slow_init_late"] == {("2.0", "cs"), ("3.0", "me")}
+    assert by_model["slow_plant"] == {("2.0", "cs"), ("3.0", "cs")}
 
 
 def test_unknown_model_or_variant_lists_what_exists() -> None:
     names = "bouncing_ball, cartpole, dcmotor, feedthrough, gearload, global_state, modelica_names, "
     names += "motor_gearload, "
-    names += "pi_controller, slow_init, slow_init_late, stair, typed, typed3, vehicle"
+    names += "pi_controller, slow_init, slow_init_late, slow_plant, stair, typed, typed3, vehicle"
     with pytest.raises(ConfigError, match=f"available: {names}"):
         models.example_fmu("pendulum")
     with pytest.raises(ConfigError, match=r"available for typed: fmi_version='2.0' interface='cs'"):

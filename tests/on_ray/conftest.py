@@ -4,13 +4,12 @@ with ``FMU_BRIDGE_REQUIRE_RAY=1`` (set by ``.ci/ray``) a missing Ray fails the r
 ``ray_cluster``: two Ray nodes on 127.0.0.1 in this machine (``ray.cluster_utils.Cluster``), one CPU
 and a small object store each, the second with one seat of the licence resource ``SEATS``, in a
 temporary folder of their own (``RAY_TMPDIR``): they never meet another Ray on this machine, and
-shutting them down stops only them."""
+shutting them down stops only them. ``agents.ray_cluster.local_cluster`` starts them: raised
+startup waits, free ports per node and a retry, so they start on a loaded machine."""
 
 from __future__ import annotations
 
 import os
-import shutil
-import tempfile
 from collections.abc import Iterator
 from typing import Any
 
@@ -29,30 +28,10 @@ SEATS = "fmu_test_seats"  # a licence's custom resource: one seat, on the second
 @pytest.fixture(scope="session")
 def ray_cluster() -> Iterator[Any]:
     pytest.importorskip("ray")
-    import ray
-    from ray.cluster_utils import Cluster
+    from agents.ray_cluster import local_cluster
 
-    folder = tempfile.mkdtemp(prefix="fbray", dir="/tmp")  # short: Ray's socket paths must fit
-    saved = {k: os.environ.get(k) for k in ("RAY_TMPDIR", "RAY_ADDRESS")}
-    os.environ["RAY_TMPDIR"] = folder
-    os.environ.pop("RAY_ADDRESS", None)
-    node = {
-        "num_cpus": 1,
-        "object_store_memory": STORE,
-        "node_ip_address": "127.0.0.1",
-        "include_dashboard": False,
-    }
-    cluster = Cluster(initialize_head=True, connect=True, head_node_args=node)
-    try:
-        cluster.add_node(**node, resources={SEATS: 1})  # the only host with the licence's seats
-        cluster.wait_for_nodes()
+    node = {"num_cpus": 1, "object_store_memory": STORE}
+    # the second node is the only host with the licence's seats; startup waits, free ports and
+    # retries for a loaded machine: agents/ray_cluster.py
+    with local_cluster([node, {**node, "resources": {SEATS: 1}}]) as cluster:
         yield cluster
-    finally:
-        ray.shutdown()
-        cluster.shutdown()
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-        shutil.rmtree(folder, ignore_errors=True)

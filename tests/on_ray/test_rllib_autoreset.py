@@ -1,6 +1,6 @@
 """RLlib's own env runner over BatchVectorEnv: with NEXT_STEP every recorded episode starts in its
 drawn initial state, ends in the FMU's terminal state and has every step the FMU took; a SAME_STEP
-env is what RLlib silently corrupts (shown without the guard), and the guard refuses it."""
+env, which RLlib would silently corrupt, is refused when RLlib builds it."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from ray.rllib.algorithms.ppo import PPOConfig
 from ray.rllib.env.single_agent_env_runner import SingleAgentEnvRunner
 
 from bridge.env.batch import BatchVectorEnv
-from bridge.env.rllib import BatchEnvCreator, ppo_config
+from bridge.env.rllib import ppo_config
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
@@ -73,17 +73,21 @@ def test_rllib_env_runner_over_next_step_batch_env_records_whole_episodes(k: int
     assert episode_faults(episodes, names) == []
 
 
-def test_same_step_without_the_guard_corrupts_episodes_and_the_guard_refuses_it() -> None:
+def test_same_step_built_by_rllib_is_refused_with_or_without_the_guard() -> None:
+    """A SAME_STEP batch env would have RLlib record the next episode's reset state as every
+    terminal observation and drop every later first step, silently: built by RLlib it is refused,
+    under a stock config (``register_env`` over ``BatchVectorEnv``, its default mode) too."""
+    from ray.tune.registry import register_env
+
     exp = cartpole()
-    names = BatchVectorEnv(exp, 1).engine.task.output_names
-    unguarded = (
+    register_env("test_user_batch_env", lambda cfg: BatchVectorEnv(exp, int(cfg["num_envs"])))
+    stock = (
         PPOConfig()
-        .environment(env=BatchEnvCreator(exp, autoreset_mode="SameStep"))
+        .environment(env="test_user_batch_env")
         .env_runners(num_envs_per_env_runner=K, gym_env_vectorize_mode="vector_entry_point")
     )
-    faults = episode_faults(sample(unguarded), names)
-    assert any("terminal obs" in f for f in faults), faults  # what RLlib did silently
-    assert any("steps recorded" in f for f in faults), faults
-    assert any("not a reset's" in f for f in faults), faults
+    with pytest.raises(ConfigError, match=r"NEXT_STEP autoreset.*'SameStep'.*autoreset_mode=AutoresetMode"):
+        sample(stock)
     with pytest.raises(ConfigError, match=r"NEXT_STEP autoreset.*'SameStep'"):
         sample(ppo_config(exp, envs_per_runner=K, autoreset_mode="SameStep"))
+    BatchVectorEnv(exp, 2).close()  # built outside RLlib, SAME_STEP stays the default (SB3's)
