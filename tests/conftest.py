@@ -365,6 +365,21 @@ def pytest_configure(config: pytest.Config) -> None:
     counts_dir()
 
 
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tier markers from what each test does (tests/tiers.py); the default run is the fast tier."""
+    from tiers import mark_tiers
+
+    mark_tiers(items)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """A fast-tier test that starts a process fails, naming the marker it needs (tests/tiers.py)."""
+    from tiers import guard_fast_tier
+
+    return (yield from guard_fast_tier(item))
+
+
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
     """reliability.md beside the counts the fuzz and fault tests wrote in this run."""
     from reliability_table import write
