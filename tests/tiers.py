@@ -3,7 +3,8 @@
 ``pytest -q`` runs the fast tier: unit tests and in-process tests on real FMUs. A test leaves it for
 
 - ``integration`` when it starts a process (``subprocess``, a node process, an isolated plant's
-  child, a multiprocessing worker) or opens a Zenoh session (the ``loopback`` router);
+  child, a multiprocessing worker, ``workers=`` more than one) or opens a Zenoh session (the
+  ``loopback`` router);
 - ``slow`` when it trains an agent (``agents.train.train``, the ``train`` command, the session's
   trained ``balancer``);
 - ``ros`` (tests/ros, marked by its conftest) and ``ray`` (tests/on_ray).
@@ -20,9 +21,10 @@ from __future__ import annotations
 import ast
 import functools
 import inspect
+import multiprocessing.util
 import sys
 import textwrap
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from types import FunctionType
 from typing import Any
@@ -82,6 +84,7 @@ def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[...,
         return frozenset(), ()
     names: set[str] = set()
     words: set[str] = set()
+    workers: list[ast.expr] = []  # evaluation workers: processes when more than one
     for node in ast.walk(tree):
         if isinstance(node, ast.Name):
             names.add(node.id)
@@ -89,6 +92,8 @@ def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[...,
             names.add(node.attr)
         elif isinstance(node, ast.Constant) and isinstance(node.value, str):
             words.add(node.value)
+        elif isinstance(node, ast.keyword) and node.arg == "workers":
+            workers.append(node.value)
         elif isinstance(node, ast.keyword) and node.arg is not None:
             if not (isinstance(node.value, ast.Constant) and node.value.value in (False, None)):
                 words.add(node.arg)
@@ -101,6 +106,11 @@ def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[...,
         signals.add("isolate")
     if names & _TRAINING_NAMES or "train" in words:
         signals.add("slow")
+    for value in workers:
+        if isinstance(value, ast.Constant) and isinstance(value.value, int) and value.value > 1:
+            signals.add("integration")
+        elif isinstance(value, ast.Name):
+            signals.add(f"workers={value.id}")  # a parameter of the test: its value decides
     scope = function.__globals__
     called = tuple(
         obj
@@ -130,10 +140,16 @@ def tiers_of(item: pytest.Function) -> set[str]:
     signals: set[str] = set()
     for function in _reached(roots):
         signals |= _direct(function)[0]
+    params = getattr(item, "callspec", None)
+    values = dict(params.params) if params is not None else {}
+    for signal in [s for s in signals if s.startswith("workers=")]:
+        signals.discard(signal)
+        count = values.get(signal.partition("=")[2], 2)  # not a parameter: taken as several
+        if not isinstance(count, int) or count > 1:
+            signals.add("integration")
     if "isolate" in signals:
         signals.discard("isolate")
-        params = getattr(item, "callspec", None)
-        chosen = {k: v for k, v in (params.params.items() if params else ()) if "isolat" in k}
+        chosen = {k: v for k, v in values.items() if "isolat" in k}
         # a parametrised test whose isolate parameter is off runs in process
         if not chosen or any(bool(v) for v in chosen.values()):
             signals.add("integration")
@@ -156,13 +172,23 @@ def in_fast_tier(item: pytest.Item) -> bool:
 
 
 class FastTierGuard:
-    """An audit hook (it cannot be removed, so it checks a flag) that records the processes a
-    fast-tier test starts while it runs."""
+    """Records the processes a fast-tier test starts while it runs: an audit hook (it cannot be
+    removed, so it checks a flag) sees subprocess, posix_spawn and fork; multiprocessing's spawn
+    and forkserver start methods raise no audit event, so the one function both start their
+    processes with is wrapped to be seen too (it still starts them as before)."""
 
     def __init__(self) -> None:
         self.watching = False
         self.started: list[str] = []
         sys.addaudithook(self._hook)
+        start = multiprocessing.util.spawnv_passfds
+
+        def spawnv_passfds(path: str, args: Sequence[str], passfds: Sequence[int]) -> int:
+            if self.watching:
+                self.started.append(f"multiprocessing: {path}")
+            return start(path, args, passfds)
+
+        multiprocessing.util.spawnv_passfds = spawnv_passfds
 
     def _hook(self, event: str, args: tuple[Any, ...]) -> None:
         if self.watching and event in ("subprocess.Popen", "os.posix_spawn", "os.fork"):
