@@ -79,11 +79,14 @@ def test_a_fast_tier_test_that_starts_a_process_fails_and_names_the_marker(pytes
 
             def test_in_process():
                 assert sum(range(4)) == 6
+
+            def test_builds_with_the_compiler():  # an example FMU's first build: a build step
+                start(["gcc", "--version"])
             """
         )
     )
     result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-m", "")
-    result.assert_outcomes(passed=2, failed=2)
+    result.assert_outcomes(passed=3, failed=2)
     result.stdout.fnmatch_lines(
         [
             "*test_hidden_process is in the fast tier but started a process (subprocess.Popen: *"

@@ -22,6 +22,7 @@ import ast
 import functools
 import inspect
 import multiprocessing.util
+import re
 import sys
 import textwrap
 from collections.abc import Callable, Iterator, Sequence
@@ -54,6 +55,9 @@ _PROCESS_NAMES = frozenset(
 )
 # Words in strings or keywords that ask for an isolated plant (a child process): integration.
 _ISOLATE_WORDS = frozenset({"isolate", "--isolate", "isolated"})
+# The C compiler builds an example FMU or a native helper the first time a test needs it (the
+# content-addressed cache keeps it from then on): a build step, not a process under test.
+_COMPILER = re.compile(r"(?:[\w.-]+-)?(?:gcc|cc|clang)(?:-[\d.]+)?")
 # Names whose use trains an agent: slow.
 _TRAINING_NAMES = frozenset({"train", "balancer", "learn"})
 
@@ -191,9 +195,16 @@ class FastTierGuard:
         multiprocessing.util.spawnv_passfds = spawnv_passfds
 
     def _hook(self, event: str, args: tuple[Any, ...]) -> None:
-        if self.watching and event in ("subprocess.Popen", "os.posix_spawn", "os.fork"):
-            program = args[0] if event != "os.fork" else "a fork"
+        if not self.watching or event not in ("subprocess.Popen", "os.posix_spawn", "os.fork"):
+            return
+        program = "a fork" if event == "os.fork" else str(args[0] or _first_word(args[1]))
+        if _COMPILER.fullmatch(Path(program).name) is None:
             self.started.append(f"{event}: {program}")
+
+
+def _first_word(argv: Any) -> str:
+    words = argv.split() if isinstance(argv, str | bytes) else list(argv or ())
+    return str(words[0]) if words else "?"
 
 
 @functools.cache
