@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import EvaluationResult, metric_spec
+from agents.evaluate import EvaluationResult
+from agents.evaluate_cell import metric_spec
 from agents.metrics import aggregate
 from bridge.experiment.config import Experiment
 from bridge.recording.replay_signals import REFERENCE_RGB, agent_colours

@@ -144,7 +144,7 @@ def algo_config(
     name = f"fmu_bridge_batch_{uuid.uuid4().hex[:12]}"  # the Algorithm takes a registered name
     register_env(name, creator)
     return (
-        ALGORITHMS[algo]()  # type: ignore[no-untyped-call]
+        ALGORITHMS[algo]()
         .environment(env=name)
         .env_runners(
             num_env_runners=num_env_runners,

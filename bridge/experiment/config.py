@@ -36,6 +36,7 @@ from bridge.experiment.strict import (
 )
 from bridge.experiment.system import SystemSection
 from bridge.experiment.yaml_text import read_yaml
+from bridge.fmu.vocab import InterfaceChoice
 
 __all__ = [
     "PROFILE_KINDS",
@@ -89,7 +90,7 @@ class ModelSection(Strict):
         default="",
         description="Path to the .fmu, .ssp or .ssd, or example:NAME[:FMI version][:cs|me] (bundled)",
     )
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
+    interface: InterfaceChoice = "auto"
     step_size: PositiveFloat | None = None
     sampling_time: PositiveFloat | None = None
     episode_duration: PositiveFloat

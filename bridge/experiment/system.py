@@ -13,6 +13,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from bridge.experiment.reward import RewardSection
+from bridge.fmu.vocab import InterfaceChoice
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
@@ -34,7 +35,7 @@ class ComponentSection(_Strict):
         description="Path to the .fmu (relative to the experiment file) or example:NAME; may be left "
         "out for a component of the SSP that model.fmu names",
     )
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
+    interface: InterfaceChoice = "auto"
     step_size: PositiveFloat | None = None
     parameters: dict[str, Scalar] = {}
     structural_parameters: dict[str, Annotated[int, Field(ge=0, strict=True)]] = Field(

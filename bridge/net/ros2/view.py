@@ -207,7 +207,7 @@ class RosView:
 
         if len(request) > 64:  # a Trigger request is empty: 4 bytes of CDR header and padding
             self.dropped += 1
-            return interfaces.trigger_response(  # type: ignore[no-any-return]
+            return interfaces.trigger_response(
                 False, f"bad request: std_srvs/srv/Trigger takes no fields, got {len(request)} bytes"
             )
         try:
@@ -218,7 +218,7 @@ class RosView:
         if success and self.follower is not None:
             self.follower.restart()  # lined up with the clock again at its next tick
 
-        return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
+        return interfaces.trigger_response(success, message)
 
     def close(self) -> None:
         self.node.close()
