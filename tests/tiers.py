@@ -5,8 +5,8 @@
 - ``integration`` when it starts a process (``subprocess``, a node process, an isolated plant's
   child, a multiprocessing worker, ``workers=`` more than one) or opens a Zenoh session (the
   ``loopback`` router);
-- ``slow`` when it trains an agent (``agents.train.train``, the ``train`` command, the session's
-  trained ``balancer``);
+- ``slow`` when it trains an agent (``agents.train.train``, the ``train`` and ``sweep`` commands,
+  the session's trained ``balancer``);
 - ``ros`` (tests/ros, marked by its conftest) and ``ray`` (tests/on_ray).
 
 What a test does is read from its code: the test function, the fixtures it requests (and theirs),
@@ -55,11 +55,14 @@ _PROCESS_NAMES = frozenset(
 )
 # Words in strings or keywords that ask for an isolated plant (a child process): integration.
 _ISOLATE_WORDS = frozenset({"isolate", "--isolate", "isolated"})
-# The C compiler builds an example FMU or a native helper the first time a test needs it (the
-# content-addressed cache keeps it from then on): a build step, not a process under test.
-_COMPILER = re.compile(r"(?:[\w.-]+-)?(?:gcc|cc|clang)(?:-[\d.]+)?")
+# Processes that are not under test: the C compiler builds an example FMU or a native helper the
+# first time a test needs it (the content-addressed cache keeps it from then on), and Python's
+# platform module asks `uname -p` once per process for the processor's name (torch and SB3 do).
+_NOT_UNDER_TEST = re.compile(r"(?:[\w.-]+-)?(?:gcc|cc|clang)(?:-[\d.]+)?|uname")
 # Names whose use trains an agent: slow.
 _TRAINING_NAMES = frozenset({"train", "balancer", "learn"})
+# CLI commands that train (run in process with typer's CliRunner or as a subprocess): slow.
+_TRAINING_COMMANDS = frozenset({"train", "sweep"})
 
 
 def _is_ours(obj: object) -> bool:
@@ -108,7 +111,7 @@ def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[...,
         signals.add("integration")
     if words & _ISOLATE_WORDS:
         signals.add("isolate")
-    if names & _TRAINING_NAMES or "train" in words:
+    if names & _TRAINING_NAMES or words & _TRAINING_COMMANDS:
         signals.add("slow")
     for value in workers:
         if isinstance(value, ast.Constant) and isinstance(value.value, int) and value.value > 1:
@@ -198,7 +201,7 @@ class FastTierGuard:
         if not self.watching or event not in ("subprocess.Popen", "os.posix_spawn", "os.fork"):
             return
         program = "a fork" if event == "os.fork" else str(args[0] or _first_word(args[1]))
-        if _COMPILER.fullmatch(Path(program).name) is None:
+        if _NOT_UNDER_TEST.fullmatch(Path(program).name) is None:
             self.started.append(f"{event}: {program}")
 
 
