@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from tiers import build_step
 
 DATA = Path(__file__).parent / "data"
 
@@ -111,7 +112,8 @@ def typed_fmu3() -> Path:
 def _pythonfmu_build(tool: str, source: Path, out: Path) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out)]
-    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
+    with build_step():
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False)
     if result.returncode != 0:
         pytest.fail(f"{tool} could not export {source.name}:\n{result.stdout}\n{result.stderr}")
     return out / f"{source.stem}.fmu"
@@ -163,7 +165,8 @@ def eta_ctrl_fmus() -> dict[str, Path]:
         str(cache),
     ]
     try:
-        subprocess.run(cmd, capture_output=True, timeout=180, check=True)
+        with build_step():
+            subprocess.run(cmd, capture_output=True, timeout=180, check=True)
     except (subprocess.SubprocessError, OSError) as exc:
         pytest.skip(f"eta-ctrl's source distribution could not be downloaded (offline?): {exc}")
     archives = sorted(cache.glob("eta_ctrl-*.tar.gz"))

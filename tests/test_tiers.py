@@ -35,6 +35,15 @@ def test_a_helper_that_starts_a_process_makes_its_test_integration_and_training_
     assert tiers["test_evaluate_reports_episodes_done_of_the_total[2]"] == {"integration"}
 
 
+def test_a_session_fixture_that_exports_an_fmu_is_a_build_step_not_a_process_under_test(
+    pytester: pytest.Pytester,
+) -> None:
+    # pythonfmu_heater2 and eta_ctrl_fmus start the exporter and pip inside `with build_step():`
+    tiers = tiers_by_test(pytester, "tests/fmu/test_thirdparty.py")
+    assert tiers["test_fmi2_string_parameter_and_reset_restore_defaults"] == set()
+    assert tiers["test_dymola_export_cs_matches_fmpy_and_me_agrees"] == set()
+
+
 def test_a_fixture_that_opens_a_zenoh_router_makes_its_test_integration(pytester: pytest.Pytester) -> None:
     tiers = tiers_by_test(pytester, "tests/plant/test_system_clocks.py")
     served = [name for name in tiers if name.startswith("test_") and "[" in name and "node" in name]

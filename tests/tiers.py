@@ -19,6 +19,7 @@ it needs, so a test this reading misses cannot stay in the wrong tier unnoticed.
 from __future__ import annotations
 
 import ast
+import contextlib
 import functools
 import inspect
 import multiprocessing.util
@@ -41,7 +42,6 @@ FAST = "not slow and not integration and not ros and not ray"
 # Names whose use starts a process or a networked session: integration.
 _PROCESS_NAMES = frozenset(
     {
-        "subprocess",
         "Popen",
         "multiprocessing",
         "get_context",
@@ -53,6 +53,11 @@ _PROCESS_NAMES = frozenset(
         "ProcessPoolExecutor",
     }
 )
+# Module functions that start a process (the module's name alone, e.g. in an except clause, does not).
+_STARTS_A_PROCESS = {
+    "subprocess": frozenset({"run", "call", "check_call", "check_output", "getoutput", "getstatusoutput"}),
+    "os": frozenset({"system", "popen", "posix_spawn", "posix_spawnp", "fork", "spawnv", "execv"}),
+}
 # Words in strings or keywords that ask for an isolated plant (a child process): integration.
 _ISOLATE_WORDS = frozenset({"isolate", "--isolate", "isolated"})
 # Processes that are not under test: the C compiler builds an example FMU or a native helper the
@@ -83,6 +88,28 @@ def _tree(function: FunctionType) -> ast.AST | None:
         return None
 
 
+def _walk(tree: ast.AST) -> Iterator[ast.AST]:
+    """Every node of ``tree`` but those inside ``with build_step():`` (a build, not under test)."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        if isinstance(node, ast.With | ast.AsyncWith) and any(
+            isinstance(i.context_expr, ast.Call) and _dotted(i.context_expr.func).endswith("build_step")
+            for i in node.items
+        ):
+            continue
+        yield node
+        todo.extend(ast.iter_child_nodes(node))
+
+
+def _dotted(node: ast.AST) -> str:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        return f"{_dotted(node.value)}.{node.attr}"
+    return ""
+
+
 @functools.cache
 def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[..., Any], ...]]:
     """The signals in one function's own code, and the functions of tests/ it refers to."""
@@ -92,11 +119,13 @@ def _direct(function: FunctionType) -> tuple[frozenset[str], tuple[Callable[...,
     names: set[str] = set()
     words: set[str] = set()
     workers: list[ast.expr] = []  # evaluation workers: processes when more than one
-    for node in ast.walk(tree):
+    for node in _walk(tree):
         if isinstance(node, ast.Name):
             names.add(node.id)
         elif isinstance(node, ast.Attribute):
             names.add(node.attr)
+            if node.attr in _STARTS_A_PROCESS.get(_dotted(node.value), ()):
+                names.add("Popen")  # subprocess.run(...), os.system(...): a process
         elif isinstance(node, ast.Constant) and isinstance(node.value, str):
             words.add(node.value)
         elif isinstance(node, ast.keyword) and node.arg == "workers":
@@ -213,6 +242,18 @@ def _first_word(argv: Any) -> str:
 @functools.cache
 def _guard() -> FastTierGuard:
     return FastTierGuard()  # one per process: an audit hook stays for good
+
+
+@contextlib.contextmanager
+def build_step() -> Iterator[None]:
+    """Processes started inside are a build step (an FMU exported by a tool, a download), not
+    processes under test: a session fixture asked for in a test's body builds while the test runs."""
+    guard = _guard()
+    watching, guard.watching = guard.watching, False
+    try:
+        yield
+    finally:
+        guard.watching = watching
 
 
 def guard_fast_tier(item: pytest.Item) -> Iterator[None]:
