@@ -61,9 +61,10 @@ _STARTS_A_PROCESS = {
 # Words in strings or keywords that ask for an isolated plant (a child process): integration.
 _ISOLATE_WORDS = frozenset({"isolate", "--isolate", "isolated"})
 # Processes that are not under test: the C compiler builds an example FMU or a native helper the
-# first time a test needs it (the content-addressed cache keeps it from then on), and Python's
-# platform module asks `uname -p` once per process for the processor's name (torch and SB3 do).
-_NOT_UNDER_TEST = re.compile(r"(?:[\w.-]+-)?(?:gcc|cc|clang)(?:-[\d.]+)?|uname")
+# first time a test needs it (the content-addressed cache keeps it from then on); Python's
+# platform module asks `uname -p` once per process for the processor's name (torch and SB3 do),
+# and ctypes.util.find_library asks `ldconfig -p` where a shared library is.
+_NOT_UNDER_TEST = re.compile(r"(?:[\w.-]+-)?(?:gcc|cc|clang)(?:-[\d.]+)?|uname|ldconfig(?:\.real)?")
 # Names whose use trains an agent: slow.
 _TRAINING_NAMES = frozenset({"train", "balancer", "learn"})
 # CLI commands that train (run in process with typer's CliRunner or as a subprocess): slow.
