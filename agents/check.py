@@ -212,7 +212,7 @@ class _FmuActing:
 def _runtime(runtime: str, run: Path, run_dir: Path, experiment: Experiment) -> Any:
     if runtime == "fmu":
         return _FmuActing(_FmuRuntime(run_dir))
-    from agents.runtime import load_policy
+    from agents.policies import load_policy
 
     settings = DeploySettings(runtime=runtime, timeout_s=3600.0)  # type: ignore[arg-type]  # checked
     info = model_info_for(experiment, run_dir, None)

@@ -8,6 +8,8 @@ from typing import Annotated, Any
 import typer
 from rich.console import Console
 
+from bridge.cli.options import ZenohModeOpt
+
 console = Console()
 
 
@@ -70,16 +72,6 @@ def tune_cmd(
         f"({len(result.evaluations)} evaluations, {result.wall_time_s:.0f} s): {best}"
     )
     console.print(f"experiment: {target}; tuning record: {report}")
-
-
-ZenohModeOpt = Annotated[
-    str | None,
-    typer.Option(
-        "--zenoh-mode",
-        help="client (all traffic through the router) or peer; default: client when only "
-        "--connect is given (a router), else peer.",
-    ),
-]
 
 
 def export_onnx_cmd(

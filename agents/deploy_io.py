@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_experiment, model_info_for
-from agents.runtime import load_policy
+from agents.policies import load_policy
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
 from bridge.net.ros2 import cdr

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
-from agents.runtime import load_policy
+from agents.policies import load_policy
 from bridge.errors import BridgeError, ConfigError
 from bridge.experiment.validate import check_experiment
 from bridge.net.ros2 import cdr

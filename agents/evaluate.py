@@ -18,11 +18,12 @@ from typing import Any
 
 import numpy as np
 
-from agents.metrics import MetricSpec, Trace, compute
+from agents.evaluate_cell import Cell, baseline_settings, metric_spec
+from agents.metrics import Trace, compute
 from agents.policies import Policy, episode_stats, make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
-from bridge.experiment.config import Experiment, load_experiment
+from bridge.experiment.config import load_experiment
 
 _log = logging.getLogger(__name__)
 NOMINAL = "nominal"  # the scenario of an experiment that defines none (the sampler's name)
@@ -35,33 +36,6 @@ class EvaluationResult:
     agents: list[str] = field(default_factory=list)
     scenarios: list[str] = field(default_factory=list)
     recordings: list[Path] = field(default_factory=list)
-
-
-def metric_spec(experiment: Experiment) -> MetricSpec:
-    """Metrics from ``evaluation.metrics``; tracking pairs default to the reward's tracking terms."""
-    config = experiment.evaluation.metrics
-    tracking = list(config.tracking) or [
-        (t.tracking.output, t.tracking.reference) for t in experiment.reward.terms if t.tracking
-    ]
-    from bridge.task.core import load_callable
-
-    return MetricSpec(
-        tracking=tracking,
-        effort=list(experiment.actions.inputs if config.effort is None else config.effort),
-        constraints=dict(config.constraints),
-        success=config.success,
-        user=[load_callable(path, "evaluation.metrics.user") for path in config.user],
-        band=config.settling_band,
-        duration_s=experiment.model.episode_duration,
-        scenario_durations={
-            name: sc.episode_duration for name, sc in experiment.scenarios.items() if sc.episode_duration
-        },
-    )
-
-
-def baseline_settings(experiment: Experiment) -> dict[str, dict[str, Any]]:
-    """``evaluation.baselines`` as the keys each gives (what ``make_policy`` takes)."""
-    return {name: spec.settings() for name, spec in experiment.evaluation.baselines.items()}
 
 
 def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Trace:
@@ -93,17 +67,6 @@ def run_episode(env: Any, policy: Policy, seed: int, scenario: str | None) -> Tr
         scenario=name,
         extra=episode_stats(policy),
     )
-
-
-@dataclass(frozen=True)
-class Cell:
-    experiment: Path
-    version: str | None
-    agent: str
-    agent_name: str
-    scenario: str | None
-    seeds: tuple[int, ...]
-    record_dir: Path | None
 
 
 def run_cell(

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import Cell, baseline_settings, metric_spec
+from agents.evaluate_cell import Cell, baseline_settings, metric_spec
 from agents.metrics import Trace, compute
 from agents.policies import Policy, Sb3Policy, episode_stats, make_policy
 from bridge.env.batch import BatchEnv
@@ -58,16 +58,6 @@ def _policies(cell: Cell, experiment: Experiment, n: int) -> list[Policy]:
     if isinstance(first, Sb3Policy) and not first.residual:
         return [first]  # stateless: one model acts on the batch
     return [first] + [make_policy(cell.agent, baselines, name=cell.agent_name) for _ in range(n - 1)]
-
-
-def run_batch(experiment: Experiment, cell: Cell, seeds: Sequence[int]) -> list[Trace]:
-    """One episode per seed, all in one batch; the traces in seed order."""
-    n = len(seeds)
-    engine = BatchEnv(experiment, n, autoreset=False)
-    try:
-        return _run(engine, _policies(cell, experiment, n), seeds, cell.scenario)
-    finally:
-        engine.close()
 
 
 def _run(engine: BatchEnv, policies: list[Policy], seeds: Sequence[int], scenario: str | None) -> list[Trace]:

@@ -14,15 +14,19 @@ import logging
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from agents.run_state import read_run
+from agents.runtime import OnnxPolicy
 from bridge.errors import ConfigError
 from bridge.task.core import Task
 from bridge.task.fixed import physical_action, start_values, zero_values
+
+if TYPE_CHECKING:
+    from bridge.experiment.config import Experiment
 
 _log = logging.getLogger(__name__)
 
@@ -305,8 +309,6 @@ class Sb3Policy:
     def reset(self, task: Task, seed: int | None) -> None:
         self._task = task
         if self.residual:
-            from agents.residual import baseline_from_run
-
             self._baseline = baseline_from_run(self.residual, task.experiment)
             self._baseline.reset(task, seed)
 
@@ -320,8 +322,6 @@ class Sb3Policy:
     def act(self, obs: Any, signals: Mapping[str, float]) -> Any:
         action, _ = self.model.predict(self.normalise(obs), deterministic=True)
         if self._baseline is not None and self.residual is not None:
-            from agents.residual import combine
-
             return combine(self._task, self._baseline, signals, action, float(self.residual["scale"]))
         return action
 
@@ -417,8 +417,6 @@ def make_policy(spec: str, experiment_baselines: Mapping[str, Any], *, name: str
         return PythonPolicy(name or spec, _import(spec.partition(":")[2], spec))
     path = Path(spec)
     if rllib_run(path):  # trained on RLlib: its ONNX export acts
-        from agents.runtime import OnnxPolicy
-
         return OnnxPolicy(path, name or path.name)
     if path.exists():
         return Sb3Policy(path, name)
@@ -442,6 +440,54 @@ def baseline(name: str, config: Mapping[str, Any]) -> Policy:
     raise ConfigError(
         f"evaluation.baselines.{name}: type {kind!r} is unknown; use pid, lqr, mpc, constant or python"
     )
+
+
+def load_policy(path: Path, runtime: str, experiment: Any = None) -> Any:
+    """The deployed policy of a run: ``torch`` (stable-baselines3), ``onnx`` (onnxruntime), ``fmu``
+    (the exported policy FMU), or ``baseline``: ``path`` names one of the experiment's
+    ``evaluation.baselines`` (pid, lqr, mpc)."""
+    if runtime == "baseline":
+        baselines = experiment.evaluation.baselines if experiment is not None else {}
+        if str(path) not in baselines:
+            raise ConfigError(
+                f"--runtime baseline: {str(path)!r} is not in evaluation.baselines of the experiment "
+                f"({sorted(baselines) or 'none defined'}); pass the experiment with --config"
+            )
+        return baseline(str(path), baselines[str(path)].settings())
+    if runtime == "onnx":
+        return OnnxPolicy(path)
+    if runtime == "fmu":
+        from agents.export.fmu_runner import FmuAgentPolicy
+
+        return FmuAgentPolicy(path)
+    if runtime == "torch":
+        return Sb3Policy(path)
+    raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx, fmu or baseline")
+
+
+Baseline = Pid | ModelBased
+
+
+def physical_inputs(baseline: Baseline, task: Task, signals: Mapping[str, float]) -> list[float]:
+    del task
+    return baseline.inputs(signals)
+
+
+def combine(task: Task, baseline: Any, signals: Mapping[str, float], residual: Any, scale: float) -> Any:
+    """The env action for baseline inputs plus ``scale`` times the residual action."""
+    base = np.asarray(physical_inputs(baseline, task, signals))
+    return task.action_for_inputs(base + scale * np.clip(np.asarray(residual, dtype=np.float64), -1.0, 1.0))
+
+
+def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Baseline:
+    del experiment
+    return residual_baseline(residual)
+
+
+def residual_baseline(residual: Mapping[str, Any]) -> Baseline:
+    made = baseline(str(residual["baseline"]), residual["config"])
+    assert isinstance(made, (Pid, ModelBased))
+    return made
 
 
 def _import(path: str, key: str) -> Callable[..., Any]:

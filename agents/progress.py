@@ -84,7 +84,7 @@ def train_progress(total: int, console: Console | None = None) -> Any:
     env steps per second of wall time, elapsed, ETA (``.done``: the steps it saw)."""
     from stable_baselines3.common.callbacks import BaseCallback
 
-    class TrainProgress(BaseCallback):  # type: ignore[misc]
+    class TrainProgress(BaseCallback):
         """A bar over the steps that will really run: done/total, env steps/s of wall time, elapsed, ETA."""
 
         def __init__(self, total: int, console: Console | None = None) -> None:

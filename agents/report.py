@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import EvaluationResult, metric_spec
+from agents.evaluate import EvaluationResult
+from agents.evaluate_cell import metric_spec
 from agents.metrics import aggregate
 from agents.stats import describe, interval_text, paired_differences
 from bridge.experiment.config import Experiment

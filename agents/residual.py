@@ -13,35 +13,11 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
-from agents.policies import ModelBased, Pid, baseline
+from agents.policies import combine, residual_baseline
 from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment
 from bridge.experiment.sections import ResidualSection
 from bridge.task.core import Task
-
-Baseline = Pid | ModelBased
-
-
-def physical_inputs(baseline: Baseline, task: Task, signals: Mapping[str, float]) -> list[float]:
-    del task
-    return baseline.inputs(signals)
-
-
-def combine(task: Task, baseline: Any, signals: Mapping[str, float], residual: Any, scale: float) -> Any:
-    """The env action for baseline inputs plus ``scale`` times the residual action."""
-    base = np.asarray(physical_inputs(baseline, task, signals))
-    return task.action_for_inputs(base + scale * np.clip(np.asarray(residual, dtype=np.float64), -1.0, 1.0))
-
-
-def baseline_from_run(residual: Mapping[str, Any], experiment: Experiment) -> Baseline:
-    del experiment
-    return _baseline(residual)
-
-
-def _baseline(residual: Mapping[str, Any]) -> Baseline:
-    made = baseline(str(residual["baseline"]), residual["config"])
-    assert isinstance(made, (Pid, ModelBased))
-    return made
 
 
 def residual_setup(experiment: Experiment, residual: ResidualSection) -> dict[str, Any]:
@@ -70,7 +46,7 @@ class ResidualWrapper(gym.Wrapper[Any, Any, Any, Any]):
         super().__init__(env)
         self._residual = residual
         self._scale = float(residual["scale"])
-        self._baseline = _baseline(residual)
+        self._baseline = residual_baseline(residual)
         self._task: Task = env.unwrapped.task  # type: ignore[attr-defined]
         n = len(self._task.action_inputs)
         self.action_space = gym.spaces.Box(-1.0, 1.0, shape=(n,), dtype=np.float32)

@@ -20,33 +20,6 @@ from bridge.errors import ConfigError, DependencyMissing
 METADATA_KEY = "fmu_bridge"  # the same key as agents.export.onnx (not imported: that module needs torch)
 
 
-def load_policy(path: Path, runtime: str, experiment: Any = None) -> Any:
-    """The deployed policy of a run: ``torch`` (stable-baselines3), ``onnx`` (onnxruntime), ``fmu``
-    (the exported policy FMU), or ``baseline``: ``path`` names one of the experiment's
-    ``evaluation.baselines`` (pid, lqr, mpc)."""
-    if runtime == "baseline":
-        from agents.policies import baseline
-
-        baselines = experiment.evaluation.baselines if experiment is not None else {}
-        if str(path) not in baselines:
-            raise ConfigError(
-                f"--runtime baseline: {str(path)!r} is not in evaluation.baselines of the experiment "
-                f"({sorted(baselines) or 'none defined'}); pass the experiment with --config"
-            )
-        return baseline(str(path), baselines[str(path)].settings())
-    if runtime == "onnx":
-        return OnnxPolicy(path)
-    if runtime == "fmu":
-        from agents.export.fmu_runner import FmuAgentPolicy
-
-        return FmuAgentPolicy(path)
-    if runtime == "torch":
-        from agents.policies import Sb3Policy
-
-        return Sb3Policy(path)
-    raise ConfigError(f"--runtime {runtime!r} is unknown; use torch, onnx, fmu or baseline")
-
-
 def onnx_file(path: Path) -> Path:
     """``policy.onnx`` of a run directory, or the given ``.onnx`` file."""
     if path.is_file() and path.suffix == ".onnx":

@@ -27,8 +27,6 @@ import yaml
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 
-MEASURED = ("mean_return", "std_return", "mean_length", "timesteps")
-
 
 @dataclass(frozen=True)
 class SweepPoint:

@@ -49,7 +49,7 @@ class TrainResult:
     model_path: Path
 
 
-class ScenarioCycle(gym.Wrapper):  # type: ignore[type-arg]
+class ScenarioCycle(gym.Wrapper):
     """For evaluation envs: cycles through held-out scenarios on reset."""
 
     def __init__(self, env: Any, scenarios: list[str]) -> None:

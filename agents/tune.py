@@ -22,7 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.evaluate import baseline_settings, metric_spec, run_episode
+from agents.evaluate import run_episode
+from agents.evaluate_cell import baseline_settings, metric_spec
 from agents.metrics import compute
 from agents.policies import baseline
 from bridge.env.fmu_env import FmuEnv

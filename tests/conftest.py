@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import pytest
+from tiers import build_step
 
 DATA = Path(__file__).parent / "data"
 
@@ -119,7 +120,8 @@ def _pythonfmu_build(
 ) -> Path:
     out.mkdir(parents=True, exist_ok=True)
     cmd = [sys.executable, "-m", tool, "build", "-f", str(source), "-d", str(out), *flags, *map(str, files)]
-    result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False, env=env)
+    with build_step():
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=False, env=env)
     if result.returncode != 0:
         pytest.fail(f"{tool} could not export {source.name}:\n{result.stdout}\n{result.stderr}")
     return out / f"{source.stem}.fmu"
@@ -192,7 +194,8 @@ def eta_ctrl_fmus() -> dict[str, Path]:
         str(cache),
     ]
     try:
-        subprocess.run(cmd, capture_output=True, timeout=180, check=True)
+        with build_step():
+            subprocess.run(cmd, capture_output=True, timeout=180, check=True)
     except (subprocess.SubprocessError, OSError) as exc:
         pytest.skip(f"eta-ctrl's source distribution could not be downloaded (offline?): {exc}")
     archives = sorted(cache.glob("eta_ctrl-*.tar.gz"))
@@ -392,6 +395,21 @@ def pytest_configure(config: pytest.Config) -> None:
     from reliability_table import counts_dir
 
     counts_dir()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tier markers from what each test does (tests/tiers.py); the default run is the fast tier."""
+    from tiers import mark_tiers
+
+    mark_tiers(items)
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_call(item: pytest.Item) -> Iterator[None]:
+    """A fast-tier test that starts a process fails, naming the marker it needs (tests/tiers.py)."""
+    from tiers import guard_fast_tier
+
+    return (yield from guard_fast_tier(item))
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:

@@ -40,8 +40,9 @@ def counts_dir() -> Path:
 HEADER = """# Reliability: hostile input and faults, counted
 
 Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
-counts); regenerate with `FMU_BRIDGE_WRITE_RELIABILITY=1 pytest -q` (a plain test run writes its
-counts and this table to a temporary folder) or `python tests/reliability_table.py`. Every row
+counts); regenerate with `FMU_BRIDGE_WRITE_RELIABILITY=1 pytest -q -m ""` (every tier: the node
+fuzz and fault tests are integration tests; a plain test run writes its counts and this table to
+a temporary folder) or `python tests/reliability_table.py`. Every row
 asserts, in its test, that there were zero tracebacks, zero hangs and nothing silently wrong.
 
 | test | what was thrown at it | outcome | tracebacks | hangs | silently wrong |

@@ -14,23 +14,12 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 
+from agents.export.ops import FloatArray, Op, network_ops
 from bridge.errors import ConfigError
 
-FloatArray = npt.NDArray[np.float64]
 Head = Literal["clip", "squash", "unscale", "unsquash", "argmax"]
-ACTIVATIONS = ("tanh", "relu", "elu")
 _HEADS: dict[str, Head] = {"PPO": "clip", "A2C": "clip", "SAC": "squash", "TD3": "unscale", "DQN": "argmax"}
-
-
-@dataclass(frozen=True)
-class Op:
-    """One step of the network: ``linear`` (weight ``(out, in)``, bias) or an activation."""
-
-    kind: str
-    weight: FloatArray | None = None
-    bias: FloatArray | None = None
 
 
 @dataclass
@@ -85,30 +74,6 @@ def actor_modules(model: Any, algo: str) -> list[Any]:
     if algo == "DQN":
         return [model.q_net.features_extractor, model.q_net.q_net]
     raise ConfigError(f"algorithm {algo!r} cannot be exported; supported: {sorted(_HEADS)}")
-
-
-def network_ops(modules: list[Any]) -> list[Op]:
-    """Flatten the modules into linear layers and activations; anything else is an error."""
-    from torch import nn
-
-    ops: list[Op] = []
-    pending = list(modules)
-    while pending:
-        module = pending.pop(0)
-        if isinstance(module, nn.Sequential) or type(module).__name__ == "FlattenExtractor":
-            pending[:0] = list(module.children())
-        elif isinstance(module, nn.Linear):
-            weight = module.weight.detach().double().numpy()
-            bias = module.bias.detach().double().numpy() if module.bias is not None else np.zeros(len(weight))
-            ops.append(Op("linear", weight, bias))
-        elif isinstance(module, nn.Tanh | nn.ReLU) or (isinstance(module, nn.ELU) and module.alpha == 1.0):
-            ops.append(Op(type(module).__name__.lower()))
-        elif not isinstance(module, nn.Flatten | nn.Identity):
-            raise ConfigError(
-                f"layer {type(module).__name__} cannot be exported to C: policies must be MLPs of "
-                f"Linear layers and {', '.join(ACTIVATIONS)} activations (SB3's MlpPolicy)"
-            )
-    return ops
 
 
 def load_parts(run: Path) -> tuple[PolicyParts, Any]:

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.export.extract import Op, network_ops
+from agents.export.ops import Op, network_ops
 from bridge.errors import ConfigError
 
 POLICY_FILE = "rllib_policy.npz"

@@ -97,7 +97,7 @@ def info(
 def _header(header: Any) -> dict[str, Any]:
     from dataclasses import asdict
 
-    return asdict(header)  # type: ignore[no-any-return]
+    return asdict(header)
 
 
 def register(app: typer.Typer) -> None:

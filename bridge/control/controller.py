@@ -201,4 +201,4 @@ class LinearController:
         j = min(len(x_star) - 1, len(m.preview))
         changes = x_star[:j] - x_star[1 : j + 1]
         feedforward = np.einsum("jmn,jn->m", m.preview[:j], changes) if j else 0.0
-        return -m.k @ state - feedforward  # type: ignore[no-any-return]
+        return -m.k @ state - feedforward

@@ -22,7 +22,8 @@ def dare(a: Matrix, b: Matrix, q: Matrix, r: Matrix, *, tol: float = 1e-12, max_
         if not np.all(np.isfinite(hk)):
             break
         if converged:
-            return 0.5 * (hk + hk.T)
+            symmetric: Matrix = 0.5 * (hk + hk.T)
+            return symmetric
     raise ConfigError(
         "the Riccati equation has no stabilising solution: check that every unstable mode is "
         "controlled by the inputs and weighted in q (the states, inputs and weights of the design)"

@@ -1,15 +1,24 @@
-"""What the vector envs share about Gymnasium's autoreset modes, per-env seeds and scenarios (no FMU
-runtime: the vector env over nodes imports it too)."""
+"""What the vector envs share about Gymnasium's autoreset modes, per-env seeds and scenarios, and
+what one env's error does to the batch (no FMU runtime: the vector env over nodes imports it too)."""
 
 from __future__ import annotations
 
 import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, Literal, cast, get_args
 
 from gymnasium.vector import AutoresetMode
 
 from bridge.errors import ConfigError
+
+OnError = Literal["raise", "truncate"]
+
+
+def on_error_mode(on_error: str) -> OnError:
+    """``on_error`` if a vector env here offers it, else a ConfigError."""
+    if on_error in get_args(OnError):
+        return cast(OnError, on_error)
+    raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
 
 
 def autoreset_mode(mode: AutoresetMode | str) -> AutoresetMode:

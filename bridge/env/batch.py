@@ -25,7 +25,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -33,8 +33,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from bridge.env.autoreset import OnError, env_scenarios, on_error_mode
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
-from bridge.env.autoreset import env_scenarios, refuse_same_step_under_rllib
+from bridge.env.autoreset import refuse_same_step_under_rllib
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
@@ -46,7 +47,6 @@ from bridge.task.batch import BatchTask
 from bridge.task.core import NonFiniteOutputs
 
 _log = logging.getLogger(__name__)
-OnError = Literal["raise", "truncate"]
 ObsArray = npt.NDArray[np.float32]
 
 
@@ -75,10 +75,8 @@ class BatchEnv:
         on_error: OnError = "truncate",
         autoreset: bool = True,
     ) -> None:
-        if on_error not in ("raise", "truncate"):
-            raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
         self.experiment = exp = as_experiment(experiment, version)
-        self.n, self.on_error, self.autoreset = n_envs, on_error, autoreset
+        self.n, self.on_error, self.autoreset = n_envs, on_error_mode(on_error), autoreset
         self.active = np.ones(n_envs, dtype=bool)
         _check_once_per_process(exp, n_envs)
         self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)

@@ -90,7 +90,7 @@ def draw_cartpole(
     """
     _check_cartpole(x, theta, x_limit, pole_length_m, width=width, height=height)
     geometry = _layout(width, height, float(x_limit), float(pole_length_m))
-    image = _background(width, height, geometry.track_y).copy()
+    image: Image = _background(width, height, geometry.track_y).copy()
     track = geometry.track_y
     # Far-off positions are clamped so pixel arithmetic stays small; the cart is then off-picture.
     cart_x = min(max(geometry.centre_x + x * geometry.scale_px_per_m, -2.0 * width), 3.0 * width)

@@ -170,7 +170,7 @@ def algo_config(
         raise ConfigError(f"RLlib algorithm {algo!r}: supported here are {sorted(ALGORITHMS)}")
     name = register(experiment, nodes=nodes, **env_kwargs)
     return (
-        ALGORITHMS[algo]()  # type: ignore[no-untyped-call]
+        ALGORITHMS[algo]()
         .environment(env=name)
         .env_runners(
             num_env_runners=num_env_runners,

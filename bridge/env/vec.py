@@ -23,11 +23,12 @@ import threading
 import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from bridge.env.autoreset import OnError, on_error_mode
 from bridge.env.fmu_env import FmuEnv
 from bridge.env.remote import RemoteFmuEnv
 from bridge.env.sb3_vec import Sb3VecEnv
@@ -39,7 +40,6 @@ from bridge.net.remote import list_nodes
 from bridge.net.transport import ZenohOptions, open_session
 
 _log = logging.getLogger(__name__)
-OnError = Literal["raise", "truncate"]
 Result = tuple[Any, float, bool, bool, dict[str, Any]]
 
 
@@ -55,10 +55,8 @@ class PlantVecEnv(Sb3VecEnv):
         super().__init__()
         if not envs:
             raise ConfigError("a vector env needs at least one env")
-        if on_error not in ("raise", "truncate"):
-            raise ConfigError(f"on_error must be 'raise' or 'truncate', got {on_error!r}")
         self.envs: list[FmuEnv] = list(envs)
-        self.on_error = on_error
+        self.on_error = on_error_mode(on_error)
         self.num_envs = len(self.envs)
         first = self.envs[0]
         self.observation_space, self.action_space = first.observation_space, first.action_space

@@ -37,6 +37,7 @@ from bridge.experiment.strict import (
 )
 from bridge.experiment.system import SystemSection
 from bridge.experiment.yaml_text import read_yaml
+from bridge.fmu.vocab import InterfaceChoice
 
 __all__ = [
     "PROFILE_KINDS",

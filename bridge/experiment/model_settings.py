@@ -13,6 +13,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from bridge.fmu.vocab import InterfaceChoice
+
 from bridge.experiment.strict import FiniteFloat, PositiveFloat, Strict, invalid
 
 Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
@@ -32,7 +34,7 @@ class ModelSettings(Strict):
         default="",
         description="Path to the .fmu (relative to the experiment file) or example:NAME",
     )
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
+    interface: InterfaceChoice = "auto"
     step_size: PositiveFloat | None = None
     parameters: dict[str, Scalar] = {}
     start_values: dict[str, Scalar] = {}

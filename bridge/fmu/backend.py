@@ -229,10 +229,6 @@ def _suffix() -> str:
     return str(fmpy.sharedLibraryExtension)
 
 
-def _bool_false(v: Any) -> bool:
-    return not bool(v) or v == b"\x00"
-
-
 class Fmi1Backend(Backend):
     major = 1
 
@@ -311,7 +307,7 @@ class Fmi1Backend(Backend):
             self.functions["fmi1DoStep"], ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_char
         )
         backend = self
-        return lambda t, h: fn(backend.component, t, h, b"\x01")  # type: ignore[no-any-return]
+        return lambda t, h: fn(backend.component, t, h, b"\x01")
 
 
 class Fmi2Backend(Backend):
@@ -370,7 +366,7 @@ class Fmi2Backend(Backend):
 
     def stepper(self) -> Callable[[float, float], int]:
         fn, backend, true = self.functions["fmi2DoStep"], self, fmi2.fmi2True
-        return lambda t, h: fn(backend.component, t, h, true)  # type: ignore[no-any-return]
+        return lambda t, h: fn(backend.component, t, h, true)
 
     def terminated_after_discard(self) -> bool:
         flag = ctypes.c_int(0)

@@ -585,7 +585,8 @@ class ClockedOutputs:
                     f"from its clock's first tick on, or leave it out of the observations"
                 )
             values[i] = float(value[index])
-        return values.copy()
+        copied: npt.NDArray[np.float64] = values.copy()
+        return copied
 
     def read_into(self, out: npt.NDArray[np.float64]) -> None:
         out[:] = self.read()

@@ -20,7 +20,6 @@ from bridge.errors import BridgeError
 _log = logging.getLogger(__name__)
 _LOCK = threading.Lock()
 _state = {"installed": False}
-EXIT_CODE = 70  # EX_SOFTWARE
 NOTE = (
     "fmu-bridge: native code (an FMU loaded in this process) called exit() while Python was "
     "running; the process ends with code 70 instead of the status it asked for when that was 0. "

@@ -990,7 +990,7 @@ class Model:
 
 def _choose_interface(info: ModelInfo, interface: str) -> Interface:
     if interface == "auto":  # co-simulation, else model exchange, else scheduled execution
-        return next(i for i in ("cs", "me", "se") if i in info.interfaces)  # type: ignore[return-value]
+        return next(i for i in ("cs", "me", "se") if i in info.interfaces)
     if interface not in ("cs", "me", "se"):
         raise ConfigError(f"interface {interface!r} is unknown; expected 'cs', 'me', 'se' or 'auto'")
     if interface not in info.interfaces:
@@ -998,7 +998,7 @@ def _choose_interface(info: ModelInfo, interface: str) -> Interface:
             f"{info.path.name} has no {interface.upper()} interface; it provides "
             f"{', '.join(i.upper() for i in info.interfaces)} [{info.path}]"
         )
-    return interface  # type: ignore[return-value]
+    return interface
 
 
 def _check_solver(info: ModelInfo, interface: Interface, solver: str, substeps: int) -> tuple[Solver, int]:

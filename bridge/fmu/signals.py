@@ -151,9 +151,11 @@ class SignalGroup:
             status = block.get(component, block.vrs, block.n, block.ptr, *block.nargs)
             if status > WARNING:
                 self._fail("get", block, status)
-            return block.buf.copy()
+            got: FloatArray = block.buf.copy()
+            return got
         self._fetch()
-        return self._values.copy()
+        values: FloatArray = self._values.copy()
+        return values
 
     def read_into(self, out: FloatArray) -> None:
         """Current values written into ``out`` (float64, same length) without allocating."""
@@ -241,7 +243,8 @@ class SignalGroup:
 
     def latest(self) -> FloatArray:
         """A copy of the values a native stepper last read into the buffer (all-Float64 groups)."""
-        return self._blocks[0].buf.copy()
+        latest: FloatArray = self._blocks[0].buf.copy()
+        return latest
 
     def _write_direct(self, component: Any, values: Any) -> None:
         """All-Float64 groups (the common case)."""
@@ -343,7 +346,7 @@ def _int_ok(value: Any, bounds: tuple[int, int]) -> bool:
 
 def _exact_part(values: Any, block: _Block) -> list[Any]:
     """The block's values as Python ints where they are whole numbers (else as given, to be refused)."""
-    seq = values.tolist() if isinstance(values, np.ndarray) else list(values)  # type: ignore[arg-type]
+    seq = values.tolist() if isinstance(values, np.ndarray) else list(values)
     part: list[Any] = []
     for i in block.index.tolist():
         value = seq[i]

@@ -204,14 +204,18 @@ class NativeMaster:
             self._count_iterations()
         if not code:  # every component stepped `count` macro steps with OK
             self.done = count
-            return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+            obs: np.ndarray[Any, np.dtype[np.float64]] = (
+                self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+            )
+            return obs
         spec = self._spec
         self.done = done = spec.done
         self.stopped = bool(spec.stopped)
         for plant in self._plants:
             plant.sample -= count
         self._finish(max(code, 0), done)
-        return self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+        obs = self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+        return obs
 
     def run(self, count: int) -> None:
         """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its

@@ -19,6 +19,9 @@ from typing import Any, Literal
 from bridge.errors import VariableError
 
 Interface = Literal["cs", "me", "se"]
+# What an experiment or a system component may ask for: an interface, or "auto" (the first the
+# model offers, in this order).
+InterfaceChoice = Literal["auto", "cs", "me", "se"]
 
 NUMERIC_TYPES = frozenset(
     {
@@ -300,7 +303,7 @@ def info_from_summary(data: dict[str, Any]) -> ModelInfo:
         fmi_version=data["fmi_version"],
         model_name=data["model_name"],
         guid=data.get("guid", ""),
-        interfaces=tuple(i.lower() for i in data["interfaces"]),  # type: ignore[misc]
+        interfaces=tuple(i.lower() for i in data["interfaces"]),
         model_identifiers={},
         default_experiment=DefaultExperiment(
             start_time_s=de.get("start_time_s"),

@@ -49,12 +49,6 @@ class Watchdog:
         """Report the next overdue call too (``on_hung`` is called once until then)."""
         self.fired = False
 
-    @property
-    def busy_s(self) -> float:
-        """How long the current call has been running (0 when idle)."""
-        busy = self._busy
-        return time.monotonic() - busy[2] if busy is not None else 0.0
-
     def _run(self) -> None:
         period = min(0.25, self.deadline_s / 4)
         while not self._stop.wait(period):

@@ -225,7 +225,7 @@ class RecordMcap(gym.Wrapper[Any, Any, Any, Any]):
             self._end_episode(info.get("reason"), terminated, truncated, info)
         elif len(self._rows) >= self._rows_per_block:
             self._pack_rows()
-        return result  # type: ignore[no-any-return]
+        return result
 
     def _pack_rows(self) -> None:
         rows, inputs, actions = self._rows, self._input_values, self._actions

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 import math
 import re
 from pathlib import Path
@@ -19,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bridge.errors import BridgeError, DependencyMissing
+from bridge.errors import DependencyMissing
 from bridge.recording.reader import Recording, Series
 
 
@@ -113,8 +112,8 @@ def _csv_cells(column: npt.NDArray[Any]) -> list[Any]:
 def export_parquet(recording: Recording, directory: str | Path) -> list[Path]:
     """One Parquet file per stream in ``directory`` (needs pyarrow)."""
     try:
-        import pyarrow as pa  # type: ignore[import-untyped]
-        import pyarrow.parquet as pq  # type: ignore[import-untyped]
+        import pyarrow as pa
+        import pyarrow.parquet as pq
     except ImportError as exc:
         raise DependencyMissing("pyarrow", "Parquet export", "pip install pyarrow") from exc
     folder = Path(directory)
@@ -153,14 +152,3 @@ def describe(recording: Recording) -> dict[str, Any]:
             {"name": a.name, "media_type": a.media_type, "bytes": len(a.data)} for a in recording.attachments
         ],
     }
-
-
-def metadata_json(recording: Recording, name: str, key: str) -> Any:
-    """A JSON-encoded metadata value, or None."""
-    text = recording.metadata.get(name, {}).get(key)
-    if text is None:
-        return None
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise BridgeError(f"metadata {name}.{key} of {recording.path} is not JSON: {exc}") from exc

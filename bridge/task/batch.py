@@ -248,7 +248,8 @@ class BatchTask:
         else:
             self.history[:, :-1] = self.history[:, 1:]
             self.history[:, -1] = new
-        return self.history.reshape(self.n, -1).copy()
+        stacked: npt.NDArray[np.float32] = self.history.reshape(self.n, -1).copy()
+        return stacked
 
 
 def _number(value: Any) -> float:

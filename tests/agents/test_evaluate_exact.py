@@ -48,7 +48,9 @@ def _positions(recording: Path) -> dict[str, list[list[float]]]:
         }
 
 
-@pytest.mark.parametrize("how", ["in_process", "recorded", "workers", "batch"])
+@pytest.mark.parametrize(
+    "how", ["in_process", "recorded", pytest.param("workers", marks=pytest.mark.integration), "batch"]
+)
 def test_constants_reach_the_fmu_exactly(tmp_path: Path, how: str) -> None:
     path = _experiment(tmp_path, "feedthrough", FEEDTHROUGH, "[y]")
     agents = [f"constant:{v!r}" for v in VALUES]

@@ -195,7 +195,7 @@ sys.modules["torch"] = None
 sys.modules["stable_baselines3"] = None
 from pathlib import Path
 from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
-from agents.runtime import load_policy
+from agents.policies import load_policy
 run = Path(sys.argv[1])
 experiment, _ = deployment_experiment(run, None)
 sent = []

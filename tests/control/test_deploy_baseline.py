@@ -14,8 +14,7 @@ import pytest
 
 from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
 from agents.deploy_io import AgentNode
-from agents.policies import make_policy
-from agents.runtime import load_policy
+from agents.policies import load_policy, make_policy
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.examples import example_experiment
@@ -95,7 +94,7 @@ def test_a_deployed_baseline_needs_no_torch() -> None:
         "import sys\n"
         "from pathlib import Path\n"
         "from agents.deploy import deployment_experiment\n"
-        "from agents.runtime import load_policy\n"
+        "from agents.policies import load_policy\n"
         "from bridge.env.fmu_env import FmuEnv\n"
         f"experiment, _ = deployment_experiment(Path('lqr'), Path({str(CARTPOLE)!r}))\n"
         "policy = load_policy(Path('lqr'), 'baseline', experiment)\n"

@@ -107,6 +107,7 @@ def test_fmu_envs_each_get_their_own_process_and_equal_one_instance_per_process(
         np.testing.assert_allclose(ys[:, i], alone(i), rtol=1e-6)
 
 
+@pytest.mark.integration  # an FMU that runs once per process: each env's plant is a child process
 def test_a_plant_vec_env_over_them_equals_one_instance_per_process(tmp_path: Path) -> None:
     exp = experiment(tmp_path)
     vec = PlantVecEnv([FmuEnv(exp) for _ in range(2)])

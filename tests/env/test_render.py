@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import sys
-import timeit
 
 import numpy as np
 import pytest
@@ -132,12 +131,6 @@ def test_non_finite_state_is_an_error() -> None:
 def test_bad_picture_arguments_are_config_errors(kwargs: dict[str, float]) -> None:
     with pytest.raises(ConfigError, match="draw_cartpole"):
         draw_cartpole(0.0, 0.0, **kwargs)  # type: ignore[arg-type]
-
-
-def test_draw_speed_is_reported() -> None:
-    count = 500
-    seconds = timeit.timeit(lambda: draw_cartpole(0.5, 0.3), number=count) / count
-    print(f"draw_cartpole 600x400: {seconds * 1e6:.0f} us per picture")
 
 
 def cycle_colours(count: int) -> list[np.ndarray]:

@@ -182,6 +182,7 @@ def cli_check(path: Path) -> int:
     return result.exit_code
 
 
+@pytest.mark.slow  # 1000 mutants per example: minutes in all, a soak rather than a unit test
 @pytest.mark.parametrize("name", example_names())
 def test_mutated_experiments_give_a_clear_error_or_a_sensible_experiment(name: str, tmp_path: Path) -> None:
     source = example_experiment(name)

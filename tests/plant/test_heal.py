@@ -37,6 +37,8 @@ PLANTS: dict[str, Callable[[Experiment], object]] = {
     "in-process": LocalFmuPlant,
     "isolated": lambda e: IsolatedFmuPlant(e, timeout_s=30.0),
 }
+# the isolated plant is a child process: that case is an integration test
+KINDS = [pytest.param(k, marks=pytest.mark.integration) if k == "isolated" else k for k in PLANTS]
 
 
 def refused(env: FmuEnv, kind: str, episode: int) -> None:
@@ -61,7 +63,7 @@ def refused(env: FmuEnv, kind: str, episode: int) -> None:
     assert isinstance(error, FmuError)  # code that caught the bare FmuError still catches it
 
 
-@pytest.mark.parametrize("kind", list(PLANTS))
+@pytest.mark.parametrize("kind", KINDS)
 def test_a_refused_initialisation_heals_at_the_next_reset(kind: str) -> None:
     plant = PLANTS[kind](EXPERIMENT)
     with FmuEnv(EXPERIMENT, plant=plant) as env:  # type: ignore[arg-type]
@@ -76,7 +78,7 @@ def test_a_refused_initialisation_heals_at_the_next_reset(kind: str) -> None:
             assert [list(o) for o in trace] == [[0.5, 1.0], [0.5, 2.0], [0.5, 3.0]], (episode, trace)
 
 
-@pytest.mark.parametrize("kind", list(PLANTS))
+@pytest.mark.parametrize("kind", KINDS)
 def test_a_first_reset_whose_initialisation_is_refused_is_the_same_error_and_heals(kind: str) -> None:
     with FmuEnv(EXPERIMENT, plant=PLANTS[kind](EXPERIMENT)) as env:  # type: ignore[arg-type]
         refused(env, kind, 1)  # the instance is created by this reset

@@ -185,6 +185,7 @@ def _write_counts() -> None:
 
 
 # -- cuts --------------------------------------------------------------------------------------------
+@pytest.mark.slow  # a read at every cut offset: a soak
 def test_a_recording_cut_at_every_byte_reads_partially_or_fails_clearly(tiny: Path, work: Path) -> None:
     data = tiny.read_bytes()
     tmp_path = work
@@ -266,6 +267,7 @@ def _corrupt(rng: random.Random, data: bytes, layout: list[tuple[int, int, int]]
     return kind, bytes(out)
 
 
+@pytest.mark.slow  # a fuzz of many corruptions: a soak
 def test_random_corruptions_read_partially_or_fail_clearly(small: Path, work: Path) -> None:
     data = small.read_bytes()
     tmp_path = work
@@ -384,6 +386,7 @@ def test_recover_refuses_to_write_over_its_input(small: Path, tmp_path: Path) ->
     assert part.read_bytes() == small.read_bytes()
 
 
+@pytest.mark.slow  # writes the counts of the two fuzz tests above, which are slow
 def test_counts_are_written() -> None:
     if TALLY["corruptions"] and TALLY["cut_offsets"]:
         _write_counts()

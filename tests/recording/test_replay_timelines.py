@@ -90,6 +90,7 @@ def test_replay_without_a_display_fails_and_suggests_save(motor_recording: Path)
     assert "opened" not in result.stdout
 
 
+@pytest.mark.integration  # starts the Rerun viewer (bridge.recording.replay) as a process
 def test_a_viewer_that_dies_at_start_is_an_error(
     motor_recording: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -8,7 +8,6 @@ import cmath
 import math
 import random
 import re
-import timeit
 from collections.abc import Callable
 from typing import Any
 
@@ -367,19 +366,3 @@ def test_expression_results_are_real_not_complex() -> None:
     with pytest.raises(BridgeError, match="math domain error"):
         compile_expression("x ** (1/3)", NAMES)(np.array([-8.0, 0, 0, 0]))
     assert cmath.isfinite(compile_expression("abs(x) ** (1/3)", NAMES)(np.array([-8.0, 0, 0, 0])))
-
-
-def test_call_speed_is_reported() -> None:
-    names = [f"v{i}" for i in range(8)] + ["x", "theta"]
-    values = np.linspace(-1.0, 1.0, len(names))
-    cases = [
-        "x + 1",
-        "-(theta**2) - 0.1 * abs(x)",
-        "-(theta**2) - 0.1*abs(x) - 0.01*v0**2 + (1 if abs(x) < 2.4 else -10)",
-        "clip(v1 * v2, -1, 1) + max(v3, v4, v5) + exp(-v6**2) * cos(theta)",
-    ]
-    for text in cases:
-        expression = compile_expression(text, names)
-        count = 20000
-        seconds = timeit.timeit(lambda e=expression: e(values), number=count) / count
-        print(f"{seconds * 1e6:6.2f} us per call: {text}")

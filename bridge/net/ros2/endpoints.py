@@ -20,7 +20,7 @@ from zenoh import ext
 
 from bridge.errors import ConfigError, TransportError
 from bridge.net.ros2.attachment import Attachment
-from bridge.net.ros2.interfaces import check_cdr, serialize
+from bridge.net.ros2.interfaces import check_cdr
 from bridge.net.ros2.names import data_key, dds_type_name, split_type_name
 from bridge.net.ros2.qos import History, QoS
 from bridge.net.ros2.tokens import Endpoint, EntityKind, Token, gid
@@ -160,10 +160,6 @@ class Publisher(RosEndpoint):
                 raise TransportError(f"publishing on {self.name} failed: {exc} (key {self.key})") from exc
         self.counters["published"] += 1
         return attachment
-
-    def publish_message(self, message: Any) -> Attachment:
-        """Serialize a rosbags message of this publisher's type and publish it."""
-        return self.publish(serialize(message, self.type_name))
 
 
 class Subscription(RosEndpoint):

@@ -232,7 +232,7 @@ class RosView:
 
         if len(request) > 64:  # a Trigger request is empty: 4 bytes of CDR header and padding
             self.dropped += 1
-            return interfaces.trigger_response(  # type: ignore[no-any-return]
+            return interfaces.trigger_response(
                 False, f"bad request: std_srvs/srv/Trigger takes no fields, got {len(request)} bytes"
             )
         if self.follower is not None:  # first: no step of the clock's catch-up beside the reset
@@ -243,7 +243,7 @@ class RosView:
             _log.exception("ROS reset failed")
             success, message = False, f"reset failed ({type(exc).__name__})"
 
-        return interfaces.trigger_response(success, message)  # type: ignore[no-any-return]
+        return interfaces.trigger_response(success, message)
 
     def close(self) -> None:
         if self.follower is not None:  # first: no step after the node's entities are gone

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from bridge.fmu.vocab import InterfaceChoice
+
 Algorithm = Literal["jacobi", "gauss_seidel"]
 
 
@@ -76,7 +78,7 @@ class Component:
     fmu: Path
     parameters: dict[str, Any] = field(default_factory=dict)
     step_size_s: float | None = None
-    interface: Literal["auto", "cs", "me", "se"] = "auto"
+    interface: InterfaceChoice = "auto"
     feedthrough: bool | None = None
     node: str | None = None
     connector_units: dict[str, str] = field(default_factory=dict)  # from an SSD's connectors
@@ -114,7 +116,3 @@ class SystemDescription:
     @property
     def where(self) -> str:
         return f" [{self.source}]" if self.source else ""
-
-    def inputs_driven(self) -> dict[Endpoint, Connection]:
-        """Each connected input and the connection that drives it."""
-        return {c.target: c for c in self.connections}
