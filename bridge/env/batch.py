@@ -33,9 +33,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from bridge.env.autoreset import OnError, env_scenarios, on_error_mode
+from bridge.env.autoreset import OnError, env_scenarios, on_error_mode, refuse_same_step_under_rllib
 from bridge.env.autoreset import autoreset_mode as _autoreset_mode
-from bridge.env.autoreset import refuse_same_step_under_rllib
 from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError

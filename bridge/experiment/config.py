@@ -37,7 +37,6 @@ from bridge.experiment.strict import (
 )
 from bridge.experiment.system import SystemSection
 from bridge.experiment.yaml_text import read_yaml
-from bridge.fmu.vocab import InterfaceChoice
 
 __all__ = [
     "PROFILE_KINDS",

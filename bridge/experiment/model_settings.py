@@ -13,9 +13,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
-from bridge.fmu.vocab import InterfaceChoice
-
 from bridge.experiment.strict import FiniteFloat, PositiveFloat, Strict, invalid
+from bridge.fmu.vocab import InterfaceChoice
 
 Scalar = FiniteFloat | int | bool | str  # parameters: finite numbers only
 

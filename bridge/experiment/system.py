@@ -14,7 +14,6 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from bridge.experiment.model_settings import EXPERIMENT_KEYS, ModelSettings
 from bridge.experiment.reward import RewardSection
-from bridge.fmu.vocab import InterfaceChoice
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 CONNECTION = re.compile(r"^\s*([A-Za-z_][\w]*)\.(\S+)\s*->\s*([A-Za-z_][\w]*)\.(\S+)\s*$")
