@@ -48,7 +48,7 @@ def atomic_checkpoints(save_freq: int, folder: Path, *, save_vecnormalize: bool)
     atomically, the VecNormalize statistics before the model they belong to."""
     from stable_baselines3.common.callbacks import CheckpointCallback
 
-    class AtomicCheckpoints(CheckpointCallback):  # type: ignore[misc]
+    class AtomicCheckpoints(CheckpointCallback):
         def _on_step(self) -> bool:
             if self.n_calls % self.save_freq == 0:
                 stats = self.model.get_vec_normalize_env()

@@ -109,7 +109,7 @@ def design_margins(experiment: Experiment, agents: list[str]) -> list[dict[str, 
     chosen = [a for a in agents if a in baselines and baselines[a].type in ("lqr", "mpc")]
     if not chosen:
         return []
-    from agents.evaluate import baseline_settings
+    from agents.evaluate_cell import baseline_settings
     from agents.policies import make_policy
     from bridge.control.margins import margins
     from bridge.env.fmu_env import FmuEnv

@@ -234,7 +234,7 @@ class BatchTask:
         :meth:`Task.controller_signals` over the batch (the sensor noise of the last observation)."""
         if self._exact_signals or not self._obs_noise or self._obs_row is None:
             return self.signals
-        out = self.signals.copy()
+        out: FloatArray = self.signals.copy()
         out[:, self._noise_signals] += self._tables["obs_noise"][self._all, self._obs_row]
         return out
 
