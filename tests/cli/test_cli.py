@@ -62,9 +62,9 @@ def test_models_lists_and_builds_every_variant() -> None:
     rows = json.loads(invoke("models", "--json"))
     models = {"cartpole", "dcmotor", "bouncing_ball", "stair", "typed", "typed3", "feedthrough"}
     models |= {"gearload", "pi_controller", "motor_gearload", "vehicle", "modelica_names", "global_state"}
-    models |= {"slow_init", "slow_init_late", "strict_arrays", "clocks3"}
+    models |= {"slow_init", "slow_init_late", "strict_arrays", "clocks3", "slow_plant"}
     assert {r["model"] for r in rows} == models
-    assert len(rows) == 48 and all(Path(r["path"]).is_file() for r in rows)
+    assert len(rows) == 50 and all(Path(r["path"]).is_file() for r in rows)
     assert "cartpole" in invoke("models")  # and the table for people
 
 

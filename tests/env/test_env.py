@@ -64,6 +64,7 @@ def _heater_experiment(fmu: Path) -> dict[str, Any]:
     }
 
 
+@pytest.mark.integration  # Python-backed FMUs run in a child process by default
 @pytest.mark.parametrize("fixture", ["pythonfmu_heater2", "pythonfmu_heater3"])
 def test_fmus_from_other_exporters_pass_both_env_checkers(
     fixture: str, request: pytest.FixtureRequest

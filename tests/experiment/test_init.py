@@ -94,6 +94,7 @@ def test_typed_inputs_become_levels_inside_their_ranges_and_check_passes(
             assert var.max is None or max(levels) <= var.max
 
 
+@pytest.mark.integration  # a Python-backed FMU: it runs in a child process by default
 def test_locals_only_model_with_modelica_names_is_observed_and_simulated(
     names2: Path, tmp_path: Path
 ) -> None:
@@ -111,6 +112,7 @@ def test_locals_only_model_with_modelica_names_is_observed_and_simulated(
         assert obs[:2] == pytest.approx([np.cos(0.1), np.sin(0.1)], abs=1e-6)
 
 
+@pytest.mark.integration  # a Python-backed FMU: it runs in a child process by default
 def test_evaluate_with_the_zero_policy_on_an_observation_only_experiment(
     names2: Path, tmp_path: Path
 ) -> None:
@@ -144,6 +146,7 @@ def _arrays_config(tmp_path: Path, fmu: Path, inputs: str, outputs: str) -> Path
     return config
 
 
+@pytest.mark.integration  # a Python-backed FMU: it runs in a child process by default
 def test_config_naming_an_array_element_runs_and_a_whole_array_is_refused(
     arrays3_fmu: Path, tmp_path: Path
 ) -> None:
