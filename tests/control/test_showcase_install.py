@@ -28,7 +28,7 @@ def test_the_showcase_install_line_names_the_extras_its_baselines_need() -> None
     extras = set(install.group(1).split(","))
     brought = set()
     for requirement in requires("fmu-bridge") or []:  # the installed distribution's own metadata
-        extra = re.search(r'extra == "([a-z]+)"', requirement)
+        extra = re.search(r"extra == ['\"]([a-z]+)['\"]", requirement)
         if extra and extra.group(1) in extras:
             brought.add(re.split(r"[<>=;\[ ]", requirement, maxsplit=1)[0].lower())
     assert {"scipy", "osqp", "control", "stable-baselines3"} <= brought, sorted(brought)
