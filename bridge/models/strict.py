@@ -122,7 +122,8 @@ def reset_model_description(guid: str) -> str:
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="{RESET_NAME}" guid="{guid}"
   description="An FMI 2.0 model whose reset keeps its terminated flag and whose state functions
-  refuse a reset instance" generationTool="fmu-bridge" variableNamingConvention="flat" numberOfEventIndicators="0">
+  refuse a reset instance" generationTool="fmu-bridge" variableNamingConvention="flat"
+  numberOfEventIndicators="0">
   <CoSimulation modelIdentifier="{RESET_NAME}" canGetAndSetFMUstate="true"
     canHandleVariableCommunicationStepSize="true"/>
   <DefaultExperiment startTime="0" stopTime="{RESET_T_END}" stepSize="0.1"/>
