@@ -291,7 +291,12 @@ def describe_system(experiment: Experiment, remote: RemoteComponents | None = No
     system = from_experiment(experiment)
     infos = {n: component_info(c, remote, system.where) for n, c in system.components.items()}
     check_system(expand_arrays(system, infos), infos)  # connections and parameters, as the plant checks them
-    return system_info(experiment, system, infos, system_timing(experiment, system))
+    from bridge.plant.system.component import steps_per_macro
+
+    timing = system_timing(experiment, system)
+    for component in system.components.values():  # each component's step, as the plant divides it
+        steps_per_macro(component, timing.step_size_s, None, system.where)
+    return system_info(experiment, system, infos, timing)
 
 
 def sized_info(component: Component, info: ModelInfo) -> ModelInfo:
