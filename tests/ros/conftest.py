@@ -100,7 +100,8 @@ class Probe:
         assert self.process.stdin is not None
         self.process.stdin.write(json.dumps({"op": op, **fields}) + "\n")
         self.process.stdin.flush()
-        answer = self._line(timeout_s)
+        # an op that waits ``timeout`` itself answers after it: wait longer than the op does
+        answer = self._line(max(timeout_s, float(fields.get("timeout", 0.0)) + 30.0))
         if "error" in answer:
             pytest.fail(f"probe {op}: {answer['error']}")
         return answer["ok"]

@@ -38,8 +38,9 @@ def test_lifecycle_configure_activate_deactivate(balancer: Path, probe: Probe) -
     args = [
         "agent", "run", str(balancer), "--transport", "rclpy", "--managed", "--node", "cart",
         "--missing", "safe", "--safe-value", "0", "--observation-topic", "/robot/joint_states",
-        "--action-topic", "/robot/effort",
+        "--action-topic", "/robot/effort", "--timeout", "600",
     ]  # fmt: skip
+    # (--timeout: a busy machine's gap between two observations here is no missing observation)
     probe.ask("subscribe", id="act", topic="/robot/effort", type=JOINT_STATE, keep_all=True)
     with command(*args, ready="Ctrl-C stops it") as agent:
         node = "/cart_agent"
