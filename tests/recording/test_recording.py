@@ -479,9 +479,16 @@ def small_recording(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dic
     return path, seen
 
 
-def test_info_lists_channels_episodes_and_metadata(small_recording: tuple[Path, Any]) -> None:
+def test_info_lists_channels_episodes_and_metadata(
+    small_recording: tuple[Path, Any], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bridge.cli.options import console
+
     path, seen = small_recording
-    result = runner.invoke(app, ["info", str(path)], env={"COLUMNS": "200"})
+    # wide enough that no cell wraps, whatever the length of the temporary folder's path (the
+    # console read COLUMNS when it was made, so setting it now would change nothing)
+    monkeypatch.setattr(console, "width", 200)
+    result = runner.invoke(app, ["info", str(path)])
     assert result.exit_code == 0, result.output
     assert "/observations" in result.output and "sensor_msgs/msg/JointState" in result.output
     assert "2 episode(s)" in result.output and "fmu_sha256" in result.output
