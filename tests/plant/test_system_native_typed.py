@@ -290,3 +290,43 @@ def test_a_component_with_input_clocks_is_named_as_the_reason(tmp_path: Path) ->
         plant.reset({}, None)
         assert plant.master.native is None
     assert reason is not None and "'c' has input clocks" in reason, reason
+
+
+def arrays(tmp_path: Path) -> Any:
+    """Two strict_arrays (FMI 3.0 arrays that refuse any get or set of another nValues): an element
+    of a's output matrix feeds one element of b's input array, the task drives one element of a's."""
+    from bridge.models.strict import strict_arrays_fmu
+
+    fmu = str(strict_arrays_fmu())
+    data = {
+        "model": {"step_size": 0.1, "episode_duration": 10.0},
+        "system": {
+            "components": {"a": {"fmu": fmu}, "b": {"fmu": fmu}},
+            "connections": ["a.y[1,2] -> b.u[2]", "a.total -> b.u[3]"],
+        },
+        "observations": {"outputs": ["b.total", "b.y[1,2]"]},
+        "reward": {"terms": [{"alive": 0.0}]},
+    }
+    return parse_experiment(data, source=tmp_path / "arrays.yaml")
+
+
+def test_arrays_used_in_part_run_natively_and_equal_the_python_master(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Before: an FMI 3.0 array connected or driven in part selected the Python master (the array
+    is read, the elements written, and set whole, as the signal group does)."""
+
+    def run_arrays() -> tuple[np.ndarray, bool]:
+        with SystemPlant(arrays(tmp_path)) as plant:
+            plant.bind(["a.u[1]"], ["b.total", "b.y[1,2]"])
+            rows = [plant.reset({}, [1.0])]
+            rows += [plant.step([1.0 + np.sin(i)]) for i in range(15)]
+            return np.array(rows), plant.master.native is not None
+
+    native, used = run_arrays()
+    assert used
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    python, used = run_arrays()
+    assert not used
+    np.testing.assert_array_equal(native, python)
+    assert np.ptp(native[:, 0]) > 0.1  # the values moved
