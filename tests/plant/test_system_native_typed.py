@@ -330,3 +330,30 @@ def test_arrays_used_in_part_run_natively_and_equal_the_python_master(
     assert not used
     np.testing.assert_array_equal(native, python)
     assert np.ptp(native[:, 0]) > 0.1  # the values moved
+
+
+@pytest.mark.parametrize(
+    "observed",
+    [["b.real_out"], ["b.counter"], ["b.boolean_out", "b.enum_out"], ["b.real_in", "b.counter"]],
+)
+def test_the_reason_and_the_choice_agree_whatever_is_observed(tmp_path: Path, observed: list[str]) -> None:
+    """Float64 links only; the task observes Float64, Int32, Boolean and Enumeration outputs and a
+    connected input. Before: the reason said "native" (it read the connections alone) while the
+    choice fell to the Python master for the Int32, Boolean and Enumeration variables bound."""
+    data = {
+        "model": {"step_size": 0.1, "episode_duration": 10.0},
+        "system": {
+            "components": {"a": {"fmu": "example:typed:2.0"}, "b": {"fmu": "example:typed:2.0"}},
+            "connections": ["a.real_out -> b.real_in"],
+        },
+        "observations": {"outputs": observed},
+        "reward": {"terms": [{"alive": 0.0}]},
+    }
+    with SystemPlant(parse_experiment(data, source=tmp_path / "observed.yaml")) as plant:
+        reason = python_master_reason(plant.system, plant.plants, plant.couplings, plant.infos)
+        plant.bind(["a.real_in"], observed)
+        plant.reset({}, [2.0])
+        rows = [plant.step([3.0]) for _ in range(3)]
+        assert reason is None and plant.master.native is not None
+    if observed == ["b.real_out"]:  # a copied its start value 0 at initialisation, then 3 from its first step
+        assert [r.tolist() for r in rows] == [[0.0], [3.0], [3.0]]
