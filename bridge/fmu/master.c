@@ -11,19 +11,19 @@
  * arrays used in part) travel as the Python master's signal groups carry them: the component's
  * values stay float64 in u and y, and each FMI type is a Block with its own typed buffer and one set
  * or get call, in the group's order (an array used in part is read before it is written whole).
- * Before any component steps, an input is checked as the group checks it (finite; whole and in the
- * type's range; 0 or 1; one of the enumeration's items); a value refused is MASTER_NONFINITE, and the
- * Python path's own check then names it.
+ * Before a component steps, each of its inputs is checked as the group checks it (finite; whole and
+ * in the type's range; 0 or 1; one of the enumeration's items); a value refused is MASTER_NONFINITE,
+ * and the Python path's own check then names it.
  *
  * Jacobi: every connected input is gathered from the outputs of t, then the components check their
  * inputs and step in order. Gauss-Seidel: each component gathers, checks and steps in order.
  * Returns 0, or 1 + the position of the component that failed (its status in status[c]:
- * MASTER_NONFINITE for an input that is NaN or infinite, which the Python path then reports; the
+ * MASTER_NONFINITE for an input its group refuses, which the Python path then reports; the
  * FMI status of a failed doStep; MASTER_SET / MASTER_GET plus the status of a failed set or get).
  * A component that asks to stop (MASTER_TERMINATED) does not stop the others.
  *
  * With `feedthrough_outputs: updated`, after every macro step the components of `settle` (sources
- * before consumers) gather their connected inputs of t + H, check them finite, set them and get
+ * before consumers) gather their connected inputs of t + H, check them, set them and get
  * their outputs again without a step: the Python master's `settle`, with the same calls. A failure
  * there is its status plus MASTER_SETTLING.
  *
@@ -45,7 +45,7 @@
 #define MASTER_TERMINATED 5
 #define MASTER_SET 16
 #define MASTER_GET 32
-#define MASTER_NONFINITE 64
+#define MASTER_NONFINITE 64 /* an input its signal group refuses: NaN, inf, not whole, out of range, ... */
 #define MASTER_SETTLING 128 /* added to a status when it came from settling, not from the step */
 #define MASTER_STATE 256    /* + the status of a failed get or set of the FMU state (iteration) */
 
@@ -285,7 +285,7 @@ static void gather(Component* comps, const Link* links, int n_links, int target)
 
 /* Whether every input is one the component's signal group takes (finite; for typed blocks also
  * whole and in range, 0 or 1, an enumeration item). */
-static int finite_inputs(const Component* c) {
+static int valid_inputs(const Component* c) {
     if (c->n_in_blocks == 0) {
         for (int j = 0; j < c->nv_in; j++) {
             if (!isfinite(c->u[j])) return 0;
@@ -304,7 +304,7 @@ static int finite_inputs(const Component* c) {
 static int settle(Component* comps, const Link* links, int n_links, int c) {
     Component* s = &comps[c];
     gather(comps, links, n_links, c);
-    if (!finite_inputs(s)) return MASTER_NONFINITE;
+    if (!valid_inputs(s)) return MASTER_NONFINITE;
     int st = write_inputs(s);
     return st != MASTER_OK ? st : read_outputs(s);
 }
@@ -325,7 +325,7 @@ static int pass(Component* comps, int n, const Link* links, int n_links, int gau
     for (int c = 0; c < n; c++) {
         if (gauss_seidel) gather(comps, links, n_links, c);
         keep_used(&comps[c], iterating);
-        if (!finite_inputs(&comps[c])) {
+        if (!valid_inputs(&comps[c])) {
             status[c] = MASTER_NONFINITE;
             return c + 1;
         }

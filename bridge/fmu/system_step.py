@@ -1,7 +1,8 @@
 """A system's macro step in one native call (``master.c``), for systems it can serve exactly.
 
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
-co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
+co-simulation FMUs in this process with numeric inputs and outputs of any type (``master_io``
+binds them), whose connections
 carry values unchanged or through an affine map (linear transformation, unit conversion),
 with or without fixed-point iteration (FMU states saved, restored and freed in the call, as the
 Python master does through each component), with ``feedthrough_outputs`` held or updated (the
