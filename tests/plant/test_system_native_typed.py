@@ -151,10 +151,17 @@ def test_a_value_its_type_refuses_is_refused_as_in_python(
     assert words in native and name.split(".")[1] in native
 
 
+@pytest.mark.parametrize(
+    "system",
+    [{}, {"algorithm": "gauss_seidel"}, {"iteration": {"max_iterations": 3}}],
+    ids=["jacobi", "gauss-seidel", "mid-iteration"],
+)
 def test_an_integer_out_of_range_on_a_link_is_refused_as_in_python(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, system: dict[str, Any]
 ) -> None:
-    """Int32 -> Int8 is allowed (integers feed integers); 300 on the link is not an Int8."""
+    """Int32 -> Int8 is allowed (integers feed integers); 300 on the link is not an Int8. Iterated,
+    the first pass gives b the 5 of t and the second the 300 of t + H: refused in the middle of the
+    iteration, with every FMU state saved and a stepped in that pass."""
     inputs_, outputs_ = ["a.integer_in"], ["b.int8_out"]
     link = parse_experiment(
         {
@@ -162,6 +169,7 @@ def test_an_integer_out_of_range_on_a_link_is_refused_as_in_python(
             "system": {
                 "components": {"a": {"fmu": "example:typed:3.0"}, "b": {"fmu": "example:typed:3.0"}},
                 "connections": ["a.integer_out -> b.int8_in"],
+                **system,
             },
             "observations": {"outputs": outputs_},
             "reward": {"terms": [{"alive": 0.0}]},
@@ -169,19 +177,24 @@ def test_an_integer_out_of_range_on_a_link_is_refused_as_in_python(
         source=tmp_path / "link.yaml",
     )
 
-    def fail() -> tuple[str, list[Any]]:
+    def fail() -> tuple[str, list[Any], Any, bool]:
         rows: list[Any] = []
         with SystemPlant(link) as plant:
             plant.bind(inputs_, outputs_)
             rows.append(plant.reset({}, [5.0]).tolist())
-            rows.append(plant.step([300.0]).tolist())  # a copies 300 at the end of this step
             with pytest.raises(Exception) as info:
-                plant.step([1.0])  # b is given 300
-            return f"{type(info.value).__name__}: {info.value} @ {plant.time_s}", rows
+                for value in (7.0, 300.0, 1.0, 1.0):  # a copies 300 at the end of its step
+                    rows.append(plant.step([value]).tolist())
+            counters = {n: (p.model.step_index, p.sample) for n, p in plant.plants.items()}  # type: ignore[attr-defined]
+            where = (plant.time_s, plant.sample, counters)
+            return f"{type(info.value).__name__}: {info.value}", rows, where, plant.master.native is not None
 
     native = fail()
     monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
-    assert native == fail()
+    python = fail()
+    assert native[3] and not python[3]
+    assert native[:3] == python[:3]
+    assert len(native[1]) == (3 if system == {} else 2)  # Jacobi alone passes the 300 one step late
     assert "int8_in=300" in native[0] and "range [-128, 127]" in native[0], native[0]
 
 
