@@ -21,7 +21,11 @@ outputs frame). Target: a macro step of N components at most 2x one bare round t
         [--nodes 1,2,3,4] [--remote-steps 2000] [--no-distributed] [--cpu-time]
 
 ``--cpu-time`` times the in-process candidates by this thread's CPU time instead of the wall clock:
-on a shared machine the time spent waiting for a core then weighs on none of them. Every in-process
+on a shared machine the time spent waiting for a core then weighs on none of them.
+
+Typed links: 2 and 12 typed FMUs (FMI 2.0) in a chain passing Real, Integer, Boolean and
+Enumeration values, on the native master and on the Python master (the ratio the second table
+prints is the Python master's cost over the native master's, per macro step). Every in-process
 candidate runs wholly in this thread (Ecos's loop included: it starts no worker thread for this
 system), so the comparison stays fair.
 """
@@ -33,6 +37,7 @@ import os
 import tempfile
 import time
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
 
 from benchmarks.common import RawFmpyLoop, fmt_us, interleaved, table
@@ -120,6 +125,35 @@ def system_plant(
     return plant
 
 
+TYPED = ("real", "integer", "boolean", "enum")
+
+
+def typed_plant(directory: Path, n: int, *, native: bool = True) -> SystemPlant:
+    """``n`` typed FMUs (FMI 2.0) in a chain, each passing its Real, Integer, Boolean and
+    Enumeration outputs to the next one's inputs (``c_i.integer_out -> c_{i+1}.integer_in``, ...):
+    three of every four links are not Float64. ``native=False`` asks for the Python master; where
+    the native master cannot serve the system, ``native=True`` gets the Python master too (the
+    table then says which master ran)."""
+    components = {f"c{i}": {"fmu": "example:typed:2.0"} for i in range(n)}
+    connections = [f"c{i}.{t}_out -> c{i + 1}.{t}_in" for i in range(n - 1) for t in TYPED]
+    inputs = [f"c0.{t}_in" for t in TYPED]
+    data = {
+        "model": {"step_size": H, "episode_duration": 1e4},
+        "system": {"components": components, "connections": connections},
+        "observations": {"outputs": [f"c{n - 1}.{t}_out" for t in TYPED]},
+        "reward": {"terms": [{"alive": 0.0}]},
+    }
+    plant = SystemPlant(parse_experiment(data, source=directory / f"typed{n}.yaml"))
+    plant.bind(inputs, [f"c{n - 1}.{t}_out" for t in TYPED])
+    if not native:
+        os.environ["FMU_BRIDGE_NO_NATIVE_MASTER"] = "1"
+    try:
+        plant.reset({}, [0.5, 3.0, 1.0, 2.0])
+    finally:
+        os.environ.pop("FMU_BRIDGE_NO_NATIVE_MASTER", None)
+    return plant
+
+
 def ecos_simulation() -> tuple[object | None, str]:
     """The same two FMUs and connections in Ecos (its own master loop), or None and why not."""
     try:
@@ -168,6 +202,11 @@ def in_process(args: argparse.Namespace) -> None:
         plant10 = system_plant(Path(tmp), sample=10)
         transformed = system_plant(Path(tmp), transformed=True)
         transformed_python = system_plant(Path(tmp), native=False, transformed=True)
+        typed = {
+            f"typed{n}{'' if native else '_python'}": typed_plant(Path(tmp), n, native=native)
+            for n in (2, 12)
+            for native in (True, False)
+        }
         motor, load = raw_pair()
         ecos, why = ecos_simulation()
         state = {"omega": 0.0, "torque": 0.0, "t": 0.0}
@@ -184,14 +223,6 @@ def in_process(args: argparse.Namespace) -> None:
             for _ in range(steps):
                 python_plant.step([0.0])
 
-        def units(steps: int) -> None:
-            for _ in range(steps):
-                transformed.step([0.0])
-
-        def units_python(steps: int) -> None:
-            for _ in range(steps):
-                transformed_python.step([0.0])
-
         def raw(steps: int) -> None:
             m, g = motor.fmu, load.fmu
             m_in, m_out, g_in, g_out = motor._in, motor._out, load._in, load._out
@@ -207,7 +238,11 @@ def in_process(args: argparse.Namespace) -> None:
             state.update(omega=omega, torque=torque, t=t)
 
         candidates = {"system": system, "system10": system10, "python": python_master, "raw": raw}
-        candidates.update(units=units, units_python=units_python)
+        candidates.update(
+            units=_stepper(transformed, [0.0]), units_python=_stepper(transformed_python, [0.0])
+        )
+        for key, typed_system in typed.items():
+            candidates[key] = _stepper(typed_system, [0.5, 3.0, 1.0, 2.0])
         if ecos is not None:
             step = ecos.step  # type: ignore[attr-defined]
 
@@ -221,11 +256,33 @@ def in_process(args: argparse.Namespace) -> None:
             candidates.update(ecos_each=ecos_each, ecos_all=ecos_all)
         clock = time.thread_time if args.cpu_time else time.perf_counter
         rates = interleaved(candidates, args.steps, args.repeats, clock)
+        masters = {key: "native" if p.master.native is not None else "Python" for key, p in typed.items()}
         for closable in (plant, plant10, python_plant, transformed, transformed_python, motor, load):
             closable.close()
+        for typed_system in typed.values():
+            typed_system.close()
         if ecos is not None:
             ecos.terminate()  # type: ignore[attr-defined]
     report(rates, why)
+    report_typed(rates, masters)
+
+
+def _stepper(plant: SystemPlant, inputs: list[float]) -> Callable[[int], None]:
+    def run(steps: int) -> None:
+        for _ in range(steps):
+            plant.step(inputs)
+
+    return run
+
+
+def report_typed(rates: dict[str, float], masters: dict[str, str]) -> None:
+    """Typed links (Integer, Boolean, Enumeration): the native master against the Python one."""
+    rows = []
+    for n in (2, 12):
+        ours, python = rates[f"typed{n}"], rates[f"typed{n}_python"]
+        rows.append((f"{n} typed components, {masters[f'typed{n}']} master", fmt_us(ours), ""))
+        rows.append((f"{n} typed components, Python master", fmt_us(python), f"{ours / python:.2f}"))
+    print(table(rows, ("typed links, macro step", "us/step", "x the first row (Python / native)")))
 
 
 def report(rates: dict[str, float], ecos_missing: str) -> None:

@@ -158,8 +158,9 @@ def _master(plant: Any) -> dict[str, str]:
     if why is None:
         return {
             "runs": "native",
-            "why": "every component an FMI 2.0/3.0 co-simulation FMU in this "
-            "process, Float64 connections, values unchanged or through an affine map",
+            "why": "every component an FMI 2.0/3.0 co-simulation FMU in this process "
+            "without input clocks, numeric connections of any type, values unchanged or "
+            "through an affine map",
         }
     return {"runs": "python", "why": why}
 

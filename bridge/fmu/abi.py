@@ -20,7 +20,7 @@ TERMINATED: Final = 5  # the FMU asked to stop (FMI 2.0: Discard with fmi2Termin
 SET_FAILED: Final = 16  # + the status of the failed set
 GET_FAILED: Final = 32  # + the status of the failed get
 INACTIVE: Final = -1  # the instance was not stepped
-NONFINITE: Final = 64  # master.c: a component's input was NaN or infinite (nothing called)
+NONFINITE: Final = 64  # master.c: an input its signal group refuses (NaN, inf, not whole, out of range, ...)
 SETTLING: Final = 128  # master.c: added to the status of a failure while settling (not stepping)
 STATE: Final = 256  # master.c: + the status of a failed get or set of an FMU state (iteration)
 
@@ -140,6 +140,43 @@ class MasterComponent(ctypes.Structure):
         ("set_state", ctypes.c_void_p),
         ("free_state", ctypes.c_void_p),
         ("used", ctypes.c_void_p),  # double*: the inputs of the last pass (nv_in values)
+        ("n_in_blocks", ctypes.c_int),  # 0: u is one Float64 buffer; else typed blocks (MasterBlock)
+        ("in_blocks", ctypes.c_void_p),
+        ("n_out_blocks", ctypes.c_int),
+        ("out_blocks", ctypes.c_void_p),
+    ]
+
+
+BLOCK_KINDS: Final = {
+    name: code
+    for code, name in enumerate(
+        ("float64", "float32", "int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64")
+    )
+}
+"""``master.c``'s Block kinds by numpy dtype name; booleans have their own two (below)."""
+BOOL_INT: Final = 10  # FMI 2.0 fmi2Boolean (an int)
+BOOL_BYTE: Final = 11  # FMI 3.0 fmi3Boolean (a C bool)
+
+
+class MasterBlock(ctypes.Structure):
+    """``master.c``'s ``Block``: the variables of one FMI type in a component's inputs or outputs,
+    with their typed buffer, their positions in the float64 vector and their checks."""
+
+    _fields_ = [
+        ("kind", ctypes.c_int),
+        ("set", ctypes.c_void_p),
+        ("get", ctypes.c_void_p),
+        ("vr", ctypes.c_void_p),
+        ("n_vr", ctypes.c_int),
+        ("buf", ctypes.c_void_p),
+        ("nv", ctypes.c_int),
+        ("n_el", ctypes.c_int),
+        ("pos", ctypes.c_void_p),  # int[n_el]: index in u or y
+        ("at", ctypes.c_void_p),  # int[n_el]: index in buf
+        ("partial", ctypes.c_int),
+        ("enum_first", ctypes.c_void_p),  # int[n_el]: first allowed value in items, -1: any
+        ("enum_count", ctypes.c_void_p),
+        ("items", ctypes.c_void_p),  # double[]
     ]
 
 

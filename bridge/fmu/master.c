@@ -7,15 +7,23 @@
  * for a link with `affine` set (a linear transformation and/or unit conversion), `factor * y +
  * offset`: the one expression the Python master's `transform.Affine` computes.
  *
- * Jacobi: every connected input is gathered from the outputs of t, all inputs checked finite, then
- * the components step in order. Gauss-Seidel: each component gathers, checks and steps in order.
+ * Inputs and outputs of other types (Float32, the integer types, Boolean, Enumeration, and FMI 3.0
+ * arrays used in part) travel as the Python master's signal groups carry them: the component's
+ * values stay float64 in u and y, and each FMI type is a Block with its own typed buffer and one set
+ * or get call, in the group's order (an array used in part is read before it is written whole).
+ * Before a component steps, each of its inputs is checked as the group checks it (finite; whole and
+ * in the type's range; 0 or 1; one of the enumeration's items); a value refused is MASTER_NONFINITE,
+ * and the Python path's own check then names it.
+ *
+ * Jacobi: every connected input is gathered from the outputs of t, then the components check their
+ * inputs and step in order. Gauss-Seidel: each component gathers, checks and steps in order.
  * Returns 0, or 1 + the position of the component that failed (its status in status[c]:
- * MASTER_NONFINITE for an input that is NaN or infinite, which the Python path then reports; the
+ * MASTER_NONFINITE for an input its group refuses, which the Python path then reports; the
  * FMI status of a failed doStep; MASTER_SET / MASTER_GET plus the status of a failed set or get).
  * A component that asks to stop (MASTER_TERMINATED) does not stop the others.
  *
  * With `feedthrough_outputs: updated`, after every macro step the components of `settle` (sources
- * before consumers) gather their connected inputs of t + H, check them finite, set them and get
+ * before consumers) gather their connected inputs of t + H, check them, set them and get
  * their outputs again without a step: the Python master's `settle`, with the same calls. A failure
  * there is its status plus MASTER_SETTLING.
  *
@@ -37,9 +45,32 @@
 #define MASTER_TERMINATED 5
 #define MASTER_SET 16
 #define MASTER_GET 32
-#define MASTER_NONFINITE 64
+#define MASTER_NONFINITE 64 /* an input its signal group refuses: NaN, inf, not whole, out of range, ... */
 #define MASTER_SETTLING 128 /* added to a status when it came from settling, not from the step */
 #define MASTER_STATE 256    /* + the status of a failed get or set of the FMU state (iteration) */
+
+/* A Block's FMI type, as its buffer holds it (abi.py: BLOCK_KINDS) */
+enum { K_F64, K_F32, K_I8, K_U8, K_I16, K_U16, K_I32, K_U32, K_I64, K_U64, K_BOOL_INT, K_BOOL_BYTE };
+
+typedef struct {
+    int kind;
+    void* set;                /* the typed setter (inputs; NULL for outputs) */
+    void* get;                /* the typed getter (outputs; inputs of an array used in part) */
+    const unsigned int* vr;
+    int n_vr;
+    void* buf;                /* nv values of the FMI type */
+    int nv;
+    int n_el;                 /* the elements of the group in this block */
+    const int* pos;           /* u or y index of each element */
+    const int* at;            /* buf index of each element */
+    int partial;              /* inputs: some elements of an array, so buf is read before it is set */
+    const int* enum_first;    /* per element: its first allowed value in items, or -1 (any value) */
+    const int* enum_count;
+    const double* items;
+} Block;
+
+typedef int TypedCall2(void*, const unsigned int*, size_t, void*);
+typedef int TypedCall3(void*, const unsigned int*, size_t, void*, size_t);
 
 typedef struct {
     int major;          /* 2 or 3 */
@@ -64,6 +95,10 @@ typedef struct {
     void* set_state;
     void* free_state;
     double* used;       /* iteration: the inputs of the last pass (nv_in values) */
+    int n_in_blocks;    /* 0: u is one Float64 buffer set with set_real; else typed blocks */
+    const Block* in_blocks;
+    int n_out_blocks;   /* 0: y is one Float64 buffer read with get_real; else typed blocks */
+    const Block* out_blocks;
 } Component;
 
 typedef struct {
@@ -117,19 +152,126 @@ static int do_steps3(Component* c) {
     return MASTER_OK;
 }
 
-static int sample(Component* c) {
+static int typed_call(void* fn, int major, void* component, const Block* b) {
+    return major == 3 ? ((TypedCall3*)fn)(component, b->vr, (size_t)b->n_vr, b->buf, (size_t)b->nv)
+                      : ((TypedCall2*)fn)(component, b->vr, (size_t)b->n_vr, b->buf);
+}
+
+/* Whether the signal group would take v for element e of b (signals.py's _valid). */
+static int valid_value(const Block* b, int e, double v) {
+    if (!isfinite(v)) return 0;
+    int ok = 1;
+    switch (b->kind) {
+        case K_F64: case K_F32: return 1;
+        case K_BOOL_INT: case K_BOOL_BYTE: return v == 0.0 || v == 1.0;
+        case K_I8: ok = v >= -128.0 && v <= 127.0; break;
+        case K_U8: ok = v >= 0.0 && v <= 255.0; break;
+        case K_I16: ok = v >= -32768.0 && v <= 32767.0; break;
+        case K_U16: ok = v >= 0.0 && v <= 65535.0; break;
+        case K_I32: ok = v >= -2147483648.0 && v <= 2147483647.0; break;
+        case K_U32: ok = v >= 0.0 && v <= 4294967295.0; break;
+        case K_I64: ok = v >= -9223372036854775808.0 && v < 9223372036854775808.0; break;
+        case K_U64: ok = v >= 0.0 && v < 18446744073709551616.0; break;
+        default: return 0;
+    }
+    if (!ok || floor(v) != v) return 0;
+    if (b->enum_first[e] < 0) return 1;
+    for (int i = 0; i < b->enum_count[e]; i++) {
+        if (b->items[b->enum_first[e] + i] == v) return 1;
+    }
+    return 0;
+}
+
+static void put(const Block* b, const double* u) {
+    for (int e = 0; e < b->n_el; e++) {
+        double v = u[b->pos[e]];
+        int a = b->at[e];
+        switch (b->kind) {
+            case K_F64: ((double*)b->buf)[a] = v; break;
+            case K_F32: ((float*)b->buf)[a] = (float)v; break;
+            case K_I8: ((signed char*)b->buf)[a] = (signed char)v; break;
+            case K_U8: ((unsigned char*)b->buf)[a] = (unsigned char)v; break;
+            case K_I16: ((short*)b->buf)[a] = (short)v; break;
+            case K_U16: ((unsigned short*)b->buf)[a] = (unsigned short)v; break;
+            case K_I32: ((int*)b->buf)[a] = (int)v; break;
+            case K_U32: ((unsigned int*)b->buf)[a] = (unsigned int)v; break;
+            case K_I64: ((long long*)b->buf)[a] = (long long)v; break;
+            case K_U64: ((unsigned long long*)b->buf)[a] = (unsigned long long)v; break;
+            case K_BOOL_INT: ((int*)b->buf)[a] = v != 0.0; break;
+            case K_BOOL_BYTE: ((unsigned char*)b->buf)[a] = v != 0.0; break;
+        }
+    }
+}
+
+static void take(const Block* b, double* y) {
+    for (int e = 0; e < b->n_el; e++) {
+        int a = b->at[e];
+        double v = 0.0;
+        switch (b->kind) {
+            case K_F64: v = ((const double*)b->buf)[a]; break;
+            case K_F32: v = (double)((const float*)b->buf)[a]; break;
+            case K_I8: v = (double)((const signed char*)b->buf)[a]; break;
+            case K_U8: v = (double)((const unsigned char*)b->buf)[a]; break;
+            case K_I16: v = (double)((const short*)b->buf)[a]; break;
+            case K_U16: v = (double)((const unsigned short*)b->buf)[a]; break;
+            case K_I32: v = (double)((const int*)b->buf)[a]; break;
+            case K_U32: v = (double)((const unsigned int*)b->buf)[a]; break;
+            case K_I64: v = (double)((const long long*)b->buf)[a]; break;
+            case K_U64: v = (double)((const unsigned long long*)b->buf)[a]; break;
+            case K_BOOL_INT: v = (double)((const int*)b->buf)[a]; break;
+            case K_BOOL_BYTE: v = ((const unsigned char*)b->buf)[a] ? 1.0 : 0.0; break;
+        }
+        y[b->pos[e]] = v;
+    }
+}
+
+/* The component's inputs set from u: one Float64 call, or one call per typed block. */
+static int write_inputs(Component* c) {
     int st;
-    if (c->n_in > 0) {
+    if (c->n_in_blocks == 0) {
+        if (c->n_in == 0) return MASTER_OK;
         st = c->major == 3 ? ((fmi3SetFloat64TYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u, c->nv_in)
                            : ((fmi2SetRealTYPE*)c->set_real)(c->component, c->in_vr, c->n_in, c->u);
+        return st > MASTER_WARNING ? MASTER_SET + st : MASTER_OK;
+    }
+    for (int i = 0; i < c->n_in_blocks; i++) {
+        const Block* b = &c->in_blocks[i];
+        if (b->partial) {
+            st = typed_call(b->get, c->major, c->component, b);
+            if (st > MASTER_WARNING) return MASTER_GET + st;
+        }
+        put(b, c->u);
+        st = typed_call(b->set, c->major, c->component, b);
         if (st > MASTER_WARNING) return MASTER_SET + st;
     }
+    return MASTER_OK;
+}
+
+/* The component's outputs read into y: one Float64 call, or one call per typed block. */
+static int read_outputs(Component* c) {
+    int st;
+    if (c->n_out_blocks == 0) {
+        if (c->n_out == 0) return MASTER_OK;
+        st = c->major == 3 ? ((fmi3GetFloat64TYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y, c->nv_out)
+                           : ((fmi2GetRealTYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y);
+        return st > MASTER_WARNING ? MASTER_GET + st : MASTER_OK;
+    }
+    for (int i = 0; i < c->n_out_blocks; i++) {
+        const Block* b = &c->out_blocks[i];
+        st = typed_call(b->get, c->major, c->component, b);
+        if (st > MASTER_WARNING) return MASTER_GET + st;
+        take(b, c->y);
+    }
+    return MASTER_OK;
+}
+
+static int sample(Component* c) {
+    int st = write_inputs(c);
+    if (st != MASTER_OK) return st;
     int result = c->major == 3 ? do_steps3(c) : do_steps2(c);
     if (result != MASTER_OK && result != MASTER_TERMINATED) return result;
-    st = c->major == 3 ? ((fmi3GetFloat64TYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y, c->nv_out)
-                       : ((fmi2GetRealTYPE*)c->get_real)(c->component, c->out_vr, c->n_out, c->y);
-    if (st > MASTER_WARNING) return MASTER_GET + st;
-    return result;
+    st = read_outputs(c);
+    return st != MASTER_OK ? st : result;
 }
 
 static void gather(Component* comps, const Link* links, int n_links, int target) {
@@ -141,9 +283,20 @@ static void gather(Component* comps, const Link* links, int n_links, int target)
     }
 }
 
-static int finite_inputs(const Component* c) {
-    for (int j = 0; j < c->nv_in; j++) {
-        if (!isfinite(c->u[j])) return 0;
+/* Whether every input is one the component's signal group takes (finite; for typed blocks also
+ * whole and in range, 0 or 1, an enumeration item). */
+static int valid_inputs(const Component* c) {
+    if (c->n_in_blocks == 0) {
+        for (int j = 0; j < c->nv_in; j++) {
+            if (!isfinite(c->u[j])) return 0;
+        }
+        return 1;
+    }
+    for (int i = 0; i < c->n_in_blocks; i++) {
+        const Block* b = &c->in_blocks[i];
+        for (int e = 0; e < b->n_el; e++) {
+            if (!valid_value(b, e, c->u[b->pos[e]])) return 0;
+        }
     }
     return 1;
 }
@@ -151,16 +304,9 @@ static int finite_inputs(const Component* c) {
 static int settle(Component* comps, const Link* links, int n_links, int c) {
     Component* s = &comps[c];
     gather(comps, links, n_links, c);
-    if (!finite_inputs(s)) return MASTER_NONFINITE;
-    int st;
-    if (s->n_in > 0) {
-        st = s->major == 3 ? ((fmi3SetFloat64TYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u, s->nv_in)
-                           : ((fmi2SetRealTYPE*)s->set_real)(s->component, s->in_vr, s->n_in, s->u);
-        if (st > MASTER_WARNING) return MASTER_SET + st;
-    }
-    st = s->major == 3 ? ((fmi3GetFloat64TYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y, s->nv_out)
-                       : ((fmi2GetRealTYPE*)s->get_real)(s->component, s->out_vr, s->n_out, s->y);
-    return st > MASTER_WARNING ? MASTER_GET + st : MASTER_OK;
+    if (!valid_inputs(s)) return MASTER_NONFINITE;
+    int st = write_inputs(s);
+    return st != MASTER_OK ? st : read_outputs(s);
 }
 
 static void keep_used(Component* c, int iterating) {
@@ -169,28 +315,19 @@ static void keep_used(Component* c, int iterating) {
     }
 }
 
-/* Every component stepped once from the current inputs: 0, or 1 + the position that failed. */
+/* Every component stepped once from the current inputs: 0, or 1 + the position that failed. Each
+ * component's inputs are checked just before it steps, as the Python master's write checks them
+ * (under Jacobi the components before it have stepped by then, there as here). */
 static int pass(Component* comps, int n, const Link* links, int n_links, int gauss_seidel, int* status,
                 int iterating) {
     for (int c = 0; c < n; c++) status[c] = MASTER_OK;
-    if (!gauss_seidel) {
-        gather(comps, links, n_links, -1);
-        for (int c = 0; c < n; c++) {
-            keep_used(&comps[c], iterating);
-            if (!finite_inputs(&comps[c])) {
-                status[c] = MASTER_NONFINITE;
-                return c + 1;
-            }
-        }
-    }
+    if (!gauss_seidel) gather(comps, links, n_links, -1);
     for (int c = 0; c < n; c++) {
-        if (gauss_seidel) {
-            gather(comps, links, n_links, c);
-            keep_used(&comps[c], iterating);
-            if (!finite_inputs(&comps[c])) {
-                status[c] = MASTER_NONFINITE;
-                return c + 1;
-            }
+        if (gauss_seidel) gather(comps, links, n_links, c);
+        keep_used(&comps[c], iterating);
+        if (!valid_inputs(&comps[c])) {
+            status[c] = MASTER_NONFINITE;
+            return c + 1;
         }
         status[c] = sample(&comps[c]);
         if (status[c] > MASTER_WARNING && status[c] != MASTER_TERMINATED) return c + 1;

@@ -11,6 +11,7 @@ import ctypes
 import itertools
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -85,6 +86,47 @@ class _Block:
             for i, v in enumerate(variables)
             if v.enum_items
         ]
+
+
+@dataclass(frozen=True)
+class TypedBlock:
+    """One FMI type of a signal group, for a native loop: element ``e`` of the group's float64
+    vector at ``positions[e]`` is ``buffer[at[e]]``, checked against ``allowed[e]`` (enumeration
+    items, None: any value of the type); ``partial``: an array used in part, read before it is set."""
+
+    dtype: str
+    boolean: bool
+    setter: Any  # the typed set (None: reading)
+    getter: Any  # the typed get
+    vrs: int
+    n_vrs: int
+    buffer: int
+    n_values: int
+    positions: list[int]
+    at: list[int]
+    partial: bool
+    allowed: list[list[float] | None]
+
+
+def _typed(block: _Block, writing: bool) -> TypedBlock:
+    at = list(range(len(block.buf))) if block.pick is None else block.pick.tolist()
+    allowed: list[list[float] | None] = [None] * len(block.index)
+    for i, items in block.enums:
+        allowed[i] = items.tolist()
+    return TypedBlock(
+        dtype=block.buf.dtype.name,
+        boolean=block.kind == _BOOL,
+        setter=block.set if writing else None,
+        getter=block.get,
+        vrs=block.vrs,
+        n_vrs=block.n,
+        buffer=block.ptr,
+        n_values=len(block.buf),
+        positions=block.index.tolist(),
+        at=at,
+        partial=block.pick is not None,
+        allowed=allowed,
+    )
 
 
 def _settable(variables: list[Variable]) -> bool:
@@ -215,6 +257,14 @@ class SignalGroup:
         if not self._direct or self._notify or (writing and block.set is None):
             return None
         return block.vrs, block.n, len(block.buf), block.ptr
+
+    def typed_blocks(self, *, writing: bool) -> list[TypedBlock] | None:
+        """The group's FMI type groups as a native loop converts them (``master.c``'s Block), in
+        the order :meth:`write` and :meth:`read` call them; None where a native loop cannot
+        (model exchange, or, ``writing``, a variable not settable during a step)."""
+        if self._notify or (writing and any(b.set is None for b in self._blocks)):
+            return None
+        return [_typed(block, writing) for block in self._blocks]
 
     def float64_layout(self) -> tuple[list[int], int] | None:
         """(value references, values) of an all-Float64 group of whole variables in row-major

@@ -1,7 +1,8 @@
 """A system's macro step in one native call (``master.c``), for systems it can serve exactly.
 
 Serves Jacobi and Gauss-Seidel systems, multi-rate included, whose components are all FMI 2.0/3.0
-co-simulation FMUs in this process with Float64 scalar inputs and outputs, whose connections
+co-simulation FMUs in this process with numeric inputs and outputs of any type (``master_io``
+binds them), whose connections
 carry values unchanged or through an affine map (linear transformation, unit conversion),
 with or without fixed-point iteration (FMU states saved, restored and freed in the call, as the
 Python master does through each component), with ``feedthrough_outputs`` held or updated (the
@@ -44,6 +45,7 @@ from bridge.fmu.abi import (
     MasterLink,
     MasterSample,
 )
+from bridge.fmu.master_io import bind_signals
 from bridge.fmu.model import Model
 from bridge.fmu.signals import SignalGroup
 
@@ -105,7 +107,7 @@ class NativeMaster:
         self,
         master: Master,
         function: Any,
-        groups: dict[str, tuple[SignalGroup | None, SignalGroup]],
+        groups: dict[str, tuple[SignalGroup | None, SignalGroup | None]],
         external: Sequence[tuple[str, int]] = (),
         observed: Sequence[tuple[str, int]] = (),
     ) -> None:
@@ -144,7 +146,7 @@ class NativeMaster:
         n = len(self._names)
         self._states = (ctypes.c_void_p * n)()
         self._saved_k = np.zeros(n, dtype=np.int64)
-        self._used: list[np.ndarray[Any, np.dtype[np.float64]]] = []
+        self._used: list[Any] = []
         self._iterating = master.iterations > 1
         iteration = spec.iteration
         iteration.max_iterations, iteration.tolerance = master.iterations, master.system.tolerance
@@ -166,14 +168,10 @@ class NativeMaster:
             c.t0, c.h, c.steps = model.start_time_s, model.step_size_s, plant.timing.steps_per_sample
             model._attach_clock(Clock.from_buffer(self._clocks.data, position * self._clocks.itemsize))
             c.k = self._clocks.ctypes.data + position * self._clocks.itemsize
-            c.n_in, c.nv_in, c.in_vr = 0, 0, None
-            if inputs is not None:
-                vrs, c.n_in, c.nv_in, _ = inputs.native_buffer(writing=True) or (0, 0, 0, 0)
-                c.in_vr = vrs
             master.inputs[name] = u = np.ascontiguousarray(master.inputs[name], dtype=np.float64)
             master.outputs[name] = y = np.ascontiguousarray(master.outputs[name], dtype=np.float64).copy()
             c.u, c.y = u.ctypes.data, y.ctypes.data
-            c.out_vr, c.n_out, c.nv_out, _ = outputs.native_buffer(writing=False) or (0, 0, 0, 0)
+            self._used += bind_signals(c, inputs, outputs, len(u), len(y))  # kept alive with the rest
             c.get_state, c.set_state, c.free_state = h["get_state"], h["set_state"], h["free_state"]
             self._used.append(used := np.zeros(max(1, len(u))))  # alive while C writes into it
             c.used = used.ctypes.data
@@ -259,8 +257,6 @@ class NativeMaster:
         stepped = len(plants)  # components that took part in the last macro step tried
         if failed and status[failed - 1] < SETTLING:  # a settling failure: every component stepped
             stepped = failed - 1
-            if status[stepped] == NONFINITE and not self._gauss_seidel:
-                stepped = 0  # Jacobi checks every input before any component steps
         for position, plant in enumerate(plants):
             plant.sample += done - (1 if not failed else 0)
             if position < stepped:

@@ -4,6 +4,7 @@ that fails keeps the rows of every macro step done before it (and says how many)
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -101,3 +102,41 @@ def test_a_failed_run_keeps_its_recording(tmp_path: Path) -> None:
         topics = Counter(channel.topic for _, channel, _ in make_reader(stream).iter_messages())
     # the reset and the two samples before the one whose outputs were not finite
     assert topics["/outputs"] == 3 and topics["/components/motor/outputs"] == 3 and topics["/actions"] == 2
+
+
+def test_a_typed_system_that_fails_keeps_the_same_rows_on_either_master(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Integer and Boolean links (the native master since they are native): b fails its 7th
+    doStep; the CSV holds the start and the six macro steps before, the same on both masters."""
+    path = tmp_path / "typed.yaml"
+    path.write_text(
+        "model: {step_size: 0.1, episode_duration: 2.0}\n"
+        "system:\n"
+        "  components:\n"
+        "    a: {fmu: 'example:typed:2.0', start_values: {integer_in: 4, boolean_in: true, enum_in: 3}}\n"
+        "    b: {fmu: 'example:typed:2.0', parameters: {fail_at_step: 7}}\n"
+        "  connections:\n"
+        "    [a.integer_out -> b.integer_in, a.boolean_out -> b.boolean_in, a.enum_out -> b.enum_in]\n"
+        "observations: {outputs: [b.integer_out, b.boolean_out, b.enum_out, b.counter]}\n"
+    )
+
+    def simulate() -> tuple[list[dict[str, str]], str]:
+        out = tmp_path / "out.csv"
+        result = runner.invoke(
+            app, ["system", "simulate", str(path), "--csv", str(out)], env={"COLUMNS": "200"}
+        )
+        assert isinstance(result.exception, BridgeError), result.output
+        with out.open() as f:
+            return list(csv.DictReader(f)), str(result.exception)
+
+    inspected = runner.invoke(app, ["system", "inspect", str(path), "--json"], env={"COLUMNS": "200"})
+    assert json.loads(inspected.output)["master"]["runs"] == "native", inspected.output
+    native = simulate()
+    monkeypatch.setenv("FMU_BRIDGE_NO_NATIVE_MASTER", "1")
+    assert simulate() == native
+    rows, message = native
+    assert len(rows) == 7 and "the run stopped after 6 macro steps" in message, message
+    assert "fail_at_step reached" in message
+    assert [r["b.integer_out"] for r in rows[2:]] == ["4"] * 5 and rows[-1]["b.counter"] == "6"
+    assert rows[-1]["b.enum_out"] == "3" and rows[-1]["b.boolean_out"] == "1"
