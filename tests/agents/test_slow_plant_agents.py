@@ -4,6 +4,7 @@ lockstep node over Zenoh, with no setting for its slowness."""
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 from pathlib import Path
@@ -54,6 +55,10 @@ evaluation:
 PARAMETERS = {"step_delay_s": 1.0, "init_delay_s": 2.0, "tau": 0.5}
 
 
+def _stepped(frames: list[proto.Frame], episode: int, step: int) -> bool:
+    return any(f.episode == episode and f.step >= step for f in frames)
+
+
 @pytest.mark.integration  # a node process, Zenoh on 127.0.0.1
 def test_a_deployed_agent_waits_for_a_slow_lockstep_plant_without_missing_observations(
     loopback: Loopback, tmp_path: Path, caplog: pytest.LogCaptureFixture
@@ -73,12 +78,9 @@ def test_a_deployed_agent_waits_for_a_slow_lockstep_plant_without_missing_observ
                 request = {"episode": episode, "values": PARAMETERS}  # a bare reset keeps the FMU's defaults
                 for _ in loopback.session.get(keys.reset, payload=proto.encode_json(request)):  # type: ignore[attr-defined]
                     pass
-                wait_until(
-                    lambda e=episode: any(f.episode == e and f.step >= 3 for f in frames),
-                    120,
-                    f"three agent-driven steps of episode {episode}",
-                )
-            node = describe_nodes(loopback.session, ["slow"], prefix=loopback.prefix, timeout_s=10)[0]  # type: ignore[arg-type]
+                stepped = functools.partial(_stepped, frames, episode, 3)
+                wait_until(stepped, 120, f"three agent-driven steps of episode {episode}")
+            node = describe_nodes(loopback.session, ["slow"], prefix=loopback.prefix, timeout_s=10)[0]
             late_after_s = agent.agent.late_after_s()
         finally:
             stats = agent.agent.stats.summary()

@@ -61,10 +61,9 @@ def test_a_first_reset_longer_than_every_deadline_waits_while_the_node_initialis
     # node's other deadlines (2 s), the client's floor (5 s) and Zenoh's default query timeout
     # (10 s) are all shorter than its 14 s
     path = slow_experiment(tmp_path, step_delay_s=0.1, init_delay_s=14.0, duration_s=0.3)
-    net = {"session": loopback.session, "prefix": loopback.prefix}
     with (
         node_process(path, "init", loopback, "--isolate", "--step-timeout", "2"),
-        RemoteFmuEnv(path, "init", **net) as env,
+        RemoteFmuEnv(path, "init", session=loopback.session, prefix=loopback.prefix) as env,
     ):
         deadlines = env.plant.client.deadlines  # type: ignore[attr-defined]
         assert deadlines.reset_s() == 5.0  # nothing measured yet: the floor
