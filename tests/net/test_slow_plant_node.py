@@ -6,6 +6,7 @@ reported in bounded time."""
 from __future__ import annotations
 
 import contextlib
+import signal
 import time
 from pathlib import Path
 
@@ -109,4 +110,30 @@ def test_a_reset_hung_in_the_fmu_is_reported_with_the_nodes_words(loopback: Loop
     message = str(caught.value)
     assert took_s < 60.0, f"a hung reset took {took_s:.0f} s to report"
     assert "the model hung" in message and "has not returned from the reset of episode 1" in message, message
+    assert "--step-timeout" in message, message
+
+
+def test_a_stopped_node_is_reported_in_bounded_time_during_a_reset(
+    loopback: Loopback, tmp_path: Path
+) -> None:
+    # the client's floor (2 s) and the node's own deadline (1 s + 1 s) end the reset's wait; the
+    # stopped node then does not answer info either (2 s): reported before its Zenoh lease ends
+    path = slow_experiment(tmp_path)
+    with (
+        node_process(path, "frozen", loopback, "--step-timeout", "1") as process,
+        RemoteFmuEnv(path, "frozen", session=loopback.session, prefix=loopback.prefix, timeout_s=2.0) as env,
+    ):
+        env.reset(seed=0)
+        process.send_signal(signal.SIGSTOP)
+        try:
+            start = time.monotonic()
+            with pytest.raises(StepTimeout) as caught:
+                env.reset(seed=1)
+            took_s = time.monotonic() - start
+        finally:
+            process.send_signal(signal.SIGCONT)
+    message = str(caught.value)
+    assert took_s < 30.0, f"a stopped node took {took_s:.0f} s to report"
+    assert "the node did not answer info within 2 s" in message, message
+    assert "the deadline 2 s is the longest of timeout_s = 2 s" in message, message
     assert "--step-timeout" in message, message
