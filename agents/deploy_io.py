@@ -12,7 +12,7 @@ from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_exper
 from agents.policies import load_policy
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
-from bridge.net.deadlines import Deadlines
+from bridge.net.deadlines import Deadlines, node_deadline_s
 from bridge.net.ros2 import cdr
 from bridge.net.transport import ZenohOptions, open_session, undeclare
 
@@ -24,8 +24,7 @@ def _lockstep(description: dict[str, Any] | None, timeout_s: float) -> Deadlines
     is their floor, the node's own deadline and the slowest step measured extend them."""
     if description is None or description.get("mode") != "lockstep":
         return None
-    node_s = description.get("step_timeout_s", 0.0)
-    return Deadlines(timeout_s, float(node_s) if isinstance(node_s, float | int) else 0.0)
+    return Deadlines(timeout_s, node_deadline_s(description))
 
 
 class AgentNode:

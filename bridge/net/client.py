@@ -22,7 +22,7 @@ from typing import Any
 from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.net import protocol as proto
 from bridge.net.channel import EventWaiting, Waiting
-from bridge.net.deadlines import SETTINGS, Deadlines
+from bridge.net.deadlines import SETTINGS, Deadlines, node_deadline_s
 from bridge.net.discovery import every_reply, query_info, query_target, replier
 from bridge.net.handshake import KeyPair, reply_proof, request_proof
 from bridge.net.lease import NO_TOKEN
@@ -31,7 +31,6 @@ from bridge.plant.base import MODEL_HUNG, Plant
 
 _log = logging.getLogger(__name__)
 _QUERY_LIFETIME_S = 7 * 86400.0  # a reset query's own timeout: the client ends it (Deadlines) first
-_POLL_S = 0.25  # how often a waiting reset looks at the node's liveliness
 _REPORT_S = 30.0  # how often a reset the node still works on is logged (INFO)
 _DEAD = object()  # put in a waiting reset's queue when the node's liveliness token goes
 
@@ -82,7 +81,7 @@ class NodeClient:
         except BaseException:
             undeclare(token)
             raise
-        self.deadlines.node_s = _node_deadline_s(self.description)
+        self.deadlines.node_s = node_deadline_s(self.description)
         self.node_zid = str(self.description.get("zid") or "")  # answers come from this session only
         self.outputs = len(self.description["output_names"])
         self._declared = [
@@ -234,10 +233,11 @@ class NodeClient:
                     reply = replies.get(timeout=max(0.0, deadline - time.monotonic()))
                 except queue.Empty:
                     call = self._still_working(plant, time.monotonic() - sent)
-                    deadline = time.monotonic() + self.deadlines.floor_s
-                    if deadline - reported >= _REPORT_S:
-                        reported = deadline
-                        _log.info("node %s: %s, %.0f s so far", self.name, call, time.monotonic() - sent)
+                    now = time.monotonic()
+                    deadline = now + self.deadlines.floor_s  # asked again after another floor
+                    if now - reported >= _REPORT_S:
+                        reported = now
+                        _log.info("node %s: %s, %.0f s so far", self.name, call, now - sent)
                     continue
                 if reply is _DEAD:
                     raise self._dead(plant, step=None)
@@ -362,13 +362,6 @@ class NodeClient:
             except Exception:
                 _log.debug("undeclare failed", exc_info=True)
         self._declared = []
-
-
-def _node_deadline_s(description: dict[str, Any]) -> float:
-    """The node's own deadline for a call (its ``step_timeout_s``); 0 if it names none."""
-    value = description.get("step_timeout_s", 0.0)
-    ok = isinstance(value, float | int) and not isinstance(value, bool) and math.isfinite(value)
-    return float(value) if ok and value > 0 else 0.0
 
 
 def _model_failed(plant: Plant, text: str) -> BridgeError:

@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import math
 import threading
-from typing import Literal
+from collections.abc import Mapping
+from typing import Any, Literal
 
 from bridge.errors import ConfigError
 
@@ -51,7 +52,7 @@ class Deadlines:
                 "shortest a client waits for a node's answer (training.remote.timeout_s)"
             )
         self.floor_s = float(floor_s)
-        self.node_s = float(node_s) if isinstance(node_s, float | int) and math.isfinite(node_s) else 0.0
+        self.node_s = node_deadline_s({"step_timeout_s": node_s})
         self.slowest = {"step": 0.0, "reset": 0.0}
         self._lock = threading.Lock()  # answers are measured on Zenoh's thread
 
@@ -93,3 +94,11 @@ class Deadlines:
         measured = f"{slowest:.3g} s" if slowest > 0 else "none yet"
         parts.append(f"{margin:g} x the slowest {call} measured ({measured})")
         return f"the deadline {self._deadline(call):.3g} s is the longest of " + ", ".join(parts)
+
+
+def node_deadline_s(description: Mapping[str, Any]) -> float:
+    """A node's own deadline for a call: the ``step_timeout_s`` of its ``info`` (0 if it names
+    none, or no positive finite number)."""
+    value = description.get("step_timeout_s", 0.0)
+    ok = isinstance(value, float | int) and not isinstance(value, bool) and math.isfinite(value)
+    return float(value) if ok and value > 0 else 0.0
