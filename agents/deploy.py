@@ -6,6 +6,10 @@ the training-time Task observation processing (selection, scaling, history, VecN
 statistics), runs deterministic inference on the CPU and publishes the actions. Sensor and
 actuator noise of the experiment are training-time randomisation and are left out here.
 Missing or late observations trigger a configured rule (hold the last action, or a safe one).
+"Late" is ``timeout_s`` for a real-time source; a lockstep node answers an action when its plant
+has stepped, which may take seconds: there an observation is late only past the node's
+deadlines (``bridge.net.deadlines``: ``timeout_s`` as the floor, the node's own deadline, and the
+slowest step measured), so a slow plant at work is not taken for a missing one.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from bridge.experiment.config import Experiment, Noise, load_experiment
 from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu.vocab import ModelInfo
 from bridge.net import protocol as proto
+from bridge.net.deadlines import Deadlines
 from bridge.task.core import Task
 
 _log = logging.getLogger(__name__)
@@ -141,7 +146,11 @@ def _decade(n: int) -> bool:
 
 
 class DeployedAgent:
-    """Receives observations, acts, publishes; thread-safe; ``close()`` stops it."""
+    """Receives observations, acts, publishes; thread-safe; ``close()`` stops it.
+
+    ``lockstep``: the deadlines of a lockstep node (its next observation answers this agent's
+    action); None for a real-time source, whose observations are late after ``timeout_s``.
+    """
 
     def __init__(
         self,
@@ -150,6 +159,8 @@ class DeployedAgent:
         info: ModelInfo,
         settings: DeploySettings,
         publish: Any,
+        *,
+        lockstep: Deadlines | None = None,
     ) -> None:
         check_experiment(experiment, info)
         self.task = Task(experiment, info.variables, timing(experiment, info))
@@ -162,6 +173,8 @@ class DeployedAgent:
         self._sample = 0
         self._last_inputs: list[float] | None = None
         self._last_time = time.monotonic()
+        self._acted_at: float | None = None  # when the last action answering an observation went out
+        self._lockstep = lockstep
         self._missing_in_a_row = 0  # missing-observation events since the last observation
         self._stop = threading.Event()
         self._warm_up()
@@ -196,6 +209,8 @@ class DeployedAgent:
                 self._start_episode(episode)
             else:
                 self._sample = self._sample + 1 if step is None else step
+                if self._lockstep is not None and self._acted_at is not None:  # the plant's step, measured
+                    self._lockstep.stepped(time.monotonic() - self._acted_at)
             if self._missing_in_a_row:
                 _log.info("observations again after %d missing-observation events", self._missing_in_a_row)
                 self._missing_in_a_row = 0
@@ -204,6 +219,7 @@ class DeployedAgent:
             # all node inputs: the agent's, then the scenario's profile inputs (simulated disturbances)
             inputs = list(self.task.action_to_inputs(action, self._sample, self._rng))
             self._last_inputs, self._last_time = inputs, time.monotonic()
+            self._acted_at = self._last_time
             self.stats.observations += 1
         if not self._send(inputs, self._sample):
             return inputs
@@ -216,10 +232,16 @@ class DeployedAgent:
         self.task.new_episode(self._rng, self.settings.scenario)
         self.policy.reset(self.task, None)
 
+    def late_after_s(self) -> float:
+        """Seconds without an observation before the missing-observation rule acts."""
+        lockstep = self._lockstep
+        return lockstep.step_s() if lockstep is not None else self.settings.timeout_s
+
     def _watch(self) -> None:
         while not self._stop.wait(self.settings.timeout_s / 4):
             with self._lock:
-                late = time.monotonic() - self._last_time > self.settings.timeout_s
+                late_after_s = self.late_after_s()
+                late = time.monotonic() - self._last_time > late_after_s
                 if not late or self._last_inputs is None:
                     continue
                 inputs = self._last_inputs if self.settings.missing == "hold" else self._safe()
@@ -230,7 +252,7 @@ class DeployedAgent:
             if _decade(in_a_row):  # the 1st, 10th, 100th, ...: a node gone for hours is a few lines
                 _log.warning(
                     "no observation for %.0f ms (%d time%s in a row; told again at %d): %s action %s",
-                    self.settings.timeout_s * 1e3 * in_a_row,
+                    late_after_s * 1e3 * in_a_row,
                     in_a_row,
                     "" if in_a_row == 1 else "s",
                     in_a_row * 10,

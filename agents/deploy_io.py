@@ -12,10 +12,19 @@ from agents.deploy import DeployedAgent, DeploySettings, Stats, deployment_exper
 from agents.policies import load_policy
 from bridge.errors import TransportError
 from bridge.net import protocol as proto
+from bridge.net.deadlines import Deadlines, node_deadline_s
 from bridge.net.ros2 import cdr
 from bridge.net.transport import ZenohOptions, open_session, undeclare
 
 _log = logging.getLogger(__name__)
+
+
+def _lockstep(description: dict[str, Any] | None, timeout_s: float) -> Deadlines | None:
+    """The deadlines of a lockstep node (None: a real-time node, or a ROS source): ``--timeout``
+    is their floor, the node's own deadline and the slowest step measured extend them."""
+    if description is None or description.get("mode") != "lockstep":
+        return None
+    return Deadlines(timeout_s, node_deadline_s(description))
 
 
 class AgentNode:
@@ -43,7 +52,8 @@ class AgentNode:
         publish = (
             self._zenoh_publisher() if settings.transport == "zenoh" else self._ros_publisher(experiment)
         )
-        self.agent = DeployedAgent(policy, experiment, info, settings, publish)
+        lockstep = _lockstep(description, settings.timeout_s)
+        self.agent = DeployedAgent(policy, experiment, info, settings, publish, lockstep=lockstep)
         if description is not None and description["output_names"] != list(self.agent.task.output_names):
             raise TransportError(
                 f"node {settings.node!r} publishes {description['output_names']}, the agent "

@@ -10,7 +10,8 @@ answers it; *how* it waits is one of two strategies with one interface (:class:`
   running Python, and the waiting thread, blocked in the channel's ``recv`` with the GIL
   released, takes it itself. Each answer then crosses threads once instead of twice, saved once
   per node and macro step (``benchmarks/bench_system.py``: about 30 us per node on loopback). A
-  channel's ``recv`` has no timeout: a watchdog closes the channel when an answer is overdue,
+  channel's ``recv`` has no timeout: a watchdog closes the channel when an answer is overdue
+  (``bridge.net.deadlines``),
   and the end of the node's liveliness token closes it too; the next action opens a new one. A
   ring channel drops its oldest frame when full: a flood of frames never blocks Zenoh.
 
@@ -128,6 +129,8 @@ class ChannelWaiting:
             self._watchdog.rearm()
 
     def sent(self) -> None:
+        assert self._client is not None
+        self._watchdog.deadline_s = self._client.deadlines.step_s()  # it follows the measured speed
         self._watchdog.begin("step")
 
     def wait(self) -> bool:

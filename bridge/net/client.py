@@ -12,6 +12,7 @@ import hmac
 import json
 import logging
 import math
+import queue
 import secrets
 import threading
 import time
@@ -21,13 +22,17 @@ from typing import Any
 from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout, TransportError
 from bridge.net import protocol as proto
 from bridge.net.channel import EventWaiting, Waiting
+from bridge.net.deadlines import SETTINGS, Deadlines, node_deadline_s
 from bridge.net.discovery import every_reply, query_info, query_target, replier
 from bridge.net.handshake import KeyPair, reply_proof, request_proof
 from bridge.net.lease import NO_TOKEN
 from bridge.net.transport import undeclare
-from bridge.plant.base import Plant
+from bridge.plant.base import MODEL_HUNG, Plant
 
 _log = logging.getLogger(__name__)
+_QUERY_LIFETIME_S = 7 * 86400.0  # a reset query's own timeout: the client ends it (Deadlines) first
+_REPORT_S = 30.0  # how often a reset the node still works on is logged (INFO)
+_DEAD = object()  # put in a waiting reset's queue when the node's liveliness token goes
 
 
 class NodeClient:
@@ -36,6 +41,8 @@ class NodeClient:
     The client has a random id, sent with every reset and action, and a liveliness token
     ``<prefix>/<node>/clients/<id>`` that ends the node's lease when this session goes away.
     ``waiting`` says how it waits for an answer (``bridge.net.channel``; by default an Event).
+    How long it waits follows the plant's measured speed (``bridge.net.deadlines``); ``timeout_s``
+    is the shortest deadline.
     """
 
     def __init__(
@@ -52,12 +59,15 @@ class NodeClient:
         self.name = node
         self.session = session
         self.timeout_s = timeout_s
+        self.deadlines = Deadlines(timeout_s)
         self.take_over = take_over
         self.client_id = secrets.randbits(63) | 1
         self.notify: threading.Event | None = None  # set too whenever an answer arrives (vector envs)
         self.waiting: Waiting = waiting if waiting is not None else EventWaiting()
+        self._resetting: queue.SimpleQueue[Any] = queue.SimpleQueue()  # the waiting reset's replies
         self.want: tuple[int, int] = (-1, -1)
         self.deadline = 0.0
+        self.sent_at = 0.0  # when the last action went out (its answer's time is measured)
         self.frame: proto.Frame | None = None
         self.alive = True
         self.key: bytes | None = None  # the session key of the lease, agreed by the reset reply
@@ -71,6 +81,7 @@ class NodeClient:
         except BaseException:
             undeclare(token)
             raise
+        self.deadlines.node_s = node_deadline_s(self.description)
         self.node_zid = str(self.description.get("zid") or "")  # answers come from this session only
         self.outputs = len(self.description["output_names"])
         self._declared = [
@@ -92,6 +103,8 @@ class NodeClient:
         if key is not None and not proto.verify(payload, key):
             return False  # not from the node this client leased: another peer's frame
         self.frame = frame
+        if frame.kind != proto.REJECT:
+            self.deadlines.stepped(time.monotonic() - self.sent_at)
         return True
 
     def _on_liveliness(self, sample: Any) -> None:
@@ -100,6 +113,7 @@ class NodeClient:
         if sample.kind == zenoh.SampleKind.DELETE:
             self.alive = False
             self.waiting.wake()  # wake a waiting step at once
+            self._resetting.put(_DEAD)  # and a waiting reset
         else:
             self.alive = True
 
@@ -112,7 +126,8 @@ class NodeClient:
         self.frame = None
         self.waiting.arm()
         self.want = (episode, step)
-        self.deadline = time.monotonic() + self.timeout_s
+        self.sent_at = now = time.monotonic()
+        self.deadline = now + self.deadlines.step_s()
         action = proto.encode_values(
             proto.ACTION, episode, step, self.client_id, inputs, flags=flags, key=self.key
         )
@@ -126,12 +141,13 @@ class NodeClient:
     def wait(self, plant: Plant) -> proto.Frame:
         """The frame that answers the last action; raises if the node died or timed out."""
         if not self.waiting.wait():
+            waited_s = time.monotonic() - self.sent_at
             raise plant.failure(
                 StepTimeout,
-                f"no answer within {self.timeout_s:g} s",
-                f"no outputs for step {self.want[1]} within {self.timeout_s:g} s",
-                "the node may be overloaded, hung or unreachable; "
-                f"timeout_s sets the limit [{self.keys.base}]",
+                f"no answer within {waited_s:.3g} s",
+                f"no outputs for step {self.want[1]} within {waited_s:.3g} s "
+                f"({self.deadlines.explain('step')})",
+                f"the node may be overloaded, stopped or unreachable; {SETTINGS} [{self.keys.base}]",
             )
         frame = self.frame
         if frame is None:
@@ -170,44 +186,96 @@ class NodeClient:
         start = time.monotonic()
         while True:
             sent = time.monotonic()
-            refusal = ""
-            replies = self.session.get(
-                self.keys.reset,
-                payload=payload,
-                attachment=proof,
-                target=query_target(),
-                consolidation=every_reply(),
-                timeout=self.timeout_s,
-            )
-            for reply in replies:
-                if self.node_zid and replier(reply) not in (None, self.node_zid):
-                    continue  # another session answering for the node: not believed
-                if reply.ok is not None:
-                    return self._session(plant, reply.ok, episode, pair, payload)
-                refusal = reply.err.payload.to_bytes().decode(errors="replace")
-                break
+            reply = self._ask_reset(plant, payload, proof)
+            if reply is None:  # the query ended unanswered: nothing serves the reset key any more
+                raise plant.failure(
+                    PlantDied,
+                    "the plant died",
+                    "nothing answers on the node's reset key (the node stopped or died)",
+                    f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.reset}]",
+                    step=None,
+                )
+            if reply.ok is not None:
+                frame = self._session(plant, reply.ok, episode, pair, payload)
+                self.deadlines.reset_took(time.monotonic() - sent)
+                return frame
+            refusal = reply.err.payload.to_bytes().decode(errors="replace")
             if NO_TOKEN in refusal and time.monotonic() - start < 0.5 * self.timeout_s:
                 time.sleep(0.05)  # the node has not seen this client's token yet: ask again
                 continue
-            if refusal:
-                raise self._reset_refused(plant, refusal)
-            break
-        if not self.alive or time.monotonic() - sent < 0.5 * self.timeout_s:
-            # No queryable answered long before the deadline: nothing serves the reset key any more.
+            raise self._reset_refused(plant, refusal)
+
+    def _ask_reset(self, plant: Plant, payload: bytes, proof: bytes | None) -> Any:
+        """The node's reply to one reset query (None: the query ended unanswered). A reset may
+        initialise the FMU, which takes what the model needs: past the reset's deadline the
+        client asks the node whether it still works (:meth:`_still_working`), and waits on while
+        it does; a node that is gone, hung or silent ends the wait with an error."""
+        import zenoh
+
+        replies: queue.SimpleQueue[Any] = queue.SimpleQueue()
+        self._resetting = replies
+        token = zenoh.CancellationToken()
+        self.session.get(
+            self.keys.reset,
+            zenoh.handlers.Callback(replies.put, lambda: replies.put(None)),
+            payload=payload,
+            attachment=proof,
+            target=query_target(),
+            consolidation=every_reply(),
+            timeout=_QUERY_LIFETIME_S,
+            cancellation_token=token,
+        )
+        sent = reported = time.monotonic()
+        deadline = sent + self.deadlines.reset_s()
+        try:
+            while True:
+                try:
+                    reply = replies.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    call = self._still_working(plant, time.monotonic() - sent)
+                    now = time.monotonic()
+                    deadline = now + self.deadlines.floor_s  # asked again after another floor
+                    if now - reported >= _REPORT_S:
+                        reported = now
+                        _log.info("node %s: %s, %.0f s so far", self.name, call, now - sent)
+                    continue
+                if reply is _DEAD:
+                    raise self._dead(plant, step=None)
+                if reply is None or not self.node_zid or replier(reply) in (None, self.node_zid):
+                    return reply
+                # another session answering for the node: not believed
+        finally:
+            token.cancel()
+
+    def _still_working(self, plant: Plant, waited_s: float) -> str:
+        """The call the node says it works on (its ``info``'s ``busy``), or the StepTimeout of a
+        reset that outlasted its deadline: the node is hung, or answers no ``info`` either."""
+        why = self.deadlines.explain("reset")
+        hint = f"{SETTINGS} [{self.keys.reset}]"
+        try:
+            info = query_info(self.session, self.keys, self.deadlines.floor_s)
+        except TransportError:
             raise plant.failure(
-                PlantDied,
-                "the plant died",
-                "nothing answers on the node's reset key (the node stopped or died)",
-                f"restart it, or let RemoteVecEnv replace dead nodes [{self.keys.reset}]",
+                StepTimeout,
+                f"no answer within {waited_s:.3g} s",
+                f"the reset request got no reply ({why}), and the node did not answer info within "
+                f"{self.deadlines.floor_s:g} s",
+                f"the node may be stopped, hung or unreachable; {hint}",
+                step=None,
+            ) from None
+        if info.get("health") == "hung":
+            raise plant.failure(StepTimeout, MODEL_HUNG, str(info.get("health_detail")), hint, step=None)
+        busy = info.get("busy")
+        if not isinstance(busy, dict):
+            raise plant.failure(
+                StepTimeout,
+                f"no answer within {waited_s:.3g} s",
+                f"the reset request got no reply ({why}), and the node works on no call: the request "
+                "or its reply was lost",
+                f"the node may be overloaded or unreachable; {hint}",
                 step=None,
             )
-        raise plant.failure(
-            StepTimeout,
-            f"no answer within {self.timeout_s:g} s",
-            "the reset request got no reply",
-            f"the node may be overloaded, hung or unreachable [{self.keys.reset}]",
-            step=None,
-        )
+        return f"still busy with {busy.get('call', 'a call')}"
 
     def send_state(self, data: bytes) -> dict[str, Any]:
         """Hand the node a state file (its bytes) to start its episodes from, from the next reset

@@ -53,8 +53,9 @@ class Health:
         self.counters["hung"] += 1
         self.state = "hung"
         self.detail = (
-            f"the FMU has not returned from {what} for {elapsed_s:.1f} s (deadline {self.deadline_s:g} s); "
-            "it cannot be interrupted in this process: restart the node, and run unstable FMUs with --isolate"
+            f"the FMU has not returned from {what} for {elapsed_s:.1f} s (deadline {self.deadline_s:g} s, "
+            "the node's --step-timeout: a slower plant needs a longer one); it cannot be interrupted in "
+            "this process: restart the node, and run unstable FMUs with --isolate"
         )
         _log.error("node %s: %s", self.node, self.detail)
         return self.detail

@@ -139,6 +139,7 @@ def describe(node: FmuNode) -> dict[str, Any]:
     """What ``fmu-bridge nodes`` and remote envs learn about ``node`` (its ``info`` reply)."""
     t, state, served = node.timing, node.lockstep, node.served
     health, health_detail = node.health.report(node.plant.unusable)
+    busy = node.watchdog.busy()  # a client whose reset outlasts its deadline asks whether it runs
     return {
         "node": node.name,
         "zid": node.zid,
@@ -166,6 +167,7 @@ def describe(node: FmuNode) -> dict[str, Any]:
         "can_save_state": node.saved.available,
         "save_state_refusal": node.saved.refusal or "",
         "step_timeout_s": node.step_timeout_s,
+        "busy": None if busy is None else {"call": busy[0], "for_s": round(busy[1], 3)},
         "counters": dict(node.counters),
         "model": _summary_without_paths(summary_of(node.info)),
     }

@@ -45,6 +45,14 @@ class Watchdog:
     def end(self) -> None:
         self._busy = None
 
+    def busy(self) -> tuple[str, float] | None:
+        """The call in progress and for how long, in seconds (None: none); from any thread."""
+        busy = self._busy
+        if busy is None:
+            return None
+        what, args, start = busy
+        return (what % args if args else what), time.monotonic() - start
+
     def rearm(self) -> None:
         """Report the next overdue call too (``on_hung`` is called once until then)."""
         self.fired = False

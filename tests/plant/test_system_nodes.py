@@ -159,7 +159,8 @@ def test_a_stopped_node_times_out_and_the_next_episode_steps_again(net: Loopback
     own = Loopback(net.endpoint, f"test_{uuid.uuid4().hex[:10]}", net.session)
     remote = NodeComponents(session=own.session, prefix=own.prefix, timeout_s=5.0)
     here = system_file(tmp_path, "stopped_here", {})
-    with serve(file, own, "load") as process, FmuEnv(here) as local:
+    # the node's own deadline under the client's 5 s: the client's deadline is then its floor
+    with serve(file, own, "load", extra=("--step-timeout", "2")) as process, FmuEnv(here) as local:
         env = FmuEnv(file, plant=SystemPlant(load_experiment(file), remote=remote))
         try:
             env.reset(seed=1)
@@ -170,7 +171,8 @@ def test_a_stopped_node_times_out_and_the_next_episode_steps_again(net: Loopback
                 with pytest.raises(
                     StepTimeout,
                     match=r"component 'load' \(node 'stopped-load'\) did not answer .*"
-                    r"no outputs for step 11 within 5 s; the",
+                    r"no outputs for step 11 within [\d.]+ s \(the deadline 5 s is the longest of "
+                    r"timeout_s = 5 s, the node's own deadline 2 s \+ 1 s",
                 ):
                     env.step(env.action_space.sample())
                 assert 4.9 < time.monotonic() - start < 60  # the watchdog ended the wait, not before
