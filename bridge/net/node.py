@@ -326,7 +326,12 @@ class FmuNode:
             self._lock.release()
 
     def reset(self, values: dict[str, Any], inputs: list[float] | None, episode: int) -> bytes:
-        """Reset the model for ``episode``; returns the OUTPUTS frame of step 0."""
+        """Reset the model for ``episode``; returns the OUTPUTS frame of step 0.
+
+        ``values`` are set over the node's nominal ones (its experiment's parameters and start
+        values): a request that names none runs the served experiment, not the FMU's defaults,
+        on every path (a client's reset, a ROS reset, a real-time start)."""
+        values = {**self.served.nominal, **values}
         if self.health.is_hung:
             raise Refused("unhealthy", f"node {self.name!r} is unhealthy: {self.health.detail}")
         if not self._lock.acquire(timeout=self.step_timeout_s):

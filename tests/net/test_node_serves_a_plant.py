@@ -207,3 +207,32 @@ def test_a_hung_node_is_the_same_error_through_a_remote_env_and_through_a_system
         finally:
             env.close()
             system.close()
+
+
+def test_a_reset_that_names_no_parameter_runs_the_served_experiment(
+    loopback: Loopback, tmp_path: Path
+) -> None:
+    """The node's experiment sets the cart's mass; a client whose own file does not name it (or a
+    hand-written request without values) gets the node's value, not the FMU's default: the same
+    rule as a ROS reset and a real-time start."""
+    fixed: dict[str, Any] = {"randomization": {}, "noise": {}}  # the same start for both files
+    plain = variant(tmp_path, "plain", **fixed)
+    heavy = variant(tmp_path, "heavy", model={"parameters": {"m_cart": 3.0}}, **fixed)
+    with (
+        FmuNode(heavy, name="heavy", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
+        RemoteFmuEnv(plain, "heavy", session=loopback.session, prefix=loopback.prefix) as remote,
+        FmuEnv(heavy) as served,
+        FmuEnv(plain) as default,
+    ):
+        assert node.served.nominal["m_cart"] == 3.0
+        trajectories = []
+        for env in (remote, served, default):
+            env.reset(seed=1)
+            trajectory, done = [], False
+            while not done and len(trajectory) < 20:
+                obs, _, terminated, truncated, _ = env.step(np.ones(1, dtype=np.float32))
+                trajectory.append(obs)
+                done = terminated or truncated
+            trajectories.append(np.array(trajectory))
+        np.testing.assert_array_equal(trajectories[0], trajectories[1])
+        assert not np.array_equal(trajectories[0], trajectories[2])  # the mass matters here
