@@ -214,8 +214,8 @@ def agent_run_cmd(
         )
         _leave_now()
     stop = threading.Event()
-    ready = f"ready after {time.monotonic() - started:.1f} s"
-    console.print(f"{what}; {ready}; Ctrl-C stops it", highlight=False)
+    console.print(f"agent ready after {time.monotonic() - started:.1f} s", highlight=False)
+    console.print(f"{what}; Ctrl-C stops it", highlight=False)  # a line scripts wait for: kept as it was
     try:
         stats = agent.run(duration_s, stop)
     finally:
