@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 from rich.console import Console
@@ -162,6 +162,7 @@ def agent_run_cmd(
     """Run a trained policy as a node until Ctrl-C (or --duration); prints inference latency."""
     import signal
     import threading
+    import time
 
     from agents.deploy import deployed_checkpoint
     from agents.deploy_io import AgentNode
@@ -180,25 +181,41 @@ def agent_run_cmd(
     listen_t, connect_t = tuple(listen or ()), tuple(connect or ())
     mode = session_mode(zenoh_mode, listen_t, connect_t, zenoh_config)
     options = ZenohOptions(config_file=zenoh_config, mode=mode, listen=listen_t, connect=connect_t)
-    console.print(f"agent deploys {deployed_checkpoint(model, runtime)}", highlight=False)
-    agent: Any
-    if managed:
-        from agents.deploy_lifecycle import ManagedAgent
-        from bridge.errors import ConfigError
-
-        if transport != "rclpy":
-            raise ConfigError("--managed is a ROS 2 lifecycle node: use it with --transport rclpy")
-        agent = ManagedAgent(model, config, settings)
-        what = f"managed agent {agent.ros.fully_qualified_name} (unconfigured: configure, then activate it)"
-    else:
-        agent = AgentNode(model, config, settings, options)
-        what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
-    stop = threading.Event()
+    started = time.monotonic()
     # SIGTERM as Ctrl-C: a KeyboardInterrupt in the main thread. Setting ``stop`` from the handler
     # could deadlock: the handler runs in the main thread, possibly while it holds the Event's lock
-    # in ``stop.wait`` (seen: an agent that never exited after SIGTERM)
+    # in ``stop.wait`` (seen: an agent that never exited after SIGTERM). Installed before the policy
+    # loads: an agent stopped while it starts says so instead of vanishing without a word
     signal.signal(signal.SIGTERM, signal.default_int_handler)
-    console.print(f"{what}; Ctrl-C stops it", highlight=False)
+    console.print(
+        f"agent deploys {deployed_checkpoint(model, runtime)}; loading it ({STARTING.get(runtime, runtime)})",
+        highlight=False,
+    )
+    agent: Any
+    try:
+        if managed:
+            from agents.deploy_lifecycle import ManagedAgent
+            from bridge.errors import ConfigError
+
+            if transport != "rclpy":
+                raise ConfigError("--managed is a ROS 2 lifecycle node: use it with --transport rclpy")
+            agent = ManagedAgent(model, config, settings)
+            what = (
+                f"managed agent {agent.ros.fully_qualified_name} (unconfigured: configure, then activate it)"
+            )
+        else:
+            agent = AgentNode(model, config, settings, options)
+            what = f"agent {model} acting on {node!r} over {transport} ({runtime})"
+    except KeyboardInterrupt:
+        console.print(
+            f"agent stopped while starting, after {time.monotonic() - started:.1f} s (loading the "
+            f"{runtime} policy): it took no observation and sent no action",
+            highlight=False,
+        )
+        _leave_now()
+    stop = threading.Event()
+    console.print(f"agent ready after {time.monotonic() - started:.1f} s", highlight=False)
+    console.print(f"{what}; Ctrl-C stops it", highlight=False)  # a line scripts wait for: kept as it was
     try:
         stats = agent.run(duration_s, stop)
     finally:
@@ -212,7 +229,14 @@ def agent_run_cmd(
     _leave_now()
 
 
-def _leave_now() -> None:
+STARTING = {
+    "torch": "importing torch takes tens of seconds on a busy machine, a minute and more under heavy "
+    "load; --runtime onnx or fmu need no torch and start sooner"
+}
+"""What an agent's start-up waits for, per runtime (said before it loads)."""
+
+
+def _leave_now() -> NoReturn:
     """Exit at once, everything being closed: unloading torch and stable-baselines3 at interpreter
     shutdown takes seconds on a busy machine, and a stopped agent should be gone within one."""
     import logging

@@ -77,14 +77,15 @@ class ManagedAgent:
         self.experiment, _ = deployment_experiment(model, config)
         self._ok, self._failure = TransitionCallbackReturn.SUCCESS, TransitionCallbackReturn.FAILURE
         self._transitions = threading.Lock()
-        self.finished = threading.Event()  # finalized: the process may exit
+        self.finished = threading.Event()  # finalized and the caller answered: the process may exit
+        self._finalized = False
         outer = self
 
         class _Node(LifecycleNodeMixin, Node):  # type: ignore[misc]  # rclpy is untyped here
             def __init__(self, node_name: str, **kwargs: Any) -> None:
                 Node.__init__(self, node_name, **kwargs)
                 LifecycleNodeMixin.__init__(self, callback_group=ReentrantCallbackGroup())
-                one_transition_at_a_time(self, outer._transitions)
+                one_transition_at_a_time(self, outer._transitions, outer._answered)
 
             def on_configure(self, state: Any) -> Any:
                 return outer._configure()
@@ -233,9 +234,14 @@ class ManagedAgent:
     def _shutdown(self) -> Any:
         self._exit_safe("shutdown")
         self._cleanup()
-        self.finished.set()
+        self._finalized = True  # the process ends once the caller has its answer (_answered)
         self.ros.node.get_logger().info("finalized: the process ends")
         return self._ok
+
+    def _answered(self) -> None:
+        """A change_state response went out: after the shutdown's, the process may end."""
+        if self._finalized:
+            self.finished.set()
 
     def _error(self) -> Any:
         self._exit_safe("a transition failed")

@@ -5,7 +5,8 @@ it by exactly one step. An action is judged in two stages, both here:
 
 1. :meth:`Lockstep.admit`, before the node's lock is taken: the sender must hold the lease
    (``not_holder``), its values must be finite and in range (``out_of_range``), the node must be
-   healthy (``unhealthy``) and able to serve the action's state flags (``state``).
+   healthy (``unhealthy``), active (``inactive``: a managed node that is not in its lifecycle
+   state active steps for nobody) and able to serve the action's state flags (``state``).
 2. :meth:`Lockstep.order`, under the lock: an action for another episode is ``stale``; the same
    action again for the last step is a retry (the last answer again, never a second step), a
    different one for that step a ``conflict``; any other step but the next is ``out_of_order``;
@@ -30,7 +31,8 @@ from bridge.net.lease import Lease
 
 STALE, OUT_OF_ORDER, CONFLICT, NOT_HOLDER = "stale", "out_of_order", "conflict", "not_holder"
 OUT_OF_RANGE, ENDED, STATE, UNHEALTHY, BUSY = "out_of_range", "ended", "state", "unhealthy", "busy"
-REASONS = (STALE, OUT_OF_ORDER, CONFLICT, NOT_HOLDER, OUT_OF_RANGE, ENDED, STATE, UNHEALTHY, BUSY)
+INACTIVE = "inactive"
+REASONS = (STALE, OUT_OF_ORDER, CONFLICT, NOT_HOLDER, OUT_OF_RANGE, ENDED, STATE, UNHEALTHY, BUSY, INACTIVE)
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +76,9 @@ class Lockstep:
         self.check_inputs = check_inputs
         self.episode, self.step, self.ended = 0, -1, True
         self.unhealthy = ""  # why the node serves no step now (its FMU hung), "" when healthy
+        # why the node steps and resets for nobody now (a managed node not active), "" when active;
+        # the one answer to "may this node step now" for native clients, ROS actions and /clock
+        self.inactive = ""
         self.last_frame = b""
         self.last_action: tuple[int, bytes] = (0, b"")
 
@@ -81,13 +86,15 @@ class Lockstep:
         """Whether an action ``payload`` (no flags but SIGNED) from ``client`` is the next step of
         this episode, from the holder's session, in range: then it is served by a step, with no
         other rule to apply."""
-        if episode != self.episode or step != self.step + 1 or self.ended or client < 0 or self.unhealthy:
+        if episode != self.episode or step != self.step + 1 or self.ended or client < 0:
+            return False
+        if self.unhealthy or self.inactive:
             return False
         return self.lease.allows(client, payload) and self.check_inputs(values) is None
 
     def is_next(self, episode: int, step: int) -> bool:
         """Whether ``step`` of ``episode`` is still the next one (``plain`` checked, then locked)."""
-        return episode == self.episode and step == self.step + 1 and not self.ended
+        return episode == self.episode and step == self.step + 1 and not self.ended and not self.inactive
 
     def admit(
         self, client: int, values: Sequence[float], flags: int, state_refusal: str | None, payload: bytes
@@ -101,6 +108,8 @@ class Lockstep:
             return Reject(OUT_OF_RANGE, reason)
         if self.unhealthy:
             return Reject(UNHEALTHY, self.unhealthy)
+        if self.inactive:
+            return Reject(INACTIVE, self.inactive)
         if flags & proto.SAVE_STATE and flags & proto.RESTORE_STATE:
             return Reject(STATE, "an action saves the state or restores it, not both")
         if flags & ~proto.SIGNED and state_refusal is not None:
@@ -109,6 +118,8 @@ class Lockstep:
 
     def order(self, episode: int, step: int, flags: int, action: tuple[int, bytes]) -> Step | Reject:
         """What an admitted action for ``step`` of ``episode`` does now (called under the lock)."""
+        if self.inactive:  # deactivated since it was admitted
+            return Reject(INACTIVE, self.inactive)
         if episode != self.episode:
             return Reject(STALE, f"action for episode {episode}; the node is in {self.episode}")
         if flags & proto.RESTORE_STATE:

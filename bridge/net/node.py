@@ -123,7 +123,8 @@ class FmuNode:
         self._driver: RealtimeDriver | None = None
         self._realtime: RealtimeStepping | None = None
         self.follows_clock = ros is not None and ros.follow_clock  # steps on another simulator's /clock
-        self.acting = not managed  # a managed node steps once activated
+        if managed:  # a managed node steps once activated, for every client alike
+            self.lockstep.inactive = inactive_reason(name)
         self._pacing = pacing
         # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
         self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
@@ -138,8 +139,24 @@ class FmuNode:
                 session.close()
             raise
 
+    @property
+    def _follower(self) -> Any:
+        """The clock follower of ``--follow-clock`` (None without one)."""
+        return self._link.ros.follower if self._link.ros is not None else None
+
     health_detail = property(lambda self: self.health.detail, doc="Why the node is not ``ok``.")
     zid = property(lambda self: self._link.zid, doc="The node's Zenoh session id (answers come from it).")
+
+    @property
+    def acting(self) -> bool:
+        """Whether the node steps now (False: a managed node that is not active)."""
+        return not self.lockstep.inactive
+
+    def check_active(self) -> None:
+        """Refused (code ``inactive``) while a managed node is not active: no reset, no step,
+        from a native client, a ROS action or reset, or a clock alike."""
+        if self.lockstep.inactive:
+            raise Refused(ls.INACTIVE, self.lockstep.inactive)
 
     @property
     def isolated(self) -> bool:
@@ -167,6 +184,8 @@ class FmuNode:
             link.add_ros(self, ros, ros_node)
         if self.acting:
             self._start_realtime()
+        elif self._follower is not None:
+            self._follower.pause()
         _log.info(
             "node %s serving %s (%s) on %s/*", self.name, self.info.model_name, self.mode, link.keys.base
         )
@@ -187,13 +206,19 @@ class FmuNode:
         self._driver.start()
 
     def activate(self) -> None:
-        """A managed node starts stepping: ROS actions are taken, a real-time node runs."""
-        self.acting = True
+        """A managed node starts stepping: actions (native and ROS) are taken, a real-time node
+        runs, a clock follower lines up with its clock again at the next tick."""
+        self.lockstep.inactive = ""
         self._start_realtime()
+        if self._follower is not None:
+            self._follower.resume()
 
     def deactivate(self) -> None:
-        """A managed node stops stepping (the FMU keeps its state; :meth:`activate` resumes)."""
-        self.acting = False
+        """A managed node stops stepping (the FMU keeps its state; :meth:`activate` resumes):
+        actions and resets are refused with the reason ``inactive``, from native clients too."""
+        self.lockstep.inactive = inactive_reason(self.name)
+        if self._follower is not None:
+            self._follower.pause()
         if self._driver is not None:
             self._driver.stop(self.step_timeout_s)
             self._driver = self._realtime = None
@@ -220,9 +245,8 @@ class FmuNode:
         self.watchdog.stop()
         if self._driver is not None:
             self._driver.stop(timeout_s)
-        follower = self._link.ros.follower if self._link.ros is not None else None
-        if follower is not None:  # its thread steps under the lock taken next
-            follower.close(timeout_s)
+        if self._follower is not None:  # its thread steps under the lock taken next
+            self._follower.close(timeout_s)
         locked = self._lock.acquire(timeout=timeout_s)
         if not locked and self.isolated:
             self.plant.close()  # kills the child: the blocked step returns with PlantDied
@@ -331,6 +355,7 @@ class FmuNode:
         ``values`` are set over the node's nominal ones (its experiment's parameters and start
         values): a request that names none runs the served experiment, not the FMU's defaults,
         on every path (a client's reset, a ROS reset, a real-time start)."""
+        self.check_active()
         values = {**self.served.nominal, **values}
         if self.health.is_hung:
             raise Refused("unhealthy", f"node {self.name!r} is unhealthy: {self.health.detail}")
@@ -399,7 +424,7 @@ class FmuNode:
         """One sample on an external clock's tick (``--follow-clock``) with the latest inputs held:
         the FMU time reached in ns, or None when the episode is over."""
         with self._lock:
-            if self.lockstep.ended or self._stop.is_set():
+            if self.lockstep.ended or self.lockstep.inactive or self._stop.is_set():
                 return None
             self._advance(self.current_inputs(), (0, b""))
             return round(self.plant.time_s * 1e9)
@@ -412,3 +437,12 @@ class FmuNode:
     def describe(self) -> dict[str, Any]:
         """What ``fmu-bridge nodes`` and remote envs learn about this node."""
         return replies.describe(self)
+
+
+def inactive_reason(name: str) -> str:
+    """Why a managed node that is not active serves no step and no reset (``Lockstep.inactive``)."""
+    return (
+        f"the managed node is not active: node {name!r} is a ROS 2 lifecycle node that steps and resets "
+        "for no client until it is activated; activate it first (the lifecycle transition activate, "
+        "e.g. ros2 lifecycle set <node> activate)"
+    )

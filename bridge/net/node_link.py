@@ -164,8 +164,8 @@ def _refuse_a_second_node(session: Any, keys: proto.Keys) -> None:
 def ros_actions(node: FmuNode, values: dict[str, float]) -> None:
     """Input values by name from the ROS view: held in real time, one sample each in lockstep.
     A rejected action is counted by cause (``ros_rejected_<cause>``) and logged the first time."""
-    if not node.acting:
-        return ros_rejected(node, "inactive", "the managed node is not active; activate it first")
+    if node.lockstep.inactive:  # the node's one rule for native clients, ROS and /clock alike
+        return ros_rejected(node, "inactive", node.lockstep.inactive)
     if node.lease.holder is not None:
         return ros_rejected(node, "not_holder", "a client holds the node's lease (native protocol)")
     current = node.current_inputs()
@@ -199,8 +199,8 @@ def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
     """``~/reset``: back to t0 with the nominal values and, unless ``keep_inputs``
     (``ros.reset_keeps_inputs``), the inputs' start values: an action of the last episode is not
     held into the next."""
-    refusal = node.lease.acquire(0, "", False).refusal
-    if refusal is not None:
+    refusal = node.lockstep.inactive or node.lease.acquire(0, "", False).refusal
+    if refusal:
         return False, f"reset refused: {refusal}"
     inputs = None if keep_inputs else list(node.start_inputs)
     try:

@@ -75,6 +75,7 @@ def checked_reset(node: FmuNode, payload: bytes, proof: bytes = b"") -> tuple[by
     ``pub`` (when the reset starts a lease), the checksum of the sent ``state`` its episodes start
     from ("" for none) and ``proof``, both bound to this request under the session key."""
     request = parse_reset(payload)
+    node.check_active()  # before the lease: a refused reset takes nothing
     values = node.rules.values(request.values)
     if request.inputs is not None:
         n = len(node.input_names)
@@ -161,6 +162,7 @@ def describe(node: FmuNode) -> dict[str, Any]:
         "time_s": node.plant.time_s,
         "health": health,
         "health_detail": health_detail,
+        "active": not node.lockstep.inactive,  # False: a managed node that steps for nobody now
         "holder": node.lease.describe(),
         "start_state": node_start.active_state(node),
         "isolated": node.isolated,

@@ -123,6 +123,19 @@ def test_the_holders_check_comes_first_then_the_values_then_the_health() -> None
     assert not state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
 
 
+def test_an_inactive_managed_node_steps_for_nobody_and_says_why() -> None:
+    state = started()
+    state.inactive = "the managed node is not active"
+    assert not state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
+    refused = verdict(state, 3, 2)  # the holder's plain next step, in range
+    assert reason(refused) == ls.INACTIVE and isinstance(refused, ls.Reject)
+    assert "not active" in refused.detail and (state.step, state.ended) == (1, False)
+    # deactivated between admission and the lock: the order refuses it too
+    assert reason(state.order(3, 2, proto.SIGNED, (HOLDER, b""))) == ls.INACTIVE
+    state.inactive = ""  # activated again: the same step is served
+    assert verdict(state, 3, 2) == ls.ADVANCE and state.plain(3, 2, HOLDER, [0.5], action(state, 3, 2))
+
+
 def test_a_duplicate_of_the_last_step_is_a_retry_never_a_second_step() -> None:
     state = started()
     assert verdict(state, 3, 1) == ls.RETRY

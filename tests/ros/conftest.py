@@ -232,8 +232,12 @@ class Command:
 
 
 @contextlib.contextmanager
-def command(*args: str, ready: str = "serving", timeout_s: float = 90.0) -> Iterator[Command]:
-    """Start ``fmu-bridge ARGS``, wait for ``ready`` in its output, kill it at the end."""
+def command(*args: str, ready: str = "serving", timeout_s: float = 300.0) -> Iterator[Command]:
+    """Start ``fmu-bridge ARGS``, wait for ``ready`` in its output, kill it at the end.
+
+    The wait ends as soon as ``ready`` is printed; its deadline is a loaded machine's: a torch agent
+    took 80-96 s to be ready beside four CPU burners at a load of 13-16 (benchmarks/
+    bench_launch_start.py), importing torch most of it."""
     cmd = Command(list(args))
     try:
         if ready:

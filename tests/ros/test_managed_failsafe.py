@@ -59,7 +59,13 @@ def test_lifecycle_services_answer_while_configure_loads_the_policy(tiny_run: Pa
     with command("agent", "run", str(tiny_run), *ARGS, ready="Ctrl-C stops it") as agent:
         assert probe.ask("lifecycle_clients", node=NODE)
         assert probe.ask("lifecycle_change_async", node=NODE, transition="configure")
-        state = probe.ask("lifecycle_get", node=NODE)
+        # a get_state may overtake the configure request on a busy machine (still unconfigured):
+        # ask until the transition has begun; a node whose services wait for configure says inactive
+        state = probe.wait(
+            lambda: (s := probe.ask("lifecycle_get", node=NODE))["label"] != "unconfigured" and s,
+            timeout_s=120.0,
+            what="configure under way",
+        )
         done = probe.ask("lifecycle_wait", node=NODE, timeout=120)
         assert done["success"], agent.output
         assert state["t"] < done["t"] and state["label"] == "configuring", (state, done)

@@ -5,10 +5,17 @@ activate steps it, deactivate stops it, cleanup closes it, shutdown ends the pro
 from __future__ import annotations
 
 import time
+from typing import Any
 
+import numpy as np
 import pytest
 
+from bridge.errors import TransportError
+from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.net import protocol as proto
+from bridge.net.discovery import query_info
+from bridge.net.remote import RemotePlant
 from tests.conftest import Loopback
 from tests.ros.conftest import Probe, command
 
@@ -34,6 +41,14 @@ def quiet_for(probe: Probe, seconds: float) -> list[object]:
     while time.monotonic() < end:
         time.sleep(0.1)
     return list(probe.ask("take", id="out"))
+
+
+def node_counters(loopback: Loopback) -> dict[str, Any]:
+    """The node's counters from its native ``info`` reply."""
+    counters: dict[str, Any] = query_info(loopback.session, proto.Keys(loopback.prefix, "plant"), 60.0)[
+        "counters"
+    ]
+    return counters
 
 
 def test_the_fmu_node_as_a_lifecycle_node(loopback: Loopback, probe: Probe) -> None:
@@ -72,3 +87,50 @@ def test_the_fmu_node_as_a_lifecycle_node(loopback: Loopback, probe: Probe) -> N
         assert probe.ask("lifecycle_change", node=NODE, transition="shutdown_active") == {"success": True}
         node.process.wait(timeout=30)
         assert node.process.returncode == 0 and "Traceback" not in node.output, node.output
+
+
+def test_a_managed_node_that_is_not_active_refuses_native_clients_too(
+    loopback: Loopback, probe: Probe
+) -> None:
+    """The native Zenoh path (a RemotePlant, as a trainer's remote env drives it) follows the same
+    rule as ROS actions: no node before configure, and no reset or step while inactive, each
+    refused with the reason; activated, the same client resets and steps, and a deactivated
+    node's episode resumes at the step it stopped at once activated again."""
+    args = [
+        "node", str(CARTPOLE), "--name", "plant", "--connect", loopback.endpoint, "--prefix",
+        loopback.prefix, "--ros-backend", "rclpy", "--managed",
+    ]  # fmt: skip
+    where = {"session": loopback.session, "prefix": loopback.prefix}
+    with command(*args, ready="Ctrl-C stops it") as node:
+        with pytest.raises(TransportError, match="plant"):  # unconfigured: no FMU, no native keys
+            RemotePlant(load_experiment(CARTPOLE), "plant", timeout_s=1.0, **where)
+        assert probe.ask("lifecycle_change", node=NODE, transition="configure") == {"success": True}
+        plant = RemotePlant(load_experiment(CARTPOLE), "plant", timeout_s=60.0, **where)
+        try:
+            plant.bind(["force"], ["x", "x_dot", "theta", "theta_dot"])
+            with pytest.raises(
+                TransportError, match=r"reset was refused \(inactive\): the managed node is not active"
+            ):
+                plant.reset({}, None)
+            assert plant.client.description["active"] is False  # and its info says so
+            assert probe.ask("lifecycle_change", node=NODE, transition="activate") == {"success": True}
+            start = plant.reset({}, None)
+            pushed = [plant.step(np.array([10.0])) for _ in range(3)]
+            assert pushed[-1][1] > 0.0 and start[1] == 0.0  # x_dot: the cart moves under +10 N
+            assert probe.ask("lifecycle_change", node=NODE, transition="deactivate") == {"success": True}
+            with pytest.raises(
+                TransportError, match=r"rejected step 4 of episode \d+: inactive: the managed node"
+            ):
+                plant.step(np.array([10.0]))
+            assert probe.ask("lifecycle_change", node=NODE, transition="activate") == {"success": True}
+            resumed = plant.step(np.array([10.0]))  # step 4 of the same episode: the state was kept
+            assert plant.sample == 4 and resumed[1] > pushed[-1][1], (resumed, pushed[-1])
+            assert probe.ask("lifecycle_change", node=NODE, transition="deactivate") == {"success": True}
+            with pytest.raises(TransportError, match=r"refused \(inactive\)"):
+                plant.reset({}, None)
+            assert probe.ask("lifecycle_change", node=NODE, transition="activate") == {"success": True}
+            assert plant.reset({}, None)[1] == 0.0 and plant.step(np.array([-10.0]))[1] < 0.0
+        finally:
+            plant.close()
+        counters = node_counters(loopback)
+        assert counters["rejected_inactive"] == 1 and counters["reset_inactive"] == 2, node.output

@@ -4,6 +4,7 @@ loop with an FMU node over DDS, and acting on a robot-like JointState publisher;
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -140,8 +141,11 @@ def test_launch_file_defaults_need_no_zenoh_router(balancer: Path, probe: Probe)
     node_line = [*lines["fmu_node"], "--listen", f"tcp/127.0.0.1:{free_port()}"]
     probe.ask("subscribe", id="act", topic="/plant/actions", type=JOINT_STATE, keep_all=True)
     with command(*node_line), command(*lines["fmu_agent"], ready="Ctrl-C stops it") as agent:
-        actions = probe.ask("wait_count", id="act", count=50)
+        # ready: subscribed and acting; the first action followed within 0.1 s in every measured run
+        actions = probe.ask("wait_count", id="act", count=50, timeout=120)
         assert isinstance(actions, list), agent.output
+        said = " ".join(agent.output.split())  # it says what its start-up waits for, and how long it took
+        assert "loading it (importing torch takes" in said and re.search(r"ready after \d+\.\d s", said), said
 
 
 def test_launch_file_with_the_zenoh_backend_closes_the_loop(

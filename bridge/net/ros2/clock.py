@@ -20,6 +20,8 @@ effort, drive the node as well as a reliable publisher does. The policy:
   gap; it is lined up with the clock again where it is (counted in ``skipped``).
 - **An ended episode** (the FMU terminated or failed): no more steps until a reset (``~/reset``
   or a jump back).
+- **Paused** (a managed node that is not active): ticks are only recorded, nothing steps or
+  resets; :meth:`ClockFollower.resume` lines the FMU up with the clock again at the next tick.
 
 Catching up is bounded per callback: a ``/clock`` callback only records the clock's time (and
 lines the FMU up: one reset at most); the steps that are due run on the follower's own thread,
@@ -71,6 +73,7 @@ class ClockFollower:
         self.t0_ns = 0
         self.last_clock_ns: int | None = None
         self.ended = False
+        self.paused = False
         self.ticks = self.steps = self.jumps_back = self.skipped = 0
         self._lock = threading.Lock()
         self._due_or_closed = threading.Condition(self._lock)
@@ -94,11 +97,23 @@ class ClockFollower:
         with self._lock:
             self.origin_ns = None
 
+    def pause(self) -> None:
+        """Take no step and no reset from now on (ticks are still recorded)."""
+        with self._lock:
+            self.paused = True
+
+    def resume(self) -> None:
+        """Follow the clock again: lined up with it at the next tick (a new episode)."""
+        with self._lock:
+            self.paused, self.origin_ns = False, None
+
     def tick(self, clock_ns: int) -> None:
         """A ``/clock`` message: record it (and line up at a start or a jump); never steps."""
         with self._lock:
             self.ticks += 1
             last, self.last_clock_ns = self.last_clock_ns, clock_ns
+            if self.paused:
+                return
             if self.origin_ns is None or (last is not None and clock_ns < last):
                 if self.origin_ns is not None:
                     self.jumps_back += 1
@@ -125,7 +140,7 @@ class ClockFollower:
                 self._due_or_closed.notify()
 
     def _due(self) -> int:
-        if self.origin_ns is None or self.ended or self.last_clock_ns is None:
+        if self.origin_ns is None or self.ended or self.paused or self.last_clock_ns is None:
             return 0
         return max((self.last_clock_ns - self.fmu_clock_ns + TOLERANCE_NS) // self.step_ns, 0)
 

@@ -1,4 +1,5 @@
-"""An FMU's parameters as ROS parameters of its node (the rclpy backend), as fmi_adapter users know them.
+"""An FMU's parameters as ROS parameters of its node (rclpy's parameter services on the rclpy backend,
+``bridge.net.ros2.param_services`` on the zenoh backend), as fmi_adapter users know them.
 
 Declared: the FMU's parameters (causality ``parameter``, variability ``fixed`` or ``tunable``)
 that the experiment lets a reset set (principle 8: a reset sets only what the experiment declares),

@@ -31,11 +31,27 @@ from bridge.net.ros2.rclpy_backend import RclpyNode
 _log = logging.getLogger(__name__)
 
 
-def one_transition_at_a_time(node: Any, lock: threading.Lock) -> None:
+def one_transition_at_a_time(
+    node: Any, lock: threading.Lock, answered: Callable[[], None] | None = None
+) -> None:
     """``change_state`` (in a reentrant group) refuses a transition while another runs: rcl's state
-    machine would raise inside the executor on a transition from a transition state."""
+    machine would raise inside the executor on a transition from a transition state.
+
+    ``answered()`` runs once each ``change_state`` response has been sent: an owner whose node is
+    finalized lets the process end only then (rclpy's executor shutdown does not wait for a callback
+    under way, so an exit straight from ``on_shutdown`` lost the caller's answer)."""
     service = node._service_change_state  # rclpy's own service of the lifecycle mixin
     change = service.callback
+    if answered is not None:
+        send = service.send_response
+
+        def send_then_tell(response: Any, header: Any) -> None:
+            try:
+                send(response, header)
+            finally:
+                answered()
+
+        service.send_response = send_then_tell
 
     def serialized(request: Any, response: Any) -> Any:
         if not lock.acquire(blocking=False):
@@ -52,7 +68,7 @@ def one_transition_at_a_time(node: Any, lock: threading.Lock) -> None:
     service.callback = serialized
 
 
-def lifecycle_class(owner: Any, lock: threading.Lock) -> Any:
+def lifecycle_class(owner: Any, lock: threading.Lock, answered: Callable[[], None] | None = None) -> Any:
     """A LifecycleNode class whose transitions call ``owner.on_<transition>() -> bool``."""
     from rclpy.callback_groups import ReentrantCallbackGroup
     from rclpy.lifecycle import LifecycleNodeMixin, TransitionCallbackReturn
@@ -65,7 +81,7 @@ def lifecycle_class(owner: Any, lock: threading.Lock) -> Any:
         def __init__(self, node_name: str, **kwargs: Any) -> None:
             Node.__init__(self, node_name, **kwargs)
             LifecycleNodeMixin.__init__(self, callback_group=ReentrantCallbackGroup())
-            one_transition_at_a_time(self, lock)
+            one_transition_at_a_time(self, lock, answered)
 
         def on_configure(self, state: Any) -> Any:
             return result(owner.on_configure())
@@ -138,13 +154,14 @@ class ManagedFmuNode:
     ) -> None:
         self._build = build
         self.fmu: Any = None
-        self.finished = threading.Event()  # finalized: the process may exit
+        self.finished = threading.Event()  # finalized and the caller answered: the process may exit
+        self._finalized = False
         self._lock = threading.Lock()
         self.ros = RclpyNode(
             name,
             namespace,
             domain_id=domain_id,
-            node_class=lifecycle_class(self, threading.Lock()),
+            node_class=lifecycle_class(self, threading.Lock(), self._answered),
             executor_threads=3,  # transitions, the other lifecycle services, the FMU's topics
         )
 
@@ -181,9 +198,13 @@ class ManagedFmuNode:
 
     def on_shutdown(self) -> bool:
         self.on_cleanup()
-        self.finished.set()
+        self._finalized = True  # the process ends once the caller has its answer (_answered)
         self._say("finalized: the process ends")
         return True
+
+    def _answered(self) -> None:
+        if self._finalized:
+            self.finished.set()
 
     def close(self) -> None:
         self.on_cleanup()

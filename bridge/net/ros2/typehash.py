@@ -28,6 +28,19 @@ SERVICE_DEFINITIONS: dict[str, tuple[str, str]] = {
     "std_srvs/srv/Trigger": ("", "bool success\nstring message\n"),
     "std_srvs/srv/SetBool": ("bool data\n", "bool success\nstring message\n"),
     "example_interfaces/srv/AddTwoInts": ("int64 a\nint64 b\n", "int64 sum\n"),
+    # a node's parameter services (what ``ros2 param`` calls; bridge.net.ros2.param_services)
+    "rcl_interfaces/srv/ListParameters": (
+        "uint64 DEPTH_RECURSIVE=0\nstring[] prefixes\nuint64 depth\n",
+        "ListParametersResult result\n",
+    ),
+    "rcl_interfaces/srv/GetParameters": ("string[] names\n", "ParameterValue[] values\n"),
+    "rcl_interfaces/srv/GetParameterTypes": ("string[] names\n", "uint8[] types\n"),
+    "rcl_interfaces/srv/DescribeParameters": ("string[] names\n", "ParameterDescriptor[] descriptors\n"),
+    "rcl_interfaces/srv/SetParameters": ("Parameter[] parameters\n", "SetParametersResult[] results\n"),
+    "rcl_interfaces/srv/SetParametersAtomically": (
+        "Parameter[] parameters\n",
+        "SetParametersResult result\n",
+    ),
 }
 """Request and response ``.srv`` text of the services this package knows (rosbags has none)."""
 

@@ -17,8 +17,9 @@ through rclpy with any RMW. Topics of node ``<name>`` in ``<namespace>``:
 - ``~/reset``: ``std_srvs/srv/Trigger``: back to t0 with the experiment's nominal values;
 - with ``per_variable``: ``std_msgs/msg/Float64`` on ``~/out/<output>`` and ``~/in/<input>``, the
   way fmi_adapter users know them;
-- on the rclpy backend, the FMU parameters a reset may set as ROS parameters
-  (``bridge.net.ros2.params``): set between episodes, applied at the next ``~/reset``.
+- the FMU parameters a reset may set as ROS parameters (``bridge.net.ros2.params``; rclpy's own
+  parameter services, or on the zenoh backend ``bridge.net.ros2.param_services``): set between
+  episodes, applied at the next ``~/reset``.
 """
 
 from __future__ import annotations
@@ -154,8 +155,13 @@ class RosView:
         self._per_variable: list[Any] = []
         if settings.per_variable:
             self._declare_per_variable(qos)
-        if parameters and on_parameters is not None and settings.backend == "rclpy":
-            self.node.declare_fmu_parameters(list(parameters), on_parameters)  # params.py
+        if parameters and on_parameters is not None:  # params.py: rclpy's own services, or ours
+            if settings.backend == "rclpy":
+                self.node.declare_fmu_parameters(list(parameters), on_parameters)
+            else:
+                from bridge.net.ros2.param_services import ParameterServices
+
+                ParameterServices(self.node, parameters, on_parameters)
 
     def _on_lost(self, count: int) -> None:
         self.lost += count
