@@ -118,7 +118,7 @@ class ChannelWaiting:
         self._watchdog = Watchdog(client.timeout_s, self._on_overdue, name=f"client-{client.name}")
         return self._channel
 
-    def _on_overdue(self, what: str, elapsed_s: float) -> None:
+    def _on_overdue(self, what: str, elapsed_s: float, deadline_s: float) -> None:
         self._overdue = True
         self._channel.close()
 

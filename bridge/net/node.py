@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import threading
+import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -128,6 +130,7 @@ class FmuNode:
         self._pacing = pacing
         # in-process only: an isolated plant is bounded by its own deadline and never hangs the node
         self.watchdog = Watchdog(self.step_timeout_s, self._on_hung, name=name, watch=not plant.isolated)
+        self.slowest_reset_s = 0.0  # measured: the deadline of later resets follows it
         self.closed_cleanly = True
         session = session if session is not None else open_session(options)
         try:
@@ -332,10 +335,10 @@ class FmuNode:
         detail = self.health.failed(exc, state.episode, state.step + 1)
         self._pub.put(state.failed(action, detail, self._time_ns, isinstance(exc, StepTimeout)))
 
-    def _on_hung(self, what: str, elapsed_s: float) -> None:
+    def _on_hung(self, what: str, elapsed_s: float, deadline_s: float) -> None:
         """The watchdog saw a reset or step outlive the deadline (the FMU is stuck in native code);
         in-process plants only (an isolated plant kills its child at its own deadline)."""
-        self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s)
+        self.lockstep.unhealthy = detail = self.health.hung(what, elapsed_s, deadline_s)
         self._link.unhealthy()
         self._pub.put(self.lockstep.error(detail, self._time_ns, hung=True))  # t: where it hung
 
@@ -348,6 +351,14 @@ class FmuNode:
             yield
         finally:
             self._lock.release()
+
+    def reset_deadline_s(self) -> float:
+        """How long the in-process FMU's next reset may take before the node reports it hung: the
+        first one (the model's initialisation, unmeasured) as long as it runs, as an isolated
+        plant's; later ones ``--step-timeout`` or 4 x the slowest reset so far, the longer."""
+        if not self.counters["resets"]:
+            return math.inf
+        return max(self.step_timeout_s, 4.0 * self.slowest_reset_s)
 
     def reset(self, values: dict[str, Any], inputs: list[float] | None, episode: int) -> bytes:
         """Reset the model for ``episode``; returns the OUTPUTS frame of step 0.
@@ -365,11 +376,13 @@ class FmuNode:
             self.saved.clear()  # a state of the last episode (and of this FMU instance) is no use
             if self._realtime is not None:
                 self._realtime.drop()  # a sample of the last episode is not published
-            self.watchdog.begin("the reset of episode %d", episode)
+            self.watchdog.begin("the reset of episode %d", episode, deadline_s=self.reset_deadline_s())
+            started = time.monotonic()
             try:
                 outputs = self.plant.reset(values, inputs)
             finally:
                 self.watchdog.end()
+            self.slowest_reset_s = max(self.slowest_reset_s, time.monotonic() - started)
             if inputs is not None:
                 self._latest_inputs = self._held_inputs = list(inputs)
             self.health.ok()

@@ -48,14 +48,20 @@ class Health:
             exc.detail + ("\nFMU log (most recent last):\n  " + "\n  ".join(log[-20:]) if log else "")
         )
 
-    def hung(self, what: str, elapsed_s: float) -> str:
-        """``what`` has not returned for ``elapsed_s``: the node is unhealthy until restarted."""
+    def hung(self, what: str, elapsed_s: float, deadline_s: float | None = None) -> str:
+        """``what`` has not returned for ``elapsed_s``: the node is unhealthy until restarted.
+        ``deadline_s``: the one that passed (a reset's follows the slowest reset measured)."""
         self.counters["hung"] += 1
         self.state = "hung"
+        deadline = self.deadline_s if deadline_s is None else deadline_s
+        why = (
+            "the node's --step-timeout: a slower plant needs a longer one"
+            if deadline <= self.deadline_s
+            else f"4 x the slowest reset so far, longer than the node's --step-timeout {self.deadline_s:g} s"
+        )
         self.detail = (
-            f"the FMU has not returned from {what} for {elapsed_s:.1f} s (deadline {self.deadline_s:g} s, "
-            "the node's --step-timeout: a slower plant needs a longer one); it cannot be interrupted in "
-            "this process: restart the node, and run unstable FMUs with --isolate"
+            f"the FMU has not returned from {what} for {elapsed_s:.1f} s (deadline {deadline:g} s, {why}); "
+            "it cannot be interrupted in this process: restart the node, and run unstable FMUs with --isolate"
         )
         _log.error("node %s: %s", self.node, self.detail)
         return self.detail

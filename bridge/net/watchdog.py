@@ -5,28 +5,41 @@ step beyond that); a daemon thread looks a few times a second and calls ``on_hun
 call outlives ``deadline_s``. A native call that never returns cannot be interrupted from
 Python: the node reports itself unhealthy and, on SIGTERM or Ctrl-C, exits without waiting
 for it. Run untrusted FMUs with ``--isolate`` to have the node kill and restart them instead.
+
+A call may carry its own deadline (``begin(..., deadline_s=...)``); ``math.inf`` watches nothing
+but says every 30 s that the call is still running (a model's first initialisation, whose length
+nothing has measured yet).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Callable
 
 _log = logging.getLogger(__name__)
+STILL_RUNNING_S = 30.0  # how often a call without a deadline is said to be still running
 
 
 class Watchdog:
-    """Calls ``on_hung(what, elapsed_s)`` once when a call marked by ``begin`` outlives ``deadline_s``."""
+    """Calls ``on_hung(what, elapsed_s, deadline_s)`` once when a call marked by ``begin`` outlives its
+    deadline (``deadline_s``, or the call's own)."""
 
     def __init__(
-        self, deadline_s: float, on_hung: Callable[[str, float], None], *, name: str = "", watch: bool = True
+        self,
+        deadline_s: float,
+        on_hung: Callable[[str, float, float], None],
+        *,
+        name: str = "",
+        watch: bool = True,
     ) -> None:
         self.deadline_s = deadline_s
         self.fired = False
         self._on_hung = on_hung
-        self._busy: tuple[str, tuple[object, ...], float] | None = None
+        self._busy: tuple[str, tuple[object, ...], float, float] | None = None
+        self._told = 0  # how many STILL_RUNNING_S periods of the current call were logged
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         if watch:  # False: the calls are bounded elsewhere (an isolated plant's own deadline)
@@ -38,9 +51,11 @@ class Watchdog:
         """Whether a thread looks for overdue calls (not for an isolated plant)."""
         return self._thread is not None and self._thread.is_alive()
 
-    def begin(self, what: str, *args: object) -> None:
-        """A call starts; ``what % args`` names it in the report (formatted only if it is late)."""
-        self._busy = (what, args, time.monotonic())
+    def begin(self, what: str, *args: object, deadline_s: float | None = None) -> None:
+        """A call starts; ``what % args`` names it in the report (formatted only if it is late).
+        ``deadline_s``: this call's own (default: the watchdog's; ``math.inf``: none)."""
+        self._told = 0
+        self._busy = (what, args, time.monotonic(), self.deadline_s if deadline_s is None else deadline_s)
 
     def end(self) -> None:
         self._busy = None
@@ -50,7 +65,7 @@ class Watchdog:
         busy = self._busy
         if busy is None:
             return None
-        what, args, start = busy
+        what, args, start, _ = busy
         return (what % args if args else what), time.monotonic() - start
 
     def rearm(self) -> None:
@@ -63,12 +78,17 @@ class Watchdog:
             busy = self._busy
             if busy is None or self.fired:
                 continue
-            what, args, start = busy
+            what, args, start, deadline_s = busy
             elapsed = time.monotonic() - start
-            if elapsed > self.deadline_s:
+            if math.isinf(deadline_s):
+                if elapsed >= (self._told + 1) * STILL_RUNNING_S:
+                    self._told += 1
+                    _log.info("%s is still running after %.0f s", what % args if args else what, elapsed)
+                continue
+            if elapsed > deadline_s:
                 self.fired = True
                 try:
-                    self._on_hung(what % args if args else what, elapsed)
+                    self._on_hung(what % args if args else what, elapsed, deadline_s)
                 except Exception:  # the watchdog must outlive whatever it reports
                     _log.exception("the hung-call handler failed")
 

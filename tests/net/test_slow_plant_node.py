@@ -17,6 +17,7 @@ from bridge.env import RemoteFmuEnv
 from bridge.env.node_vector import NodeVectorEnv
 from bridge.env.vec import RemoteVecEnv
 from bridge.errors import StepTimeout
+from bridge.net.remote import describe_nodes
 from tests.conftest import Loopback, node_process
 from tests.plant.test_slow_plant import lag
 from tests.slow_plant import slow_experiment
@@ -96,20 +97,49 @@ def test_steps_slower_than_the_floor_succeed_at_default_deadlines(loopback: Loop
     assert deadlines.step_s() >= 4 * 6.0  # the measured step, with its margin
 
 
-def test_a_reset_hung_in_the_fmu_is_reported_with_the_nodes_words(loopback: Loopback, tmp_path: Path) -> None:
-    # the FMU's initialisation never returns (1000 s); the node's own deadline is 2 s
-    path = slow_experiment(tmp_path, init_delay_s=1000.0)
+def test_a_first_reset_longer_than_the_step_timeout_runs_in_an_in_process_node(
+    loopback: Loopback, tmp_path: Path
+) -> None:
+    # the model's initialisation (3 s) is unmeasured before it ends: no deadline, as in an
+    # isolated plant, where --step-timeout (1 s) would have reported the node hung
+    path = slow_experiment(tmp_path, step_delay_s=0.05, init_delay_s=3.0, duration_s=0.3)
     with (
-        node_process(path, "stuck-init", loopback, "--step-timeout", "2"),
-        RemoteFmuEnv(path, "stuck-init", session=loopback.session, prefix=loopback.prefix) as env,
+        node_process(path, "init-in-process", loopback, "--step-timeout", "1"),
+        RemoteFmuEnv(path, "init-in-process", session=loopback.session, prefix=loopback.prefix) as env,
     ):
         start = time.monotonic()
-        with pytest.raises(StepTimeout) as caught:
-            env.reset(seed=0)
+        obs, _ = env.reset(seed=3)
         took_s = time.monotonic() - start
+        x = [float(obs[0])] + [float(env.step(np.array([0.5], dtype=np.float32))[0][0]) for _ in range(2)]
+        (info,) = describe_nodes(loopback.session, ["init-in-process"], prefix=loopback.prefix, timeout_s=10)
+    assert took_s >= 3.0, f"the reset took {took_s:.1f} s: the FMU's initialisation did not run in it"
+    np.testing.assert_allclose(x, lag(x[0], 0.5, 2), rtol=0, atol=1e-6)
+    assert info["health"] == "ok", info
+
+
+def test_a_reset_hung_in_the_fmu_is_reported_with_the_nodes_words(loopback: Loopback, tmp_path: Path) -> None:
+    # the node's first reset (0.3 s) is measured; a later one whose initialisation never returns
+    # (a client whose file asks for 1000 s, within what the node's file allows) outlives the
+    # node's deadline, max(2 s, 4 x 0.3 s)
+    folders = [tmp_path / name for name in ("node", "quick", "stuck")]
+    for folder in folders:
+        folder.mkdir()
+    served = slow_experiment(folders[0])
+    served.write_text(served.read_text().replace("x0:", "init_delay_s: {uniform: [0.1, 1000.0]}\n    x0:"))
+    quick = slow_experiment(folders[1], init_delay_s=0.3)
+    stuck = slow_experiment(folders[2], init_delay_s=1000.0)
+    net = {"session": loopback.session, "prefix": loopback.prefix}
+    with node_process(served, "stuck-init", loopback, "--step-timeout", "2"):
+        with RemoteFmuEnv(quick, "stuck-init", **net) as env:
+            env.reset(seed=0)
+        with RemoteFmuEnv(stuck, "stuck-init", **net) as env:
+            start = time.monotonic()
+            with pytest.raises(StepTimeout) as caught:
+                env.reset(seed=0)
+            took_s = time.monotonic() - start
     message = str(caught.value)
     assert took_s < 60.0, f"a hung reset took {took_s:.0f} s to report"
-    assert "the model hung" in message and "has not returned from the reset of episode 1" in message, message
+    assert "the model hung" in message and "has not returned from the reset of episode" in message, message
     assert "--step-timeout" in message, message
 
 
