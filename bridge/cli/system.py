@@ -368,15 +368,15 @@ def serve_system(  # noqa: PLR0917 (typer options)
     import threading
 
     from bridge.net.node_setup import check_step_timeout
-    from bridge.net.system_node import served_experiments, start_nodes
     from bridge.net.transport import ZenohOptions, open_session, session_mode
+    from bridge.serving.system import served_components, start_nodes
 
     check_step_timeout(step_timeout)  # before the network, like the file's checks below
 
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
     stop = threading.Event()
-    served = served_experiments(_experiment(experiment, step_size), component or ())  # before the network
+    served = served_components(_experiment(experiment, step_size), component or ())  # before the network
     session = open_session(options)
     try:
         nodes = start_nodes(
@@ -388,7 +388,7 @@ def serve_system(  # noqa: PLR0917 (typer options)
             signal.signal(signal.SIGTERM, signal.default_int_handler)
             for n in nodes:
                 err_console.print(
-                    f"node {n.name!r} serving {n.experiment.name} on {n.keys.base}/*", highlight=False
+                    f"node {n.name!r} serving {n.served.title} on {n.keys.base}/*", highlight=False
                 )
             err_console.print(f"{len(nodes)} component node(s) serving; Ctrl-C stops them", highlight=False)
             while not stop.wait(0.5):

@@ -7,6 +7,7 @@ from typing import Any
 
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.validate import resolve_state_file, timing
 from bridge.net import protocol as proto
 from bridge.net.remote import RemotePlant
 from bridge.net.transport import ZenohOptions
@@ -37,15 +38,23 @@ class RemoteFmuEnv(FmuEnv):
         take_over: bool = False,
     ) -> None:
         exp = as_experiment(experiment, version)
+        own = resolve_state_file(exp)  # the node gets the file from here: its machine need not have it
         plant = RemotePlant(
-            exp,
             node,
             options=options,
             session=session,
             prefix=prefix,
             timeout_s=timeout_s,
             take_over=take_over,
+            state=_read_state(own) if own is not None else None,
+            where=f" [{exp.source}]" if exp.source else "",
         )
+        try:  # the node must step as this experiment does (its checks: the env's, over the node's model)
+            expected = timing(exp, plant.info)
+            plant.check_timing(expected.sampling_time_s, expected.start_time_s)
+        except BaseException:
+            plant.close()
+            raise
         super().__init__(exp, render_mode=render_mode, plant=plant)
         self.node = node
         self._remote = plant

@@ -146,7 +146,7 @@ def test_a_component_node_that_is_not_running_is_a_clear_error(net: Loopback, tm
 
 
 def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:
-    from bridge.net.system_node import serve_components
+    from bridge.serving.system import serve_components
 
     file = system_file(tmp_path, "none", {"motor": "m"})
     with pytest.raises(ConfigError, match=r"\['load'\] is not served by a node"):
