@@ -35,7 +35,7 @@ scenarios:
 """
 EXPERIMENT = parse_experiment(parse_yaml(TEXT))
 PLANTS: dict[str, Callable[[Experiment], object]] = {
-    "in-process": LocalFmuPlant,
+    "in-process": lambda e: LocalFmuPlant(experiment_plant_spec(e)),
     "isolated": lambda e: IsolatedFmuPlant(experiment_plant_spec(e), timeout_s=30.0),
 }
 # the isolated plant is a child process: that case is an integration test

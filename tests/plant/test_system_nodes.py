@@ -119,7 +119,8 @@ def test_a_node_component_needs_no_fmu_on_this_machine(served: Path, net: Loopba
     there.write_text(yaml.safe_dump(data))
     with FmuEnv(here) as local, remote_env(there, net) as distributed:
         motor = distributed.plant.plants["motor"]  # type: ignore[attr-defined]
-        assert not motor.component.fmu.exists() and "omega" in motor.info.variables
+        fmu = distributed.plant.system.components["motor"].fmu  # type: ignore[attr-defined]
+        assert not fmu.exists() and "omega" in motor.info.variables
         np.testing.assert_array_equal(trajectory(distributed, 2), trajectory(local, 2))
 
 
