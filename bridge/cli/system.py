@@ -95,10 +95,20 @@ def _remote(
     return NodeComponents(options=options, prefix=prefix)
 
 
-def _open(experiment: Experiment, remote: Any) -> Any:
+def _open(experiment: Experiment, remote: Any, *, check: bool = True) -> Any:
+    """The system's plant; with ``check``, the experiment's task checked against it (a plant checks
+    no task: an env does, and these commands run the plant without one)."""
+    from bridge.experiment.validate import check_experiment
     from bridge.plant.system.plant import SystemPlant
 
-    return SystemPlant(experiment, remote=remote)
+    plant = SystemPlant(experiment, remote=remote)
+    try:
+        if check:
+            check_experiment(experiment, plant.info)
+    except BaseException:
+        plant.close()
+        raise
+    return plant
 
 
 def summary(plant: Any) -> dict[str, Any]:
@@ -232,9 +242,9 @@ def check_system_cmd(  # noqa: PLR0917 (typer options)
     from bridge.env.fmu_env import FmuEnv
 
     exp = _experiment(experiment, step_size, None, no_feedthrough, iterations)
-    plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix))
+    plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix), check=False)
     try:
-        env = FmuEnv(exp, plant=plant)
+        env = FmuEnv(exp, plant=plant)  # checks the task against the plant
     except BaseException:
         plant.close()
         raise
