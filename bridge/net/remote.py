@@ -75,7 +75,8 @@ class RemotePlant(Plant):
 
     One plant for a remote env and a system's component alike: the plant's bound inputs and
     outputs are mapped onto the node's by name (a bound name the node does not serve is a
-    ConfigError; an input the node serves and nobody binds holds its start value), and the
+    ConfigError; an input the node serves and nobody binds holds its start value; a remote env
+    holds the node to exactly its task's names, ``bridge.env.RemoteFmuEnv``), and the
     master of a system rolls it back for fixed-point iteration (SAVE_STATE or RESTORE_STATE rides
     on the next action, ``bridge.net.node_state``). It checks no task: the env checks its task
     against :attr:`info`, the model the node reports.
