@@ -87,8 +87,9 @@ class RemotePlant(Plant):
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
         take_over: take the node over from the client that holds it (its next action is rejected).
         waiting: how to wait for answers (``bridge.net.channel``; by default an Event).
-        sampling_time_s, start_time_s: the sample and start time this plant is used with (a
-            system's macro step); the node must step the same (None: as the node says).
+        sampling_time_s: the sample this plant is used with (a system's macro step); the node
+            must step the same (None: as the node says).
+        start_time_s: the start time this plant is used with (None: as the node says).
         defaults: values every reset sets under those it is given (a system component's own
             parameters and start values, which the system's task does not know).
         state: a state file's bytes that every episode starts from (:meth:`start_from`).
