@@ -45,6 +45,7 @@ from bridge.experiment.examples import example_experiment
 from bridge.fmu import Model
 from bridge.models import example_fmu
 from bridge.plant.batch import BatchPlant
+from bridge.plant.experiment_model import experiment_plant_spec
 
 RAW = {
     "feedthrough": ("u", "y"),
@@ -82,7 +83,7 @@ def raw_stepping(model: str, n: int, repeats: int) -> list[tuple[str, ...]]:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{model}.yaml"
         path.write_text(raw_experiment(model))
-        plant = BatchPlant(load_experiment(path), n, native=True)
+        plant = BatchPlant(experiment_plant_spec(load_experiment(path)), n, native=True)
     plant.bind([RAW[model][0]], [RAW[model][1]])
     for i in range(n):
         plant.reset(i, {}, [0.0])

@@ -40,6 +40,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.experiment import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.models import example_fmu
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 
 OUTPUTS = ["x", "x_dot", "theta", "theta_dot"]
@@ -108,7 +109,7 @@ def main() -> None:
     loops = {"raw FMPy loop": raw_loop, "FmuEnv.step": env_loop}
     if args.isolated:
         experiment = load_experiment(example_experiment(args.experiment))
-        isolated = FmuEnv(experiment, plant=IsolatedFmuPlant(experiment))
+        isolated = FmuEnv(experiment, plant=IsolatedFmuPlant(experiment_plant_spec(experiment)))
         loops["FmuEnv.step, isolated plant"] = lambda steps: env_loop(steps, isolated)
     # CPU time of this thread: both loops run wholly here, so waiting for a core on a busy machine
     # counts for neither; the isolated plant waits on its child process and needs the wall clock.

@@ -46,8 +46,8 @@ from bridge.net.transport import ZenohOptions, open_session, wait_connected
 
 NODE = """
 import os, sys, threading
-from bridge.net.node import FmuNode
 from bridge.net.realtime import Pacing
+from bridge.serving import experiment_node
 from bridge.net.transport import ZenohOptions
 
 experiment, name, endpoint, prefix, rate, spin_us, priority = sys.argv[1:]
@@ -57,8 +57,8 @@ if priority != "-":  # Zenoh's threads, started by the session below, inherit it
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(int(priority) - 1))
     except OSError:
         pass
-node = FmuNode(experiment, name=name, mode="realtime", rate=float(rate), prefix=prefix,
-               options=ZenohOptions(connect=(endpoint,)), pacing=pacing)
+node = experiment_node(experiment, name=name, mode="realtime", rate=float(rate), prefix=prefix,
+                       options=ZenohOptions(connect=(endpoint,)), pacing=pacing)
 threading.Event().wait(0.5)
 print("serving", node._driver.scheduling, node.counters["overruns"], flush=True)
 sys.stdin.readline()

@@ -342,6 +342,7 @@ def node(
 
     from bridge.env.fmu_env import as_experiment
     from bridge.net.node import FmuNode
+    from bridge.serving.experiment import experiment_served
 
     if mode not in (None, "lockstep", "realtime"):
         raise BridgeError(f"--mode {mode!r} is unknown; use lockstep or realtime")
@@ -365,8 +366,9 @@ def node(
     options = _zenoh_options(zenoh_config, listen, connect, zenoh_mode=zenoh_mode, network=network)
 
     def build(ros_node: Any = None) -> FmuNode:
+        plant, served = experiment_served(loaded)  # the experiment checked against its FMU
         return FmuNode(
-            loaded, name=name, mode=mode, rate=rate, options=options,  # type: ignore[arg-type]
+            plant, served, name=name, mode=mode, rate=rate, options=options,  # type: ignore[arg-type]
             prefix=prefix, ros=view, isolate=isolate, step_timeout_s=step_timeout,
             ros_node=ros_node, managed=ros_node is not None,
         )  # fmt: skip

@@ -95,10 +95,20 @@ def _remote(
     return NodeComponents(options=options, prefix=prefix)
 
 
-def _open(experiment: Experiment, remote: Any) -> Any:
+def _open(experiment: Experiment, remote: Any, *, check: bool = True) -> Any:
+    """The system's plant; with ``check``, the experiment's task checked against it (a plant checks
+    no task: an env does, and these commands run the plant without one)."""
+    from bridge.experiment.validate import check_experiment
     from bridge.plant.system.plant import SystemPlant
 
-    return SystemPlant(experiment, remote=remote)
+    plant = SystemPlant(experiment, remote=remote)
+    try:
+        if check:
+            check_experiment(experiment, plant.info)
+    except BaseException:
+        plant.close()
+        raise
+    return plant
 
 
 def summary(plant: Any) -> dict[str, Any]:
@@ -233,9 +243,9 @@ def check_system_cmd(  # noqa: PLR0917 (typer options)
     from bridge.env.fmu_env import FmuEnv
 
     exp = _experiment(experiment, step_size, None, no_feedthrough, iterations)
-    plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix))
+    plant = _open(exp, _remote(zenoh_config, listen, connect, zenoh_mode, prefix), check=False)
     try:
-        env = FmuEnv(exp, plant=plant)
+        env = FmuEnv(exp, plant=plant)  # checks the task against the plant
     except BaseException:
         plant.close()
         raise
@@ -369,15 +379,15 @@ def serve_system(  # noqa: PLR0917 (typer options)
     import threading
 
     from bridge.net.node_setup import check_step_timeout
-    from bridge.net.system_node import served_experiments, start_nodes
     from bridge.net.transport import ZenohOptions, open_session, session_mode
+    from bridge.serving.system import served_components, start_nodes
 
     check_step_timeout(step_timeout)  # before the network, like the file's checks below
 
     mode = session_mode(zenoh_mode, tuple(listen or ()), tuple(connect or ()), zenoh_config)
     options = ZenohOptions(zenoh_config, mode, tuple(listen or ()), tuple(connect or ()))
     stop = threading.Event()
-    served = served_experiments(_experiment(experiment, step_size), component or ())  # before the network
+    served = served_components(_experiment(experiment, step_size), component or ())  # before the network
     session = open_session(options)
     try:
         nodes = start_nodes(
@@ -389,7 +399,7 @@ def serve_system(  # noqa: PLR0917 (typer options)
             signal.signal(signal.SIGTERM, signal.default_int_handler)
             for n in nodes:
                 err_console.print(
-                    f"node {n.name!r} serving {n.experiment.name} on {n.keys.base}/*", highlight=False
+                    f"node {n.name!r} serving {n.served.title} on {n.keys.base}/*", highlight=False
                 )
             err_console.print(f"{len(nodes)} component node(s) serving; Ctrl-C stops them", highlight=False)
             while not stop.wait(0.5):

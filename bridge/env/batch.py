@@ -39,9 +39,10 @@ from bridge.env.autoreset import env_seeds as _seeds
 from bridge.env.sb3_vec import Sb3VecEnv
 from bridge.errors import BridgeError, ConfigError, StepError
 from bridge.experiment.config import Experiment, as_experiment
-from bridge.experiment.validate import resolve_fmu
+from bridge.experiment.validate import check_experiment, resolve_fmu
 from bridge.fmu import read_model_info
 from bridge.plant.batch import BatchPlant
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.task.batch import BatchTask
 from bridge.task.core import NonFiniteOutputs
 
@@ -78,8 +79,9 @@ class BatchEnv:
         self.n, self.on_error, self.autoreset = n_envs, on_error_mode(on_error), autoreset
         self.active = np.ones(n_envs, dtype=bool)
         _check_once_per_process(exp, n_envs)
-        self.plant = plant = BatchPlant(exp, n_envs, threads=threads, native=native)
+        self.plant = plant = BatchPlant(experiment_plant_spec(exp), n_envs, threads=threads, native=native)
         try:
+            check_experiment(exp, plant.info)  # the task, once, against what the plant serves
             self.task = BatchTask(exp, plant.info.variables, plant.timing, n_envs)
             plant.bind(self.task.input_names, self.task.output_names)
         except BaseException:

@@ -24,6 +24,7 @@ import numpy.typing as npt
 
 from bridge.errors import BridgeError, ConfigError, PlantError, StepError
 from bridge.experiment.config import Experiment, as_experiment
+from bridge.experiment.validate import check_experiment
 from bridge.plant.base import Plant
 from bridge.task import Task, load_callable
 from bridge.task.core import NonFiniteOutputs
@@ -72,6 +73,7 @@ class FmuEnv(gym.Env[ObsType, Any]):
         self.plant = plant
         try:
             self.timing = t = plant.timing
+            check_experiment(exp, plant.info)  # the task, once, against what the plant serves
             self.task = Task(exp, plant.info.variables, t)
             plant.bind(self.task.input_names, self.task.output_names)
             self._state_hook = load_callable(exp.hooks.state, "hooks.state") if exp.hooks.state else None

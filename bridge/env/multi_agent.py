@@ -27,6 +27,7 @@ from bridge.experiment.config import Experiment, as_experiment
 from bridge.experiment.reward import RewardSection
 from bridge.experiment.strict import format_validation_error
 from bridge.experiment.system import AgentSection
+from bridge.experiment.validate import check_experiment
 from bridge.plant.base import FloatArray, Plant
 from bridge.task.rewards import Reward, build_reward, reward_signal_names
 
@@ -105,6 +106,7 @@ class SystemParallelEnv(ParallelEnv):  # type: ignore[misc]
             plant = plant_for(exp)
         self.plant = plant
         try:
+            check_experiment(exp, plant.info)  # the task, once, against what the plant serves
             self._agents = {n: _Agent(n, s, plant, exp) for n, s in section.agents.items()}
             self._bind(where)
         except BaseException:

@@ -23,7 +23,7 @@ def plant_for(experiment: Experiment) -> Plant:
         from bridge.plant.system.plant import SystemPlant
 
         return SystemPlant(experiment, remote=NodeComponents())
-    return factory.fmu_plant(experiment)
+    return factory.experiment_plant(experiment)
 
 
 def model_info_for(experiment: Experiment) -> ModelInfo:

@@ -4,10 +4,13 @@ The node applies the input values it receives, advances one sample and publishes
 with their step index and simulation time; reset and info are queries
 (``bridge.net.node_replies``); its Zenoh entities live in ``bridge.net.node_link``. Who owns what:
 
-- the plant (``bridge.plant.factory.fmu_plant``, the factory envs use) steps the FMU, in this
-  process or in a child process (``plant.isolated``);
+- the plant (``bridge.plant.factory.fmu_plant`` of the node's
+  :class:`~bridge.plant.spec.PlantSpec`, the factory envs use) steps the FMU, in this process or
+  in a child process (``plant.isolated``);
 - :class:`~bridge.net.served.Served` says what the node serves: signal names, what a reset may
   set, input ranges, timing; ``bridge.net.requests`` checks every request against it;
+- both come from the caller: ``bridge.serving`` builds them from an experiment or a system file
+  (the node never reads a task);
 - :class:`~bridge.net.lockstep.Lockstep` decides what an action does (step, retry, or a REJECT
   with its reason) and :class:`~bridge.net.lease.Lease` who may send one;
 - :class:`~bridge.net.node_actions.ActionPath` carries out what the rules order for an action
@@ -28,15 +31,14 @@ from __future__ import annotations
 import contextlib
 import logging
 import math
+import sys
 import threading
 import time
 from collections import Counter
 from collections.abc import Iterator
-from pathlib import Path
 from typing import Any, Literal
 
 from bridge.errors import PlantError, StepTimeout
-from bridge.experiment.config import Experiment, as_experiment
 from bridge.net import lockstep as ls
 from bridge.net import node_replies as replies
 from bridge.net import node_start
@@ -54,6 +56,7 @@ from bridge.net.ros2.view import RosViewSettings
 from bridge.net.served import Served, element_start
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.net.watchdog import Watchdog
+from bridge.plant.spec import PlantSpec
 
 _log = logging.getLogger(__name__)
 Mode = Literal["lockstep", "realtime"]
@@ -64,10 +67,11 @@ __all__ = ["FmuNode", "Refused", "redact"]
 class FmuNode:
     """Serves one plant over Zenoh; ``close()`` (or the context manager) stops it.
 
+    ``bridge.serving.experiment_node`` builds one from an experiment file.
+
     Args:
-        experiment: the experiment whose model the node serves (its ``model`` section chooses the
-            FMU and whether it runs isolated).
-        served: what the node serves; by default read from ``experiment`` (:func:`served_by`).
+        spec: the plant the node serves (the model, its time grid, whether it runs isolated).
+        served: what the node serves: names, what a reset may set, input ranges, timing.
         isolate: run the FMU in a child process as ``model.isolation`` would: a hung or crashing
             FMU is killed after ``step_timeout_s`` and restarted by the next reset.
         step_timeout_s: the longest a reset or step may take before the node reports it hung.
@@ -78,7 +82,8 @@ class FmuNode:
 
     def __init__(
         self,
-        experiment: Experiment | str | Path,
+        spec: PlantSpec,
+        served: Served,
         *,
         name: str,
         mode: Mode = "lockstep",
@@ -89,17 +94,16 @@ class FmuNode:
         ros: RosViewSettings | None = None,
         isolate: bool = False,
         step_timeout_s: float = 10.0,
-        served: Served | None = None,
         pacing: Pacing | None = None,
         ros_node: Any = None,
         managed: bool = False,
     ) -> None:
         check_arguments(name, mode, rate, step_timeout_s)
-        self.experiment = exp = as_experiment(experiment)
         self.name, self.mode, self.rate = name, mode, rate
         self.keys = proto.Keys(prefix, name)
-        plant, served, self.step_timeout_s = served_plant(
-            exp, served, isolate=isolate, step_timeout_s=step_timeout_s
+        self.spec = spec
+        plant, self.step_timeout_s = served_plant(
+            spec, served, isolate=isolate, step_timeout_s=step_timeout_s
         )
         self.plant, self.served, self.info, self.timing = plant, served, plant.info, served.timing
         self.input_names, self.output_names = served.input_names, served.output_names
@@ -119,7 +123,10 @@ class FmuNode:
         self._held_inputs = list(self.start_inputs)
         self.ros_parameters: dict[str, Any] = {}  # FMU parameters set over ROS, for the next ~/reset
         # ROS lockstep (anonymous actions) ends an episode after model.episode_duration
-        self.episode_samples = round(exp.model.episode_duration / self.timing.sampling_time_s)
+        episode_s = served.episode_duration_s
+        self.episode_samples = (
+            round(episode_s / self.timing.sampling_time_s) if math.isfinite(episode_s) else sys.maxsize
+        )
         self.checksum = plant.provenance()["fmu_sha256"]
         self._own_session = session is None
         self._driver: RealtimeDriver | None = None
@@ -420,7 +427,7 @@ class FmuNode:
                         "node %s: ROS action after the end of episode %d (step %d of %d, "
                         "model.episode_duration %g s): not stepped; call ~/reset for the next episode",
                         self.name, self.lockstep.episode, self.lockstep.step, self.episode_samples,
-                        self.experiment.model.episode_duration,
+                        self.served.episode_duration_s,
                     )  # fmt: skip
         finally:
             self._lock.release()

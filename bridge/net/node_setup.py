@@ -7,11 +7,11 @@ the node cannot serve fails with a clear error and leaves nothing open.
 from __future__ import annotations
 
 from bridge.errors import BridgeError
-from bridge.experiment.config import Experiment
 from bridge.experiment.safe import check_safe_name
-from bridge.net.served import Served, served_by
+from bridge.net.served import Served
 from bridge.plant.base import Plant
 from bridge.plant.factory import fmu_plant
+from bridge.plant.spec import PlantSpec
 
 
 def check_step_timeout(step_timeout_s: float) -> None:
@@ -34,20 +34,18 @@ def check_arguments(name: str, mode: str, rate: float, step_timeout_s: float) ->
 
 
 def served_plant(
-    experiment: Experiment, served: Served | None, *, isolate: bool, step_timeout_s: float
-) -> tuple[Plant, Served, float]:
-    """The plant from the factory envs use, bound to what it serves (``served``, else read from
-    ``experiment``), and the longest a reset or step may take on it."""
-    plant = fmu_plant(experiment, isolate=isolate, timeout_s=step_timeout_s)
-    # isolated (by --isolate or model.isolation alike): the plant's own deadline bounds every
-    # call (model.isolation.timeout, else step_timeout_s) and kills the child at it
+    spec: PlantSpec, served: Served, *, isolate: bool, step_timeout_s: float
+) -> tuple[Plant, float]:
+    """The plant ``spec`` describes, from the factory envs use, bound to what it serves, and the
+    longest a reset or step may take on it."""
+    plant = fmu_plant(spec, isolate=isolate, timeout_s=step_timeout_s)
+    # isolated (by --isolate or the description's isolation alike): the plant's own deadline
+    # bounds every call (model.isolation.timeout, else step_timeout_s) and kills the child at it
     if plant.isolated:
         step_timeout_s = float(getattr(plant, "timeout_s", step_timeout_s))
     try:
-        info = plant.info
-        served = served or served_by(experiment, info, plant.timing)
         plant.bind(served.input_names, served.output_names)
     except BaseException:
         plant.close()
         raise
-    return plant, served, step_timeout_s
+    return plant, step_timeout_s

@@ -1,4 +1,5 @@
-"""``RemotePlant``: a node as a plant, for a remote env and for a system's component alike, and
+"""``RemotePlant``: a node as a plant, for a remote env and for a system's component alike (one
+constructor: what a use adds, a macro step or a component's own values, are its arguments), and
 :func:`answer`, the one reading of a node's answer frames. The client's session is
 ``bridge.net.client.NodeClient`` and discovery ``bridge.net.discovery`` (both re-exported here).
 
@@ -15,34 +16,27 @@ import hashlib
 import math
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, StepError, StepTimeout, TransportError
-from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, check_experiment, resolve_state_file, timing
+from bridge.experiment.validate import Timing
 from bridge.fmu import state_file
 from bridge.fmu.vocab import info_from_summary
 from bridge.net import protocol as proto
-from bridge.net.channel import ChannelWaiting, Waiting
+from bridge.net.channel import Waiting
 from bridge.net.client import NodeClient
 from bridge.net.discovery import describe_nodes, list_nodes, query_info
 from bridge.net.served import element_start
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, MODEL_HUNG, FloatArray, Plant
 
-if TYPE_CHECKING:
-    from bridge.plant.system.description import Component
-
 __all__ = [
     "SERVE_HINT",
-    "ComponentRole",
     "NodeClient",
     "RemotePlant",
     "answer",
-    "check_node",
     "describe_nodes",
     "list_nodes",
     "query_info",
@@ -76,56 +70,34 @@ def answer(plant: Plant, frame: proto.Frame, episode: int, step: int, outputs: i
     )
 
 
-def check_node(
-    experiment: Experiment, description: dict[str, Any], names: tuple[Any, Any], timing_: Timing
-) -> None:
-    """The node must serve the same model with the same timing and I/O as this env expects."""
-    inputs, outputs = names
-    node = description.get("node", "?")
-    mismatches = []
-    if list(inputs) != description["input_names"]:
-        mismatches.append(f"inputs {list(inputs)} vs the node's {description['input_names']}")
-    if list(outputs) != description["output_names"]:
-        mismatches.append(f"outputs {list(outputs)} vs the node's {description['output_names']}")
-    if abs(timing_.sampling_time_s - description["sampling_time_s"]) > 1e-12:
-        mismatches.append(f"sampling time {timing_.sampling_time_s} vs {description['sampling_time_s']}")
-    if mismatches:
-        raise ConfigError(
-            f"node {node!r} serves experiment {description.get('experiment')!r} with "
-            f"{'; '.join(mismatches)}; start the node with the same experiment file ({experiment.source})"
-        )
-
-
-@dataclass(frozen=True)
-class ComponentRole:
-    """A remote plant that is one component of a system: its sample is the macro step."""
-
-    component: Component
-    macro_step_s: float
-    start_time_s: float
-    where: str = ""
-
-
 class RemotePlant(Plant):
     """The model of a node (lockstep over Zenoh): the FMU need not exist on this machine.
 
-    The same plant serves a remote env (the node serves the env's experiment: the names must
-    match exactly) and a system's component (:meth:`for_component`: the plant's bound inputs and
-    outputs are mapped onto the node's by name, and the master rolls it back for fixed-point
-    iteration: SAVE_STATE or RESTORE_STATE rides on the next action, ``bridge.net.node_state``).
+    One plant for a remote env and a system's component alike: the plant's bound inputs and
+    outputs are mapped onto the node's by name (a bound name the node does not serve is a
+    ConfigError; an input the node serves and nobody binds holds its start value; a remote env
+    holds the node to exactly its task's names, ``bridge.env.RemoteFmuEnv``), and the
+    master of a system rolls it back for fixed-point iteration (SAVE_STATE or RESTORE_STATE rides
+    on the next action, ``bridge.net.node_state``). It checks no task: the env checks its task
+    against :attr:`info`, the model the node reports.
 
     Args:
-        experiment: the experiment (the same file the node was started with).
         node: the node's name.
         options: how to open a Zenoh session (ignored when ``session`` is given).
         timeout_s: how long a step or reset may take before :class:`StepTimeout`.
         take_over: take the node over from the client that holds it (its next action is rejected).
         waiting: how to wait for answers (``bridge.net.channel``; by default an Event).
+        sampling_time_s: the sample this plant is used with (a system's macro step); the node
+            must step the same (None: as the node says).
+        start_time_s: the start time this plant is used with (None: as the node says).
+        defaults: values every reset sets under those it is given (a system component's own
+            parameters and start values, which the system's task does not know).
+        state: a state file's bytes that every episode starts from (:meth:`start_from`).
+        label: how errors name the plant (default ``node 'NAME'``); ``where`` ends config errors.
     """
 
     def __init__(
         self,
-        experiment: Experiment | None,
         node: str,
         *,
         options: ZenohOptions | None = None,
@@ -134,39 +106,54 @@ class RemotePlant(Plant):
         timeout_s: float = 5.0,
         take_over: bool = False,
         waiting: Waiting | None = None,
-        role: ComponentRole | None = None,
+        sampling_time_s: float | None = None,
+        start_time_s: float | None = None,
+        defaults: Mapping[str, Any] | None = None,
+        state: bytes | None = None,
+        label: str | None = None,
+        where: str = "",
     ) -> None:
-        self.experiment, self.node, self.role = experiment, node, role
-        self.name = f"node {node!r}" if role is None else f"component {role.component.name!r} (node {node!r})"
+        self.node, self.where = node, where
+        self.name = label or f"node {node!r}"
         self._own_session = session is None
         self._session = session if session is not None else open_session(options)
         self._time_s = 0.0
-        self._state: bytes | None = None  # the state file its episodes start from, sent as the holder
+        self._state = state  # the state file its episodes start from, sent as the holder
         try:
             self.client = NodeClient(
                 self._session, node, prefix=prefix, timeout_s=timeout_s, take_over=take_over, waiting=waiting
             )
             d = self.client.description
             self.info = info_from_summary(d["model"])
-            if role is not None:
-                self.timing = _check_timing(self.name, d, role.macro_step_s, role.start_time_s, role.where)
-            else:
-                assert experiment is not None, "a remote env's plant needs its experiment"
-                check_experiment(experiment, self.info)
-                self.timing = timing(experiment, self.info)
-            if experiment is not None:  # only a holder may send a state: it goes at the first reset
-                self._state = _state_file_bytes(experiment)
+            self.timing = self.check_timing(sampling_time_s, start_time_s)
+            if state is not None:  # only a holder may send a state: it goes at the first reset
+                state_file.decode(state, source="the state to send", max_bytes=len(state))
         except BaseException:
             self.close()
             raise
         self._time_s = self.timing.start_time_s
         self._node_inputs: list[str] = list(d["input_names"])
         self._node_outputs: list[str] = list(d["output_names"])
-        own = {**role.component.parameters, **role.component.start_values} if role is not None else {}
-        self._defaults = own
+        self._defaults = dict(defaults or {})
         self._u = np.zeros(len(self._node_inputs))
         self._held: Sequence[float] = []
         self._flags = 0  # SAVE_STATE or RESTORE_STATE for the next action
+
+    def check_timing(self, sampling_time_s: float | None, start_time_s: float | None) -> Timing:
+        """The node's timing, checked against the sample and start time this plant is used with
+        (None: not checked); a ConfigError says what differs and how to start the node."""
+        d = self.client.description
+        node_s, node_t0 = float(d["sampling_time_s"]), float(d["start_time_s"])
+        same_sample = sampling_time_s is None or math.isclose(node_s, sampling_time_s, rel_tol=1e-12)
+        if not same_sample or (start_time_s is not None and node_t0 != start_time_s):
+            raise ConfigError(
+                f"{self.name}: the node steps {node_s} s from t0 = {node_t0} s; here a sample is "
+                f"{sampling_time_s if sampling_time_s is not None else node_s} s from "
+                f"{start_time_s if start_time_s is not None else node_t0} s: start the node from the "
+                f"same file (`fmu-bridge node EXPERIMENT`; a system's: {SERVE_HINT}){self.where}"
+            )
+        sample_s = node_s if sampling_time_s is None else sampling_time_s
+        return Timing(d["step_size_s"], d["steps_per_sample"], sample_s, node_t0)
 
     def start_from(self, data: bytes) -> dict[str, Any]:
         """Hand the node a state file's bytes: its episodes start from that state from the next
@@ -190,47 +177,14 @@ class RemotePlant(Plant):
 
     def clear_start(self) -> dict[str, Any]:
         """Drop the state sent to the node: from the next reset on its episodes start as its own
-        experiment says (its state file, else initialisation)."""
+        description says (its state file, else initialisation)."""
         self._state = None
         if self.client.key is None:
             return {"cleared": True}
         return self.client.clear_state()
 
-    @property
-    def component(self) -> Component | None:
-        """The system's component this plant is (None: a remote env's plant)."""
-        return self.role.component if self.role is not None else None
-
-    @classmethod
-    def for_component(
-        cls,
-        component: Component,
-        macro_step_s: float,
-        start_time_s: float,
-        *,
-        session: Any,
-        prefix: str,
-        timeout_s: float,
-        where: str = "",
-    ) -> RemotePlant:
-        """A system's component served by its node; answers wait in a ring channel (the master
-        waits for every node of a macro step in turn)."""
-        return cls(
-            None,
-            component.node or component.name,
-            session=session,
-            prefix=prefix,
-            timeout_s=timeout_s,
-            waiting=ChannelWaiting(),
-            role=ComponentRole(component, macro_step_s, start_time_s, where),
-        )
-
     def bind(self, input_names: Sequence[str], output_names: Sequence[str]) -> None:
         super().bind(input_names, output_names)
-        if self.role is None:
-            assert self.experiment is not None
-            names = (self.input_names, self.output_names)
-            check_node(self.experiment, self.client.description, names, self.timing)
         self._in_index = self._positions(self.input_names, self._node_inputs, "inputs")
         self._out_index = self._positions(self.output_names, self._node_outputs, "outputs")
         # the usual case (both sides bound alike): values pass through without reordering
@@ -240,10 +194,9 @@ class RemotePlant(Plant):
     def _positions(self, names: Sequence[str], served: list[str], what: str) -> list[int]:
         missing = [n for n in names if n not in served]
         if missing:
-            where = self.role.where if self.role is not None else ""
             raise ConfigError(
                 f"{self.name}: the node serves {what} {served}, not {missing}; restart the node with "
-                f"this experiment file ({SERVE_HINT}){where}"
+                f"this file (`fmu-bridge node EXPERIMENT`; a system's: {SERVE_HINT}){self.where}"
             )
         return [served.index(n) for n in names]
 
@@ -324,9 +277,7 @@ class RemotePlant(Plant):
 
     def provenance(self) -> dict[str, str]:
         d = self.client.description
-        fmu = (
-            str(self.role.component.fmu) if self.role is not None else str(d.get("model", {}).get("path", ""))
-        )
+        fmu = str(d.get("model", {}).get("path", ""))
         return {"fmu": fmu, "fmu_sha256": d.get("fmu_sha256", ""), "node": self.node}
 
     def reset_info(self) -> dict[str, Any]:
@@ -343,23 +294,3 @@ class RemotePlant(Plant):
 
 
 SERVE_HINT = "`fmu-bridge system serve SYSTEM.yaml` starts the component nodes"
-
-
-def _check_timing(name: str, d: Mapping[str, Any], macro_s: float, t0: float, where: str) -> Timing:
-    if not math.isclose(d["sampling_time_s"], macro_s, rel_tol=1e-12) or d["start_time_s"] != t0:
-        raise ConfigError(
-            f"{name}: the node steps {d['sampling_time_s']} s from t0 = {d['start_time_s']} s; the system "
-            f"has macro step {macro_s} s from {t0} s: start the node from this system file ({SERVE_HINT})"
-            f"{where}"
-        )
-    return Timing(d["step_size_s"], d["steps_per_sample"], macro_s, t0)
-
-
-def _state_file_bytes(experiment: Experiment) -> bytes | None:
-    """``model.reset_policy: {state_file: ...}`` of a remote env's experiment, checked here first
-    (sizes, checksum): the node gets the file from here, so the FMU's machine need not have it."""
-    path = resolve_state_file(experiment)
-    if path is None:
-        return None
-    saved = state_file.read(path)
-    return state_file.encode(saved.header, saved.payload)

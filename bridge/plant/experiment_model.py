@@ -1,15 +1,18 @@
-"""The experiment's FMU as a model description: one place that maps the ``model`` section to a
-:class:`bridge.fmu.ModelSpec` (and :func:`experiment_model` opens it)."""
+"""The experiment's FMU as a description: the one place that maps the ``model`` section to a
+:class:`bridge.fmu.ModelSpec` (:func:`experiment_spec`) and to the :class:`PlantSpec` its plant is
+built from (:func:`experiment_plant_spec`); :func:`experiment_model` opens the model itself."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, resolve_state_file
-from bridge.fmu import Model
+from bridge.experiment.validate import Timing, configured, resolve_fmu, resolve_state_file, timing
+from bridge.fmu import Model, read_model_info
 from bridge.fmu.opening import open_model
 from bridge.fmu.spec import ModelSpec
+from bridge.fmu.vocab import ModelInfo
+from bridge.plant.spec import Isolation, PlantSpec
 
 
 def experiment_spec(
@@ -42,6 +45,22 @@ def experiment_spec(
         parameters=m.parameters,
         start_values=m.start_values,
     )
+
+
+def experiment_plant_spec(experiment: Experiment, info: ModelInfo | None = None) -> PlantSpec:
+    """The plant the experiment's ``model`` section describes: its model (:func:`experiment_spec`),
+    the agent's time grid (``step_size``, ``sampling_time``; the FMU's default step where the file
+    gives none) and ``model.isolation``. ``info``: the FMU's model, where the caller has read it.
+
+    Checks the time grid, not the task: the env checks the task against the plant's variables."""
+    fmu = resolve_fmu(experiment)
+    info = configured(experiment, info if info is not None else read_model_info(fmu))
+    t = timing(experiment, info)
+    section = experiment.model.isolation
+    isolation = None
+    if section is not None:
+        isolation = Isolation(section.timeout, section.memory_limit_mb, section.restart)
+    return PlantSpec(experiment_spec(experiment, fmu, t), t, isolation)
 
 
 def experiment_model(

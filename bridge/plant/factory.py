@@ -10,34 +10,47 @@ from typing import TYPE_CHECKING
 
 from bridge.experiment.config import Experiment
 from bridge.experiment.system import is_system_file
+from bridge.fmu import read_model_info
 from bridge.fmu.vocab import ModelInfo
+from bridge.plant.spec import Isolation, PlantSpec
 
 if TYPE_CHECKING:
     from bridge.plant.base import Plant
     from bridge.plant.system.plant import RemoteComponents
 
 
-def fmu_plant(experiment: Experiment, *, isolate: bool = False, timeout_s: float | None = None) -> Plant:
-    """The experiment's FMU in a child process when ``model.isolation`` or ``isolate`` asks for
-    it (bounded by the file's ``timeout``, else ``timeout_s``, else 10 s), else in this process.
-    ``plant.isolated`` says which."""
-    isolation = experiment.model.isolation
-    if isolation is None and not isolate and _needs_own_process(model_info_for(experiment)):
-        from bridge.experiment.config import IsolationSection
+def fmu_plant(spec: PlantSpec, *, isolate: bool = False, timeout_s: float | None = None) -> Plant:
+    """The FMU ``spec`` describes, in a child process when ``spec.isolation`` or ``isolate`` asks
+    for it (bounded by the isolation's ``timeout_s``, else ``timeout_s``, else 10 s) or the FMU
+    needs a process of its own, else in this process. ``plant.isolated`` says which.
 
-        isolation = IsolationSection()
-    if isolation is not None or isolate:
+    The plant checks no task: the env checks it once against ``plant.info``."""
+    isolation = spec.isolation
+    if isolation is None and isolate:
+        isolation = Isolation(timeout_s or 10.0)
+    if isolation is None and _needs_own_process(read_model_info(spec.model.fmu)):
+        isolation = Isolation()
+    if isolation is not None:
         from bridge.plant.isolated import IsolatedFmuPlant
 
         return IsolatedFmuPlant(
-            experiment,
-            timeout_s=isolation.timeout if isolation is not None else (timeout_s or 10.0),
-            memory_limit_mb=isolation.memory_limit_mb if isolation is not None else None,
-            restart=isolation.restart if isolation is not None else True,
+            spec,
+            timeout_s=isolation.timeout_s,
+            memory_limit_mb=isolation.memory_limit_mb,
+            restart=isolation.restart,
         )
     from bridge.plant.local import LocalFmuPlant  # the FMU runtime only when it runs here
 
-    return LocalFmuPlant(experiment)
+    return LocalFmuPlant(spec)
+
+
+def experiment_plant(
+    experiment: Experiment, *, isolate: bool = False, timeout_s: float | None = None
+) -> Plant:
+    """The plant of the experiment's FMU (:func:`fmu_plant` of its ``model`` section's description)."""
+    from bridge.plant.experiment_model import experiment_plant_spec
+
+    return fmu_plant(experiment_plant_spec(experiment), isolate=isolate, timeout_s=timeout_s)
 
 
 def _needs_own_process(info: ModelInfo) -> bool:

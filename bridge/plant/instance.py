@@ -1,12 +1,12 @@
 """``FmuInstancePlant``: one FMU instance in this process as a plant.
 
-What ``LocalFmuPlant`` (an experiment's FMU) and a system's ``FmuComponent`` share: a sample
+What ``LocalFmuPlant`` (an FMU from its description) and a system's ``FmuComponent`` share: a sample
 (inputs written, ``n`` FMU steps, outputs read) as one native call where the instance allows it
 (``bridge.fmu.sample``, re-pointed after every reset), else through the model's signal groups
 and ``Model.advance``; FMU errors turned into the plant's :class:`StepError`; and saving and
 restoring the state through the Plant interface (a system's fixed-point iteration rolls
 components back to the start of a macro step, here or in a node). Every FMU call is made by
-``bridge.fmu``. Subclasses build ``model``, ``info``, ``timing``, ``name`` and ``fmu_path``.
+``bridge.fmu``. ``LocalFmuPlant`` builds ``model``, ``info``, ``timing``, ``name`` and ``fmu_path``.
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ from bridge.plant.base import (
     FloatArray,
     Plant,
 )
+from bridge.plant.spec import PlantSpec
 
 _EMPTY = np.zeros(0)
 
@@ -49,6 +50,7 @@ class FmuInstancePlant(Plant):
     """A plant over ``self.model``; ``bind`` binds the per-sample calls once (the hot path)."""
 
     can_set_values = True
+    spec: PlantSpec
     model: Model
     fmu_path: Path
     _pending: Sequence[float] | None = None
@@ -89,7 +91,11 @@ class FmuInstancePlant(Plant):
         return m.start_time_s + m.step_index * m.step_size_s
 
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
-        return values
+        """A system's component sets its own parameters and start values under those given (the
+        system's task does not know them); an experiment's task gives its model's itself."""
+        if self.spec.component is None:
+            return values
+        return {**self.spec.model.initial_values(), **values}
 
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1

@@ -24,9 +24,9 @@ initialise the FMU again: it may take ``timeout_s`` or four times the first rese
 Cost: one pipe round trip per sample (see ``benchmarks/bench_env.py --plant isolated``). Use it
 for untrusted or unstable FMUs; the in-process plant stays the default.
 
-With ``component=`` the child runs one component of a system (an ``FmuComponent``: one macro step
-a sample) instead of the experiment's model: a system puts every component whose FMU declares
-``canBeInstantiatedOnlyOncePerProcess`` in a process of its own this way.
+The child runs a ``LocalFmuPlant`` of the same description (:class:`~bridge.plant.spec.PlantSpec`)
+the parent was given, an experiment's FMU and a system's component alike: a system puts every
+component whose FMU declares ``canBeInstantiatedOnlyOncePerProcess`` in a process of its own this way.
 """
 
 from __future__ import annotations
@@ -40,44 +40,31 @@ import sys
 import time
 from collections.abc import Mapping, Sequence
 from multiprocessing.connection import Connection
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
 from bridge.errors import BridgeError, ConfigError, PlantDied, PlantError, StepError, StepTimeout
-from bridge.experiment.config import Experiment
-from bridge.experiment.validate import Timing, check_experiment, resolve_fmu, timing
-from bridge.fmu import read_model_info
+from bridge.fmu import read_model_info, structure
 from bridge.fmu.state_file import StateFile
+from bridge.fmu.vocab import ModelInfo
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT, FloatArray, Plant
-
-if TYPE_CHECKING:
-    from bridge.plant.system.description import Component
+from bridge.plant.spec import PlantSpec
 
 _log = logging.getLogger(__name__)
 RESET_MARGIN = 4.0  # a later reset may take this many times the first (measured) one
 _START_REPORT_S = 30.0  # how often a child that is still starting is reported (INFO)
 
 
-class ChildComponent(NamedTuple):
-    """A system component for the child to run (the arguments of ``FmuComponent``)."""
-
-    component: Component
-    macro_step_s: float
-    start_time_s: float
-    where: str = ""
-
-
 class IsolatedFmuPlant(Plant):
-    """The experiment's FMU in a child process, every call bounded by ``timeout_s``.
+    """The FMU ``spec`` describes in a child process, every call bounded by ``timeout_s``.
 
     Args:
-        experiment: the experiment (its ``model`` section, as for ``LocalFmuPlant``).
+        spec: the model and what a sample is (as for ``LocalFmuPlant``, which the child runs).
         timeout_s: the longest a reset or one sample may take before :class:`StepTimeout` (not
             the start, nor the first reset of a child, which initialises the FMU).
         memory_limit_mb: resident memory the child may add after loading the FMU (None: no limit).
         restart: start a fresh child at the next ``reset()`` after a hang or a crash.
-        component: run this system component in the child instead of the experiment's model.
     """
 
     can_set_values = True
@@ -85,31 +72,19 @@ class IsolatedFmuPlant(Plant):
 
     def __init__(
         self,
-        experiment: Experiment,
+        spec: PlantSpec,
         *,
         timeout_s: float = 10.0,
         memory_limit_mb: float | None = None,
         restart: bool = True,
-        component: ChildComponent | None = None,
     ) -> None:
         if not timeout_s > 0:
             raise ConfigError(f"timeout_s must be > 0 seconds, got {timeout_s}")
-        self.experiment = experiment
-        self.component = component
-        if component is None:
-            self.fmu_path = resolve_fmu(experiment)
-            self.info = check_experiment(experiment, read_model_info(self.fmu_path))
-            self.timing = timing(experiment, self.info)
-            self.name = f"FMU {self.fmu_path.name} (child process)"
-        else:
-            from bridge.plant.system.component import steps_per_macro
-
-            part, macro_s = component.component, component.macro_step_s
-            self.fmu_path = part.fmu
-            self.info = read_model_info(part.fmu)
-            n = steps_per_macro(part, macro_s, None, component.where)  # as FmuComponent divides it
-            self.timing = Timing(macro_s / n, n, macro_s, component.start_time_s)
-            self.name = f"component {part.name!r} ({part.fmu.name}, child process)"
+        self.spec = spec
+        self.fmu_path = spec.model.fmu
+        self.info = _configured_info(spec)
+        self.timing = spec.timing
+        self.name = spec.named("child process")
         self.timeout_s, self.memory_limit_mb, self.restart = timeout_s, memory_limit_mb, restart
         self.restarts = 0
         self._time_s = self.timing.start_time_s
@@ -128,10 +103,8 @@ class IsolatedFmuPlant(Plant):
         parent = child = None
         try:
             parent, child = context.Pipe()
-            args = (child, self.experiment, self.input_names, self.output_names, self.memory_limit_mb)
-            process = context.Process(
-                target=_serve, args=args, kwargs={"component": self.component}, name="fmu-plant", daemon=True
-            )
+            args = (child, self.spec, self.input_names, self.output_names, self.memory_limit_mb)
+            process = context.Process(target=_serve, args=args, name="fmu-plant", daemon=True)
             process.start()
         except (OSError, ValueError) as exc:  # no process: EAGAIN, EMFILE, ENOMEM, a bad executable
             for end in (parent, child):
@@ -286,7 +259,7 @@ class IsolatedFmuPlant(Plant):
 
     def start_from(self, file: StateFile | None, source: str) -> None:
         """The child starts every episode from the next reset on at ``file``'s saved state (None:
-        as the experiment says); a restarted child is given it again."""
+        as the description says); a restarted child is given it again."""
         if self._conn is not None and self._broken is None:
             self._call(("start", file, source), step=None)
         self._start_file = (file, source) if file is not None else None
@@ -405,23 +378,20 @@ class IsolatedFmuPlant(Plant):
 # -- the child process -------------------------------------------------------------------------------------
 def _serve(
     conn: Connection,
-    experiment: Experiment,
+    spec: PlantSpec,
     input_names: Sequence[str],
     output_names: Sequence[str],
     memory_limit_mb: float | None = None,
-    *,
-    component: ChildComponent | None = None,
 ) -> None:
-    """The child's loop: one LocalFmuPlant (or FmuComponent), one message in, one reply out."""
+    """The child's loop: one LocalFmuPlant of ``spec``, one message in, one reply out."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C goes to the parent, which stops us
     os.setpgid(0, 0)  # a process group of its own: the parent kills it whole, with whatever the FMU forked
     _follow_parent(os.getppid())
     from bridge.errors import BridgeError
     from bridge.plant.local import LocalFmuPlant
-    from bridge.plant.system.component import FmuComponent
 
     try:
-        plant = LocalFmuPlant(experiment) if component is None else FmuComponent(*component)
+        plant = LocalFmuPlant(spec)
         plant.bind(input_names, output_names)
     except BridgeError as exc:  # the FMU did not load: the parent's "hello" gets the error itself
         _refuse(conn, exc)
@@ -469,6 +439,17 @@ def _handle(plant: Any, op: str, args: tuple[Any, ...]) -> tuple[Any, ...]:
     else:  # "hello"
         outputs = np.zeros(0)
     return ("ok", outputs, plant.time_s, plant.terminated)
+
+
+def _configured_info(spec: PlantSpec) -> ModelInfo:
+    """The model the child serves, read here: the FMU's variables, arrays sized as the
+    description's structural parameters size them (what the child's model reports)."""
+    info = read_model_info(spec.model.fmu)
+    values = dict(spec.model.structural_parameters)
+    if not values:
+        return info
+    checked = structure.check(info, values, "structural_parameters")
+    return structure.resized(info, structure.sizes_of(checked))
 
 
 def _start_hint() -> str:

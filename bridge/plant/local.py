@@ -8,39 +8,38 @@ outputs, in one native call where the FMU allows it (``bridge.fmu.sample``), els
 
 from __future__ import annotations
 
-from bridge.experiment.config import Experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, resolve_state_file, timing
-from bridge.fmu import read_model_info, state_file
+from bridge.fmu import state_file
 from bridge.fmu.exit_guard import guard_native_exit
+from bridge.fmu.opening import open_model
 from bridge.fmu.state_file import StateFile
-from bridge.plant.experiment_model import experiment_model
 from bridge.plant.instance import FmuInstancePlant
+from bridge.plant.spec import PlantSpec
 
 
 class LocalFmuPlant(FmuInstancePlant):
-    """The FMU of ``experiment`` (``model.fmu``), loaded and checked in this process.
+    """The FMU ``spec`` describes, loaded in this process (:func:`bridge.fmu.open_model`).
 
     Args:
-        experiment: the experiment whose ``model`` section says which FMU, interface, step size,
-            reset policy and tolerance to use.
+        spec: the model (FMU, interface, time grid, reset policy, solver, parameters, ...) and what
+            a sample is; an experiment's from
+            :func:`bridge.plant.experiment_model.experiment_plant_spec`.
     """
 
-    def __init__(self, experiment: Experiment) -> None:
-        self.experiment = exp = experiment
-        self.fmu_path = resolve_fmu(exp)
-        self.info = check_experiment(exp, read_model_info(self.fmu_path))
-        self.timing = t = timing(exp, self.info)
-        self.name = f"FMU {self.fmu_path.name} (in-process)"
-        self.model = experiment_model(exp, self.fmu_path, t)
+    def __init__(self, spec: PlantSpec) -> None:
+        self.spec = spec
+        self.fmu_path = spec.model.fmu
+        self.timing = spec.timing
+        self.name = spec.named("in-process")
+        self.model = open_model(spec.model)
+        self.info = self.model.info  # the array sizes after configuration mode
         guard_native_exit()  # an exit() inside the FMU ends the process with code 70, saying so
 
     def start_from(self, file: StateFile | None, source: str) -> None:
         """Start every episode from the next reset on at ``file``'s saved state; None: as the
-        experiment says (its ``reset_policy: {state_file: ...}``, else initialisation)."""
-        if file is None:
-            own = resolve_state_file(self.experiment)
-            if own is not None:
-                file, source = state_file.read(own), str(own)
+        description says (its state file, else initialisation)."""
+        own = self.spec.model.state_file
+        if file is None and own is not None:
+            file, source = state_file.read(own), str(own)
         self.model.start_from(file, source)
 
     def current_inputs(self) -> list[float]:

@@ -21,6 +21,7 @@ from bridge.errors import ConfigError
 from bridge.experiment.config import Experiment, load_experiment
 from bridge.fmu import read_model_info
 from bridge.models import example_fmu
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 from bridge.plant.local import LocalFmuPlant
 
@@ -124,13 +125,13 @@ def test_a_plant_vec_env_over_them_equals_one_instance_per_process(tmp_path: Pat
 
 def test_a_second_instance_in_this_process_is_refused_until_the_first_closes(tmp_path: Path) -> None:
     exp = experiment(tmp_path)
-    first = LocalFmuPlant(exp)
+    first = LocalFmuPlant(experiment_plant_spec(exp))
     try:
         with pytest.raises(ConfigError, match=r"canBeInstantiatedOnlyOncePerProcess.*already open"):
-            LocalFmuPlant(exp)
+            LocalFmuPlant(experiment_plant_spec(exp))
     finally:
         first.close()
-    LocalFmuPlant(exp).close()  # the first one gave the process back
+    LocalFmuPlant(experiment_plant_spec(exp)).close()  # the first one gave the process back
 
 
 def test_a_batch_env_of_several_is_refused_and_of_one_runs_alone(tmp_path: Path) -> None:

@@ -31,9 +31,9 @@ from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import load_experiment
 from bridge.net import protocol as proto
-from bridge.net.node import FmuNode
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.state_run import save_state
+from bridge.serving import experiment_node
 from tests.conftest import free_port, router_on_loopback, wait_until
 from tests.net.test_transport import client_config, make_certificates, render, router_config
 
@@ -243,7 +243,7 @@ def test_a_participant_replaying_every_frame_changes_no_episode_and_learns_no_ke
     attacker = Attacker(attacker_session, keys)
     episodes, session_keys = [], []
     try:
-        with FmuNode(
+        with experiment_node(
             served, name="victim", options=network.options, prefix=network.prefix, isolate=True
         ) as node:
             for _ in range(SESSIONS):  # a later session: the victim's env opened again
@@ -301,7 +301,7 @@ def test_crafted_states_crash_no_node_and_change_no_other_clients_episode(tmp_pa
         reference = [_episode(local, seed) for seed in range(3)]
     with router_on_loopback() as net:
         options = ZenohOptions(connect=(net.endpoint,))
-        with FmuNode(served, name="target", options=options, prefix=net.prefix, isolate=True) as node:
+        with experiment_node(served, name="target", options=options, prefix=net.prefix, isolate=True) as node:
             for data in crafted:
                 with RemoteFmuEnv(
                     served, "target", session=net.session, prefix=net.prefix, timeout_s=60
@@ -381,7 +381,7 @@ def test_zenoh_access_control_keeps_a_viewer_away_from_the_node_keys(tmp_path: P
     try:
         options = ZenohOptions(config_file=worker)
         with (
-            FmuNode(served, name="guarded", options=options, prefix=prefix) as node,
+            experiment_node(served, name="guarded", options=options, prefix=prefix) as node,
             RemoteFmuEnv(served, "guarded", session=victim_session, prefix=prefix, timeout_s=30) as env,
         ):
             with FmuEnv(served) as local:

@@ -17,6 +17,7 @@ import yaml
 from bridge.env import RemoteFmuEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.experiment.config import load_experiment
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 from tests.conftest import Loopback, node_process
 
@@ -114,5 +115,5 @@ def test_an_isolated_clocked_plant_runs_as_in_process(
         assert env.plant.isolated  # type: ignore[attr-defined]
         np.testing.assert_array_equal(_episodes(env), in_process[interface])
     experiment = load_experiment(_experiment(tmp_path, interface))
-    with FmuEnv(experiment, plant=IsolatedFmuPlant(experiment, timeout_s=60.0)) as env:  # type: ignore[arg-type]
+    with FmuEnv(experiment, plant=IsolatedFmuPlant(experiment_plant_spec(experiment), timeout_s=60.0)) as env:  # type: ignore[arg-type]
         np.testing.assert_array_equal(_episodes(env), in_process[interface])

@@ -26,8 +26,8 @@ import pytest
 from bridge.env import RemoteFmuEnv
 from bridge.errors import StepError
 from bridge.net import protocol as proto
-from bridge.net.node import FmuNode
 from bridge.plant.base import MODEL_INIT_FAILED_HINT
+from bridge.serving import experiment_node
 from tests.conftest import Loopback, node_process, wait_until
 
 pytestmark = pytest.mark.integration
@@ -184,7 +184,7 @@ def test_isolation_by_the_file_or_the_flag_is_the_same_node(
 ) -> None:
     path, flags = experiment(tmp_path, way)
     isolate = "--isolate" in flags
-    with FmuNode(
+    with experiment_node(
         path,
         name="same",
         options=loopback.options(),  # type: ignore[arg-type]

@@ -23,10 +23,10 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import PlantError, StepTimeout
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
-from bridge.net.node import FmuNode
 from bridge.net.remote import describe_nodes
 from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
+from bridge.serving import experiment_node
 from tests.conftest import Loopback, _wait_for_line, _wait_for_node, stop_process
 
 pytestmark = pytest.mark.integration
@@ -51,7 +51,7 @@ def test_a_node_starts_on_an_experiment_whose_reward_callable_it_cannot_import(
     """The reward runs in the trainer: the node's machine need not carry its code."""
     served = variant(tmp_path, "trainer_only", reward={"callable": "trainer_only_rewards_nowhere:reward"})
     with (
-        FmuNode(served, name="no-reward", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
+        experiment_node(served, name="no-reward", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(CARTPOLE, "no-reward", session=loopback.session, prefix=loopback.prefix) as remote,
         FmuEnv(CARTPOLE) as local,
     ):
@@ -66,7 +66,7 @@ def test_a_node_with_model_isolation_in_its_file_runs_and_reports_it_isolated(
 ) -> None:
     isolated = variant(tmp_path, "isolated", model={"isolation": {"timeout": 20.0}})
     with (
-        FmuNode(isolated, name="iso", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
+        experiment_node(isolated, name="iso", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(
             CARTPOLE, "iso", session=loopback.session, prefix=loopback.prefix, timeout_s=30
         ) as remote,
@@ -85,12 +85,12 @@ SERVE = """
 import os, signal, sys, threading
 from bridge.experiment.config import load_experiment
 from bridge.net.node import FmuNode
-from bridge.net.system_node import served_experiments
 from bridge.net.transport import ZenohOptions
+from bridge.serving import served_components
 
 file, node, endpoint, prefix, isolate = sys.argv[1:]
-component = served_experiments(load_experiment(file))[node]
-server = FmuNode(component.model, name=node, served=component.served, prefix=prefix,
+component = served_components(load_experiment(file))[node]
+server = FmuNode(component.plant, component.served, name=node, prefix=prefix,
                  options=ZenohOptions(connect=(endpoint,)), step_timeout_s=5.0, isolate=isolate == "1")
 stop = threading.Event()
 signal.signal(signal.SIGTERM, lambda *_: stop.set())

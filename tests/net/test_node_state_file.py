@@ -25,10 +25,10 @@ from bridge.fmu import Model
 from bridge.net import node_start
 from bridge.net import protocol as proto
 from bridge.net.handshake import request_proof
-from bridge.net.node import FmuNode
 from bridge.net.remote import RemotePlant
 from bridge.net.requests import BadRequest, Refused
 from bridge.plant.state_run import save_state
+from bridge.serving import experiment_node
 from tests.conftest import Loopback, example_fmu
 
 pytestmark = pytest.mark.integration
@@ -100,7 +100,9 @@ def test_node_given_a_state_over_the_wire_equals_the_in_memory_snapshot(
     wanted = _experiment(tmp_path, "from_state", reset_policy={"state_file": "s.state"})
     reference = _snapshot_episode()
     with (
-        FmuNode(served, name="st", options=loopback.options(), prefix=loopback.prefix, isolate=True) as node,  # type: ignore[arg-type]
+        experiment_node(
+            served, name="st", options=loopback.options(), prefix=loopback.prefix, isolate=True
+        ) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(wanted, "st", session=loopback.session, prefix=loopback.prefix, timeout_s=60) as remote,
         FmuEnv(wanted) as local,
     ):
@@ -120,7 +122,7 @@ def test_node_with_a_state_file_in_its_experiment_starts_from_it(
 ) -> None:
     served = _experiment(tmp_path, "node_state", reset_policy={"state_file": str(saved)})
     with (
-        FmuNode(served, name="own", options=loopback.options(), prefix=loopback.prefix),  # type: ignore[arg-type]
+        experiment_node(served, name="own", options=loopback.options(), prefix=loopback.prefix),  # type: ignore[arg-type]
         RemoteFmuEnv(
             _experiment(tmp_path, "client_plain"), "own", session=loopback.session, prefix=loopback.prefix
         ) as remote,
@@ -137,7 +139,7 @@ def test_node_refuses_foreign_cut_and_unauthenticated_states(
     ).path.read_bytes()
     options: Any = loopback.options()
     with (
-        FmuNode(
+        experiment_node(
             _experiment(tmp_path, "n"), name="ref", options=options, prefix=loopback.prefix, isolate=True
         ) as node,
         RemoteFmuEnv(
@@ -181,7 +183,9 @@ def test_a_node_running_its_fmu_in_its_own_process_loads_no_sent_state(
     refuses a sent state (a crafted one could crash it), naming the option that allows it."""
     options: Any = loopback.options()
     with (
-        FmuNode(_experiment(tmp_path, "n"), name="inproc", options=options, prefix=loopback.prefix) as node,
+        experiment_node(
+            _experiment(tmp_path, "n"), name="inproc", options=options, prefix=loopback.prefix
+        ) as node,
         RemoteFmuEnv(
             _experiment(tmp_path, "c"), "inproc", session=loopback.session, prefix=loopback.prefix
         ) as env,
@@ -209,7 +213,7 @@ def test_a_take_over_sends_its_state_as_the_new_holder(
     served = _experiment(tmp_path, "held")
     wanted = _experiment(tmp_path, "taker", reset_policy={"state_file": "s.state"})
     with (
-        FmuNode(
+        experiment_node(
             served, name="held", options=loopback.options(), prefix=loopback.prefix, isolate=True
         ) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(served, "held", session=loopback.session, prefix=loopback.prefix, timeout_s=60) as first,
@@ -239,7 +243,9 @@ def test_an_isolated_node_takes_a_state_over_the_wire_and_clears_it(
     snapshot's bit for bit, also after the child is restarted; a clear goes back to initialisation."""
     served = _experiment(tmp_path, "plain_isolated")
     with (
-        FmuNode(served, name="iso", options=loopback.options(), prefix=loopback.prefix, isolate=True) as node,  # type: ignore[arg-type]
+        experiment_node(
+            served, name="iso", options=loopback.options(), prefix=loopback.prefix, isolate=True
+        ) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(served, "iso", session=loopback.session, prefix=loopback.prefix, timeout_s=60) as remote,
     ):
         assert node.isolated
@@ -265,10 +271,10 @@ def test_clearing_a_sent_state_goes_back_to_the_experiments_own_start(
     ).path
     options: Any = loopback.options()
     with (
-        FmuNode(
+        experiment_node(
             _experiment(tmp_path, "p"), name="clr", options=options, prefix=loopback.prefix, isolate=True
         ) as plain,
-        FmuNode(
+        experiment_node(
             _experiment(tmp_path, "own", reset_policy={"state_file": str(saved)}),
             name="own_clr",
             options=options,

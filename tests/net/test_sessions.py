@@ -24,9 +24,10 @@ from bridge.errors import BridgeError, StepError, TransportError
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.handshake import KeyPair, reply_proof
-from bridge.net.node import FmuNode
 from bridge.net.remote import answer, describe_nodes
 from bridge.net.transport import ZenohOptions, open_session
+from bridge.plant.experiment_model import experiment_plant_spec
+from bridge.serving import experiment_node
 from tests.conftest import Loopback, _wait_for_line, node_process, stop_process, wait_for, wait_until
 
 pytestmark = pytest.mark.integration
@@ -252,7 +253,7 @@ def test_a_second_node_with_the_same_name_refuses_to_start(loopback: Loopback) -
         node_process(CARTPOLE, "only", loopback),
         pytest.raises(TransportError, match="a node named 'only' already serves"),
     ):
-        FmuNode(CARTPOLE, name="only", options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
+        experiment_node(CARTPOLE, name="only", options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
 
 
 @pytest.mark.parametrize("name", ["other/reset", "*", "**", "w$x", "a b", "..", "n" * 101, "bidi\u202e"])
@@ -262,7 +263,7 @@ def test_a_node_name_that_would_widen_its_keys_is_refused_before_anything_starts
     """A node's name is a part of every key it declares: '/', wildcards or '$' would make it
     answer for other nodes' keys."""
     with pytest.raises(BridgeError, match=r"the node name: .*give --name or node\.name a plain one"):
-        FmuNode(CARTPOLE, name=name, options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
+        experiment_node(CARTPOLE, name=name, options=loopback.options(), prefix=loopback.prefix)  # type: ignore[arg-type]
 
 
 def test_a_malformed_info_reply_is_a_transport_error_naming_the_node(loopback: Loopback) -> None:
@@ -331,7 +332,7 @@ def test_an_outputs_frame_with_the_wrong_value_count_is_a_transport_error(tmp_pa
     from bridge.experiment.config import load_experiment
     from bridge.plant.local import LocalFmuPlant
 
-    with LocalFmuPlant(load_experiment(CARTPOLE)) as plant:
+    with LocalFmuPlant(experiment_plant_spec(load_experiment(CARTPOLE))) as plant:
         three = proto.decode(proto.encode_values(proto.OUTPUTS, 1, 1, 0, [0.0, 1.0, 2.0]))
         with pytest.raises(TransportError, match="with 3 values; it serves 4 outputs"):
             answer(plant, three, 1, 1, outputs=4)
@@ -345,7 +346,7 @@ def test_a_malformed_reset_reply_is_a_transport_error_naming_the_node(loopback: 
     """A session posing as node ``faker`` (its info is a real node's, its own zid, a live token)
     answers resets with short, garbled, unsigned, unkeyed or misdirected step-0 frames: each is a
     TransportError naming the node and what was wrong, never an IndexError or a wrong observation."""
-    with FmuNode(CARTPOLE, name="model", options=loopback.options(), prefix=loopback.prefix) as real:  # type: ignore[arg-type]
+    with experiment_node(CARTPOLE, name="model", options=loopback.options(), prefix=loopback.prefix) as real:  # type: ignore[arg-type]
         described = real.describe()
     peer = open_session(ZenohOptions(connect=(loopback.endpoint,)))
     keys = proto.Keys(loopback.prefix, "faker")

@@ -20,6 +20,7 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import PlantDied
 from bridge.experiment.examples import example_experiment
 from bridge.experiment.sections import REPLACE_WAIT_S
+from bridge.serving import experiment_node
 from tests.conftest import Loopback, node_process, stop_process
 from tests.net.soak import soak, start_node
 
@@ -167,8 +168,8 @@ def test_by_default_a_node_restarted_under_its_name_replaces_itself(loopback: Lo
     from bridge.net.node import FmuNode
 
     options: Any = loopback.options()
-    first = FmuNode(CARTPOLE, name="again-0", options=options, prefix=loopback.prefix)
-    second = FmuNode(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
+    first = experiment_node(CARTPOLE, name="again-0", options=options, prefix=loopback.prefix)
+    second = experiment_node(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
     restarted: list[FmuNode] = []
     vec = RemoteVecEnv(
         CARTPOLE, ["again-0", "again-1"], session=loopback.session, prefix=loopback.prefix, replace_dead=True
@@ -179,7 +180,7 @@ def test_by_default_a_node_restarted_under_its_name_replaces_itself(loopback: Lo
         second.close()  # the node stops; the same name comes back as soon as its FMU is loaded
         thread = threading.Thread(
             target=lambda: restarted.append(
-                FmuNode(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
+                experiment_node(CARTPOLE, name="again-1", options=options, prefix=loopback.prefix)
             )
         )
         thread.start()

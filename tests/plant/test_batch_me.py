@@ -16,6 +16,7 @@ import pytest
 
 from bridge.experiment.config import load_experiment
 from bridge.plant.batch import BatchPlant
+from bridge.plant.experiment_model import experiment_plant_spec
 
 MODEL = """\
 model: {{fmu: 'example:{name}:{version}', interface: me, solver: rk4, solver_substeps: {substeps},
@@ -46,7 +47,7 @@ def experiment(tmp_path: Path, name: str, version: str) -> Path:
 
 def open_plant(path: Path, n: int, native: bool, threads: int = 1) -> BatchPlant:
     exp = load_experiment(path)
-    plant = BatchPlant(exp, n, native=native, threads=threads)
+    plant = BatchPlant(experiment_plant_spec(exp), n, native=native, threads=threads)
     plant.bind(list(exp.actions.inputs), list(exp.observations.outputs))
     return plant
 
@@ -127,7 +128,7 @@ def test_an_fmu_from_another_tool(tmp_path: Path, eta_ctrl_fmus: dict[str, Path]
     run = both_paths(path, springs, inputs)
     cs_path = tmp_path / "oscillator_cs.yaml"
     cs_path.write_text(text.replace("interface: me, solver: rk4, solver_substeps: 10,", "interface: cs,"))
-    with BatchPlant(load_experiment(cs_path), 3, native=True) as cs:
+    with BatchPlant(experiment_plant_spec(load_experiment(cs_path)), 3, native=True) as cs:
         cs.bind(["u", "f"], ["s", "v"])
         reference = episode(cs, springs, inputs)["outputs"]
     assert np.ptp(reference[:, :, 0]) > 0.05  # it really moved

@@ -10,6 +10,7 @@ import pytest
 from bridge.errors import StepError
 from bridge.experiment.config import load_experiment
 from bridge.plant.batch import BatchPlant
+from bridge.plant.experiment_model import experiment_plant_spec
 
 TYPED = """\
 model: {{fmu: 'example:typed:{version}', step_size: 0.1, sampling_time: 0.2, episode_duration: 5.0}}
@@ -30,7 +31,7 @@ def experiment(request: pytest.FixtureRequest, tmp_path_factory: pytest.TempPath
 
 
 def open_plant(path: Path, n: int, **kwargs: object) -> BatchPlant:
-    plant = BatchPlant(load_experiment(path), n, **kwargs)  # type: ignore[arg-type]
+    plant = BatchPlant(experiment_plant_spec(load_experiment(path)), n, **kwargs)  # type: ignore[arg-type]
     plant.bind(["real_in"], OUTPUTS)
     return plant
 
@@ -108,7 +109,7 @@ def test_bad_sizes_are_config_errors(experiment: Path) -> None:
     from bridge.errors import ConfigError
 
     with pytest.raises(ConfigError, match="n >= 1"):
-        BatchPlant(load_experiment(experiment), 0)
+        BatchPlant(experiment_plant_spec(load_experiment(experiment)), 0)
 
 
 @pytest.mark.parametrize("native", [True, False])

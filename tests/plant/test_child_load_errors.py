@@ -17,6 +17,7 @@ import pytest
 
 from bridge.errors import FmuLoadError
 from bridge.experiment.config import load_experiment
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 from bridge.plant.local import LocalFmuPlant
 from tests.conftest import DATA, _pythonfmu_build
@@ -56,8 +57,8 @@ def experiment_file(windows_only: Path) -> Path:
 def test_child_load_error_is_the_in_process_error(experiment_file: Path) -> None:
     experiment = load_experiment(experiment_file)
     with pytest.raises(FmuLoadError) as in_process:
-        LocalFmuPlant(experiment).bind(["power"], ["room"])
-    plant = IsolatedFmuPlant(experiment)
+        LocalFmuPlant(experiment_plant_spec(experiment)).bind(["power"], ["room"])
+    plant = IsolatedFmuPlant(experiment_plant_spec(experiment))
     try:
         with pytest.raises(FmuLoadError) as in_child:
             plant.bind(["power"], ["room"])

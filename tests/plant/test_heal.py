@@ -19,9 +19,10 @@ from bridge.experiment.validate import resolve_fmu, timing
 from bridge.experiment.yaml_text import parse_yaml
 from bridge.fmu import read_model_info
 from bridge.net.requests import BadRequest, RequestRules
-from bridge.net.served import served_by
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 from bridge.plant.local import LocalFmuPlant
+from bridge.serving.experiment import served_by
 
 TEXT = """
 model: {fmu: 'example:typed', step_size: 0.1, episode_duration: 1.0}
@@ -34,8 +35,8 @@ scenarios:
 """
 EXPERIMENT = parse_experiment(parse_yaml(TEXT))
 PLANTS: dict[str, Callable[[Experiment], object]] = {
-    "in-process": LocalFmuPlant,
-    "isolated": lambda e: IsolatedFmuPlant(e, timeout_s=30.0),
+    "in-process": lambda e: LocalFmuPlant(experiment_plant_spec(e)),
+    "isolated": lambda e: IsolatedFmuPlant(experiment_plant_spec(e), timeout_s=30.0),
 }
 # the isolated plant is a child process: that case is an integration test
 KINDS = [pytest.param(k, marks=pytest.mark.integration) if k == "isolated" else k for k in PLANTS]

@@ -13,6 +13,7 @@ from bridge.env import FmuEnv, PlantVecEnv
 from bridge.errors import BridgeError, PlantDied, StepError, StepTimeout
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 
 TYPED = """\
@@ -40,7 +41,7 @@ def typed(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def isolated_env(path: Path, **kwargs: float) -> FmuEnv:
     experiment = load_experiment(path)
-    return FmuEnv(experiment, plant=IsolatedFmuPlant(experiment, **kwargs))  # type: ignore[arg-type]
+    return FmuEnv(experiment, plant=IsolatedFmuPlant(experiment_plant_spec(experiment), **kwargs))  # type: ignore[arg-type]
 
 
 def steps(env: FmuEnv, scenario: str, n: int) -> list[np.ndarray]:
@@ -68,7 +69,7 @@ def test_isolated_plant_gives_the_in_process_trajectory_bit_for_bit() -> None:
     with FmuEnv(experiment) as local:
         expected = run(local)
     exp = load_experiment(experiment)
-    with FmuEnv(exp, plant=IsolatedFmuPlant(exp)) as isolated:
+    with FmuEnv(exp, plant=IsolatedFmuPlant(experiment_plant_spec(exp))) as isolated:
         np.testing.assert_array_equal(run(isolated), expected)
 
 

@@ -117,9 +117,10 @@ START_FAILS = textwrap.dedent(
     import resource, sys
     from bridge.errors import PlantDied
     from bridge.experiment.config import load_experiment
+    from bridge.plant.experiment_model import experiment_plant_spec
     from bridge.plant.isolated import IsolatedFmuPlant
 
-    plant = IsolatedFmuPlant(load_experiment(sys.argv[1]))
+    plant = IsolatedFmuPlant(experiment_plant_spec(load_experiment(sys.argv[1])))
     import os
     used = len(os.listdir("/proc/self/fd"))
     resource.setrlimit(resource.RLIMIT_NOFILE, (used + 1, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))

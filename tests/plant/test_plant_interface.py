@@ -15,6 +15,7 @@ import pytest
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
+from bridge.plant.experiment_model import experiment_plant_spec
 from bridge.plant.isolated import IsolatedFmuPlant
 from bridge.plant.local import LocalFmuPlant
 
@@ -24,7 +25,7 @@ REFUSED = r"\(child process\) cannot save and restore its state: it does not"
 
 def test_a_plant_that_cannot_save_refuses_with_its_reason() -> None:
     experiment = load_experiment(example_experiment("cartpole_balance"))
-    with IsolatedFmuPlant(experiment) as plant:
+    with IsolatedFmuPlant(experiment_plant_spec(experiment)) as plant:
         assert not plant.can_save
         assert plant.save_refusal == "it does not save or restore its state"
         for call in (plant.save, lambda: plant.restore(None), lambda: plant.discard(None)):
@@ -33,7 +34,9 @@ def test_a_plant_that_cannot_save_refuses_with_its_reason() -> None:
 
 
 def test_an_fmu_in_this_process_saves_and_restores_through_the_interface() -> None:
-    with LocalFmuPlant(load_experiment(example_experiment("cartpole_balance"))) as plant:
+    with LocalFmuPlant(
+        experiment_plant_spec(load_experiment(example_experiment("cartpole_balance")))
+    ) as plant:
         plant.bind(["force"], OUTPUTS)
         plant.reset({"theta0": 0.05}, [0.0])
         assert plant.can_save and plant.save_refusal == ""
@@ -47,7 +50,9 @@ def test_an_fmu_in_this_process_saves_and_restores_through_the_interface() -> No
 
 
 def test_a_single_model_has_no_components_and_is_always_ready() -> None:
-    with LocalFmuPlant(load_experiment(example_experiment("cartpole_balance"))) as plant:
+    with LocalFmuPlant(
+        experiment_plant_spec(load_experiment(example_experiment("cartpole_balance")))
+    ) as plant:
         plant.bind(["force"], OUTPUTS)
         plant.reset({}, [0.0])
         event = threading.Event()

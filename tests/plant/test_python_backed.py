@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from bridge.experiment.config import load_experiment
-from bridge.plant.factory import fmu_plant
+from bridge.plant.factory import experiment_plant
 from tests.conftest import DATA, _pythonfmu_build, unimportable_fmu
 
 pytestmark = pytest.mark.integration
@@ -41,7 +41,7 @@ def abort_at_exit(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_python_backed_fmu_runs_in_a_child_process_by_default(abort_at_exit: Path) -> None:
-    plant = fmu_plant(load_experiment(abort_at_exit))
+    plant = experiment_plant(load_experiment(abort_at_exit))
     try:
         assert plant.isolated
     finally:

@@ -25,8 +25,9 @@ from bridge.experiment.config import load_experiment
 from bridge.models import example_fmu
 from bridge.net import protocol as proto
 from bridge.net.remote import describe_nodes
-from bridge.net.system_node import NodeComponents, serve_components
+from bridge.net.system_node import NodeComponents
 from bridge.plant.system.plant import SystemPlant
+from bridge.serving.system import serve_components
 from tests.conftest import Loopback, free_port
 from tests.plant.test_system_nodes import NODES, remote_env, serve, system_file, trajectory
 
@@ -212,16 +213,16 @@ def test_another_clients_reject_of_the_same_step_is_not_the_holders_answer(
 
 def test_a_real_time_or_isolated_node_says_it_cannot_save(tmp_path: Path) -> None:
     from bridge.net.node import FmuNode
-    from bridge.net.system_node import component_served
     from bridge.net.transport import ZenohOptions
     from bridge.plant.system.description import from_experiment
+    from bridge.serving.system import component_served
 
     file = system_file(tmp_path, "rt", {"motor": "rt-motor"})
     experiment = load_experiment(file)
     motor = component_served(experiment, from_experiment(experiment), "motor")
     options = ZenohOptions(listen=(f"tcp/127.0.0.1:{free_port()}",))
     for kwargs, reason in (({"mode": "realtime", "rate": 0.0}, "real-time"), ({"isolate": True}, "isolated")):
-        with FmuNode(motor.model, name="rt-motor", options=options, served=motor.served, **kwargs) as node:  # type: ignore[arg-type]
+        with FmuNode(motor.plant, motor.served, name="rt-motor", options=options, **kwargs) as node:  # type: ignore[arg-type]
             d = node.describe()
             assert d["can_save_state"] is False and reason in d["save_state_refusal"]
 

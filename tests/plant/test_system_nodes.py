@@ -119,7 +119,8 @@ def test_a_node_component_needs_no_fmu_on_this_machine(served: Path, net: Loopba
     there.write_text(yaml.safe_dump(data))
     with FmuEnv(here) as local, remote_env(there, net) as distributed:
         motor = distributed.plant.plants["motor"]  # type: ignore[attr-defined]
-        assert not motor.component.fmu.exists() and "omega" in motor.info.variables
+        fmu = distributed.plant.system.components["motor"].fmu  # type: ignore[attr-defined]
+        assert not fmu.exists() and "omega" in motor.info.variables
         np.testing.assert_array_equal(trajectory(distributed, 2), trajectory(local, 2))
 
 
@@ -146,7 +147,7 @@ def test_a_component_node_that_is_not_running_is_a_clear_error(net: Loopback, tm
 
 
 def test_serving_a_component_without_node_is_refused(tmp_path: Path) -> None:
-    from bridge.net.system_node import serve_components
+    from bridge.serving.system import serve_components
 
     file = system_file(tmp_path, "none", {"motor": "m"})
     with pytest.raises(ConfigError, match=r"\['load'\] is not served by a node"):

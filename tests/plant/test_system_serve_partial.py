@@ -24,10 +24,11 @@ from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError
 from bridge.experiment.config import load_experiment
 from bridge.models import example_fmu
-from bridge.net.system_node import NodeComponents, component_signals, serve_components
+from bridge.net.system_node import NodeComponents
 from bridge.net.transport import ZenohOptions, open_session
 from bridge.plant.system.description import from_experiment, split_name
 from bridge.plant.system.plant import SystemPlant, describe_system, system_timing
+from bridge.serving.system import component_signals, serve_components
 from bridge.task.core import Task
 from tests.conftest import Loopback, _wait_for_node, free_port
 from tests.plant.test_system_nodes import EXAMPLE, serve, trajectory

@@ -12,9 +12,10 @@ import pytest
 import yaml
 
 from bridge.experiment.config import load_experiment
-from bridge.net.system_node import NodeComponents, component_signals
+from bridge.net.system_node import NodeComponents
 from bridge.plant.system.description import from_experiment
 from bridge.plant.system.plant import SystemPlant
+from bridge.serving.system import component_signals
 from tests.conftest import Loopback
 from tests.plant.test_system_nodes import serve
 

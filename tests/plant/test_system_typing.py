@@ -197,8 +197,8 @@ def test_whole_arrays_of_one_shape_connect_element_by_element(tmp_path: Path, ar
     whole = arrays_run(tmp_path, arrays3, ["a.n -> b.k"])
     by_element = arrays_run(tmp_path, arrays3, [f"a.n[{i}] -> b.k[{i}]" for i in (1, 2, 3)])
     np.testing.assert_array_equal(whole, by_element)
-    from bridge.net.system_node import component_signals
     from bridge.plant.system.description import from_experiment
+    from bridge.serving.system import component_signals
 
     exp = parse_experiment(
         {

@@ -22,6 +22,7 @@ from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.recording import meta
 from bridge.recording.node_recorder import NodeRecorder
+from bridge.serving import experiment_node
 from tests.conftest import Loopback
 
 pytestmark = pytest.mark.integration
@@ -44,9 +45,8 @@ Factory = Callable[[Path], tuple[NodeRecorder, Node]]
 @pytest.fixture
 def recorder(loopback: Loopback) -> Iterator[Factory]:
     """Recorders of one real node (cart-pole, in this process) on a loopback router."""
-    from bridge.net.node import FmuNode
 
-    node = FmuNode(
+    node = experiment_node(
         example_experiment("cartpole_continuous"),
         name="iterated",
         prefix=loopback.prefix,

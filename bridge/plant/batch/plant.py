@@ -1,10 +1,10 @@
 """``BatchPlant``: N instances of one FMU, stepped together in one native call.
 
 Each instance is a ``bridge.fmu.Model`` (instantiated, reset and restored exactly as in
-``LocalFmuPlant``: the experiment's reset policy, snapshots of initial states); the instances are
+``LocalFmuPlant``: the description's reset policy, snapshots of initial states); the instances are
 a ``bridge.fmu.ModelBatch``, which owns every FMU call (the native loop, or the same FMI calls
-from Python) and whose models keep the only clock. This plant adds the experiment: episodes,
-samples, which instances may step, and errors in the message shape of every plant.
+from Python) and whose models keep the only clock. This plant adds episodes, samples, which
+instances may step, and errors in the message shape of every plant; the env checks its task.
 
 Errors are per instance: a failed instance gets a :class:`StepError` (same message shape as every
 plant) in the step's ``errors`` and takes no further steps until it is reset; the others go on.
@@ -20,12 +20,11 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import ConfigError, FmuError, StepError
-from bridge.experiment.config import Experiment
-from bridge.experiment.validate import check_experiment, resolve_fmu, timing
 from bridge.fmu import Model, read_model_info, sha256
 from bridge.fmu.batch import ModelBatch
+from bridge.fmu.opening import open_model
 from bridge.plant.base import MODEL_FAILED, MODEL_FAILED_HINT
-from bridge.plant.experiment_model import experiment_model
+from bridge.plant.spec import PlantSpec
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -41,26 +40,25 @@ class BatchStep:
 
 
 class BatchPlant:
-    """``n`` instances of the experiment's FMU in this process.
+    """``n`` instances of the FMU ``spec`` describes, in this process.
 
     Args:
-        experiment: the experiment (its ``model`` section: FMU, step size, reset policy).
+        spec: the model (FMU, step size, reset policy, ...) and what a sample is, as for
+            ``LocalFmuPlant``; an experiment's from
+            :func:`bridge.plant.experiment_model.experiment_plant_spec`.
         n: how many instances.
         threads: native threads stepping the batch (1: the calling thread only).
         native: use the native stepper (None: when it can be built and the signals allow it).
     """
 
-    def __init__(
-        self, experiment: Experiment, n: int, *, threads: int = 1, native: bool | None = None
-    ) -> None:
+    def __init__(self, spec: PlantSpec, n: int, *, threads: int = 1, native: bool | None = None) -> None:
         if n < 1 or threads < 1:
             raise ConfigError(
                 f"a batch needs n >= 1 instances and threads >= 1, got n={n}, threads={threads}"
             )
-        self.experiment = exp = experiment
-        self.fmu_path = resolve_fmu(exp)
-        self.info = check_experiment(exp, read_model_info(self.fmu_path))
-        self.timing = timing(exp, self.info)
+        self.spec = spec
+        self.fmu_path = spec.model.fmu
+        self.timing = spec.timing
         self.name = f"FMU {self.fmu_path.name} (batch of {n})"
         self.n, self.threads = n, threads
         models: list[Model] = []
@@ -75,14 +73,14 @@ class BatchPlant:
             for model in models:
                 model.close()
             raise
+        self.info = models[0].info  # the array sizes after configuration mode
         self.episode = np.zeros(n, dtype=np.int64)
         self.sample = np.zeros(n, dtype=np.int64)
         self.ready = np.zeros(n, dtype=bool)  # reset and not failed since: may step
 
     def _open(self, i: int) -> Model:
-        return experiment_model(
-            self.experiment, self.fmu_path, self.timing, f"{self.info.model_name}#batch{i}"
-        )
+        model_name = read_model_info(self.fmu_path).model_name
+        return open_model(self.spec.model.replace(instance_name=f"{model_name}#batch{i}"))
 
     @property
     def models(self) -> list[Model]:

@@ -1,24 +1,24 @@
 """``FmuComponent``: one FMU of a system in this process, a plant stepping one macro step a sample.
 
-Like :class:`bridge.plant.local.LocalFmuPlant` but built from a component of a system rather than
-an experiment: a macro step of ``H`` is ``n`` FMU steps of the component's own step size ``h``
-(multi-rate, inputs held); its state is saved and restored as :class:`FmuInstancePlant` does.
+A :class:`bridge.plant.local.LocalFmuPlant` built from a component's description
+(:func:`component_plant_spec`): a macro step of ``H`` is ``n`` FMU steps of the component's own
+step size ``h`` (multi-rate, inputs held); every reset sets the component's own parameters and
+start values under what the system's task gives. What it adds is what the system's master
+asks of an in-process component (native stepping accounts, settling direct feedthrough).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from typing import Any
+from collections.abc import Sequence
 
 from bridge.errors import ConfigError
 from bridge.experiment.validate import Timing
-from bridge.fmu import read_model_info
-from bridge.fmu.opening import open_model
 from bridge.fmu.sample import sample_failure
 from bridge.fmu.spec import ModelSpec
 from bridge.plant.base import FloatArray
-from bridge.plant.instance import FmuInstancePlant
+from bridge.plant.local import LocalFmuPlant
+from bridge.plant.spec import PlantSpec
 from bridge.plant.system.description import Component
 
 
@@ -62,24 +62,17 @@ def component_spec(component: Component, step_size_s: float, start_time_s: float
     )
 
 
-class FmuComponent(FmuInstancePlant):
-    """One component's FMU in this process; a sample is one macro step of ``macro_step_s``."""
+def component_plant_spec(
+    component: Component, macro_step_s: float, start_time_s: float, where: str = ""
+) -> PlantSpec:
+    """The plant a component describes: a sample is one macro step of ``n`` steps of its own size."""
+    n = steps_per_macro(component, macro_step_s, None, where)  # default: one step per macro step
+    t = Timing(macro_step_s / n, n, macro_step_s, start_time_s)
+    return PlantSpec(component_spec(component, t.step_size_s, start_time_s), t, component=component.name)
 
-    def __init__(
-        self, component: Component, macro_step_s: float, start_time_s: float, where: str = ""
-    ) -> None:
-        self.component = component
-        self.fmu_path = component.fmu
-        self.info = read_model_info(component.fmu)
-        self.name = f"component {component.name!r} ({component.fmu.name})"
-        n = steps_per_macro(component, macro_step_s, None, where)  # default: one step per macro step
-        self.timing = Timing(macro_step_s / n, n, macro_step_s, start_time_s)
-        self.spec = component_spec(component, macro_step_s / n, start_time_s)
-        self.model = open_model(self.spec)
-        self.info = self.model.info  # the array sizes after configuration mode
 
-    def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
-        return {**self.spec.initial_values(), **values}
+class FmuComponent(LocalFmuPlant):
+    """One component's FMU in this process (:func:`component_plant_spec`); a sample is one macro step."""
 
     def native_done(self, k: int, terminated: bool) -> None:
         """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from bridge.errors import ConfigError, PlantDied, PlantError, StepError
 from bridge.experiment.config import Experiment, sampling_ratio, scenario_inputs
-from bridge.experiment.validate import Timing, check_experiment
+from bridge.experiment.validate import Timing
 from bridge.fmu.vocab import DefaultExperiment, ModelInfo
 from bridge.plant.base import MODEL_FAILED_HINT, MODEL_HUNG, FloatArray, Plant
 from bridge.plant.system.check import check_system, expand_arrays
@@ -98,28 +98,26 @@ class SystemPlant(Plant):
             raise loop_error(loop, system)
         self.info = system_info(exp, system, self.infos, self.timing)
         _check_driven(exp, system)
-        check_experiment(exp, self.info)
 
     def _component(self, component: Component) -> Plant:
         t, where = self.timing, self.system.where
         if component.node is None:
-            from bridge.plant.system.component import FmuComponent
+            from bridge.plant.system.component import FmuComponent, component_plant_spec
 
+            spec = component_plant_spec(component, t.step_size_s, t.start_time_s, where)
             if self.infos[component.name].once_per_process:  # never beside another instance
-                from bridge.plant.isolated import ChildComponent, IsolatedFmuPlant
+                from bridge.plant.isolated import IsolatedFmuPlant
 
-                child = ChildComponent(component, t.step_size_s, t.start_time_s, where)
-                isolation = self.experiment.model.isolation  # its limits, where the file sets them
-                if isolation is None:
-                    return IsolatedFmuPlant(self.experiment, component=child)
+                section = self.experiment.model.isolation  # its limits, where the file sets them
+                if section is None:
+                    return IsolatedFmuPlant(spec)
                 return IsolatedFmuPlant(
-                    self.experiment,
-                    component=child,
-                    timeout_s=isolation.timeout,
-                    memory_limit_mb=isolation.memory_limit_mb,
-                    restart=isolation.restart,
+                    spec,
+                    timeout_s=section.timeout,
+                    memory_limit_mb=section.memory_limit_mb,
+                    restart=section.restart,
                 )
-            return FmuComponent(component, t.step_size_s, t.start_time_s, where)
+            return FmuComponent(spec)
         if self._remote is None:
             raise ConfigError(
                 f"system.components: {component.name!r} runs in node {component.node!r}, and this "
