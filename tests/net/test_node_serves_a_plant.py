@@ -219,7 +219,7 @@ def test_a_reset_that_names_no_parameter_runs_the_served_experiment(
     plain = variant(tmp_path, "plain", **fixed)
     heavy = variant(tmp_path, "heavy", model={"parameters": {"m_cart": 3.0}}, **fixed)
     with (
-        FmuNode(heavy, name="heavy", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
+        experiment_node(heavy, name="heavy", options=loopback.options(), prefix=loopback.prefix) as node,  # type: ignore[arg-type]
         RemoteFmuEnv(plain, "heavy", session=loopback.session, prefix=loopback.prefix) as remote,
         FmuEnv(heavy) as served,
         FmuEnv(plain) as default,
