@@ -73,7 +73,7 @@ class MeBatch:
 
     def bind(self, i: int, model: Model) -> None:
         """Point slot ``i`` at ``model``'s integrator (after every reset: it may be a new one)."""
-        stepper = model._fixed_stepper
+        stepper = model.fixed_stepper
         if stepper is None:
             raise FmuError(f"{model.info.model_name}: a model-exchange batch needs solver 'rk4' or 'euler'")
         self.specs[i], self.calls[i] = stepper.addresses()
@@ -106,4 +106,4 @@ class MeBatch:
         code = int(self.codes[i])
         if code in _SET_OR_GET:  # the set (sample not begun) or the get (sample done, k moved) failed
             raise native_failure(model, code, *names)
-        return model._me_finish(code, self.steps)
+        return model.me_finish(code, self.steps)

@@ -81,15 +81,13 @@ class FmuComponent(FmuInstancePlant):
     def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
         return {**self.spec.initial_values(), **values}
 
-    def native_done(self, k: int, terminated: bool) -> None:
-        """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""
-        self.model._native_sampled(k, terminated)
-        self.terminated = terminated
+    def native_done(self) -> None:
+        """Account a sample the native master stepped (:mod:`.native_master`)."""
+        self.terminated = self.model.terminated
         self.sample += 1
 
-    def native_failed(self, status: int, k: int) -> None:
+    def native_failed(self, status: int) -> None:
         """Raise the error of a sample the native master stepped and the FMU failed (as :meth:`step`)."""
-        self.model._native_sampled(k, False)
         raise self._failed(sample_failure(self.model, status, self.input_names, self.output_names))
 
     can_settle = True
