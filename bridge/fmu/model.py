@@ -4,6 +4,15 @@ Time is an integer: after ``k`` FMU steps of size ``h`` the model is at ``t = t0
 (never accumulated). A sample of an agent is ``n`` FMU steps (``advance(n)``). ``k`` lives in one
 C ``long long`` (the model's clock) that the native steppers (``bridge.fmu.sample``,
 ``bridge.fmu.batch``) advance in place, so whoever steps the instance, the model knows its time.
+
+Split by responsibility: the instance's runtime (its FMI calls, clock, step, state, and the one
+interface native steppers use) is :class:`~bridge.fmu.instance.Instance`, which ``Model`` extends
+with what is set up and decided here: settings, variable access, initialisation, the reset policy
+and saved states. Beside it: ``model_values`` (settings and initial values checked and written),
+``snapshots`` (what a reset restores, and what ``auto`` trusts), ``exchange`` (model exchange
+around the integrator), ``stepping`` (native function addresses, step errors) and
+``start_state`` (state files). No module but this one touches a ``Model`` member whose name starts
+with ``_`` (tests/fmu/test_model_privates.py).
 """
 
 from __future__ import annotations
@@ -11,7 +20,7 @@ from __future__ import annotations
 import ctypes
 import itertools
 import logging
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -20,21 +29,18 @@ import numpy as np
 import numpy.typing as npt
 
 from bridge.errors import FMU_LOG_HEADER, ConfigError, FmuError, VariableError
-from bridge.fmu import access, archive, once, python_backed, serial, start_state, structure
+from bridge.fmu import access, archive, exchange, once, python_backed, serial, start_state, structure
 from bridge.fmu import model_values as mv
-from bridge.fmu.abi import DISCARD, FATAL, WARNING, Clock
+from bridge.fmu.abi import FATAL, Clock
 from bridge.fmu.backend import Backend, open_backend
 from bridge.fmu.clocks import ClockDriver, ClockedOutputs, ClockInputs, clock_driver
 from bridge.fmu.description import Interface, ModelInfo, Variable, read_model_info, unknown_variable_error
-from bridge.fmu.events import EventCalls
-from bridge.fmu.fixed_step import FixedStepper
+from bridge.fmu.instance import Instance
 from bridge.fmu.model_values import SOLVERS
 from bridge.fmu.signals import SignalGroup
 from bridge.fmu.snapshots import Snapshot, Snapshots
-from bridge.fmu.solver import MeStepper
 from bridge.fmu.spec import ResetPolicy, Solver
 from bridge.fmu.state_file import MAX_STATE_BYTES, StateFile
-from bridge.fmu.stepping import function_addresses, step_failed, step_refused
 from bridge.fmu.values import to_c
 
 _log = logging.getLogger(__name__)
@@ -56,7 +62,7 @@ class ModelState:
     clocks: tuple[Any, ...] | None = None  # the clock schedule (FMUs with clocks that tick)
 
 
-class Model:
+class Model(Instance):
     """One instance of an FMU (FMI 1.0/2.0/3.0, co-simulation or model exchange).
 
     Args:
@@ -132,7 +138,7 @@ class Model:
         self._init_failed = False
         self._closed = False
         self._failed_status = 0
-        self._me: MeStepper | FixedStepper | None = None
+        self._me: exchange.Integrator | None = None
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
         self._init_values: dict[str, Any] = {}  # of the last initialisation, for state files
@@ -204,43 +210,7 @@ class Model:
         names = [n for v in variables for n in (v.element_names() if v.dimensions else [v.name])]
         return SignalGroup(self, [self._element(n) for n in names], names)
 
-    # -- FMI 3.0 clocks ------------------------------------------------------------------------
-    @property
-    def clock_ticks(self) -> list[tuple[float, str]]:
-        """``(time in s, clock name)`` of every clock tick since the start (input clocks as activated,
-        output clocks as the FMU reported them; the most recent 100 000), in order."""
-        return list(self._clocks.ticks) if self._clocks is not None else []
-
-    def activate_clock(self, name: str) -> None:
-        """Tick the triggered input clock ``name`` at the current time (before the next step)."""
-        if self._clocks is None:
-            raise ConfigError(
-                f"{self.info.model_name}: clocks tick only in FMI 3.0 co-simulation with event mode or "
-                f"scheduled execution; {name!r} cannot be activated here"
-            )
-        self._clocks.activate(name)
-
-    # -- the clock ----------------------------------------------------------------------------
-    @property
-    def step_index(self) -> int:
-        """FMU steps ``k`` since the start time (the model's only clock)."""
-        return self._clock.value
-
-    @step_index.setter
-    def step_index(self, k: int) -> None:
-        self._clock.value = k
-
-    @property
-    def time_s(self) -> float:
-        """Simulation time ``t0 + k * h`` of the current step index ``k``."""
-        return self.start_time_s + self._clock.value * self.step_size_s
-
     # -- variables ----------------------------------------------------------------------------
-
-    @property
-    def log(self) -> list[str]:
-        """The FMU's most recent log messages."""
-        return list(self._backend.log.messages)
 
     def variable(self, name: str) -> Variable:
         return self.info.variable(name)
@@ -319,32 +289,8 @@ class Model:
                 raise unknown_variable_error(name, self.info, role) from None
             raise
 
-    def write_in_event_mode(self, write: Callable[[], None]) -> None:
-        """Model exchange: ``write`` in event mode, then the discrete-state iteration and continuous time.
-
-        FMI 2.0/3.0 accept discrete inputs and tunable parameters only in event mode; FMI 1.0 takes
-        them at any time but needs the event iteration afterwards.
-        """
-        me = self._me
-        if me is None or self.terminated:  # before initialisation every value is accepted
-            write()
-            return
-        events, call = me.events, self._backend.call
-        call("enterEventMode", events.enter_event_mode)
-        write()
-        terminate, me.next_event_s = call("the event iteration", events.iterate)
-        self._inputs_dirty = True
-        if terminate:
-            self.terminated = True
-            return
-        call("enterContinuousTimeMode", events.enter_continuous_time_mode)
-
     def _to_c(self, var: Variable, value: Any) -> Any:
         return to_c(var, value, self.info.model_name, self._backend.major)
-
-    def inputs_written(self) -> None:
-        """Inputs were written through a signal group: model exchange restarts its integrator."""
-        self._inputs_dirty = True
 
     # -- initialisation and reset -------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None) -> None:
@@ -487,18 +433,8 @@ class Model:
         self._restart()
 
     def _start_me(self) -> None:
-        # FMI 2.0 and 3.0 both leave initialisation in event mode: iterate, then integrate.
-        # FMI 1.0's fmiInitialize has iterated already (the backend finished it).
-        fmu, backend = self._backend.fmu, self._backend
-        events = EventCalls(fmu, backend.major)
-        if backend.major == 1:
-            terminate, next_event = getattr(backend, "initial_events", (False, None))
-        else:
-            terminate, next_event = backend.call("the initial event iteration", events.iterate)
-        if terminate:
-            raise FmuError(f"{self.info.model_name}: the FMU requested termination during initialisation")
-        backend.call("enterContinuousTimeMode", events.enter_continuous_time_mode)
-        if self._me is None or self._me.fmu is not fmu:
+        next_event = exchange.leave_initialization(self._backend, self.info.model_name)
+        if self._me is None or self._me.fmu is not self._backend.fmu:
             self._me = self._me_stepper(next_event)
         else:
             self._me.next_event_s = next_event
@@ -509,14 +445,11 @@ class Model:
         self._initialized_once = True
         return fresh
 
-    def _me_stepper(self, next_event: float | None) -> MeStepper | FixedStepper:
-        if self.solver != "cvode":
-            h = self.step_size_s
-            return FixedStepper(self._backend, self.solver, self.solver_substeps, h, next_event)
-        # An exporter's default tolerance is tuned for its own solver; restarting CVode at every
-        # input change needs a tighter one, so 1e-6 unless the caller asks for another.
-        tolerance = self._requested_tolerance or min(self.tolerance or 1e-6, 1e-6)
-        return MeStepper(self._backend, self.start_time_s, tolerance, self.step_size_s, next_event)
+    def _me_stepper(self, next_event: float | None) -> exchange.Integrator:
+        grid, tolerances = (self.start_time_s, self.step_size_s), (self._requested_tolerance, self.tolerance)
+        return exchange.integrator(
+            self._backend, self.solver, self.solver_substeps, grid, tolerances, next_event_s=next_event
+        )
 
     def _restart(self) -> None:
         self.step_index = 0
@@ -598,161 +531,25 @@ class Model:
         self._snapshots.drop()
         self._start = start
 
-    # -- stepping -----------------------------------------------------------------------------
-    def advance(self, n: int = 1) -> bool:
-        """Advance ``n`` FMU steps from the current step index; True if the FMU asked to terminate.
-
-        Raises:
-            StepError: the FMU returned Error/Fatal/Discard, or stepping after termination.
-        """
-        if not self._initialized or self.terminated or self._failed_status:
-            self._refuse_step()
-        clock = self._clock
-        if n == 1 and self._me is None:  # one FMU step per sample: the common hot path
-            k = clock.value
-            status = self._do_step(self.start_time_s + k * self.step_size_s, self.step_size_s)
-            if status > WARNING:
-                return self._step_failed(status)
-            clock.value = k + 1
-            return False
-        if self._me is not None:
-            return self._advance_me(n)
-        k, t0, h, do_step = clock.value, self.start_time_s, self.step_size_s, self._do_step
-        for _ in range(n):
-            status = do_step(t0 + k * h, h)
-            if status > WARNING:
-                clock.value = k
-                return self._step_failed(status)
-            k += 1
-        clock.value = k
-        return False
-
     # -- continuous states (model exchange) -----------------------------------------------------
     def continuous_states(self) -> npt.NDArray[np.float64]:
         """The continuous states ``x`` now (model exchange, initialised), in the FMU's order."""
-        x = np.zeros(self.info.number_of_states)
-        self._me_call("getContinuousStates", x)
-        return x
+        return exchange.continuous_states(self._backend, self.info, self._me_ready)
 
     def set_continuous_states(self, x: npt.ArrayLike) -> None:
         """Set the continuous states ``x`` (model exchange, in continuous-time mode)."""
-        values = np.ascontiguousarray(x, dtype=np.float64)
-        if values.shape != (self.info.number_of_states,):
-            raise VariableError(
-                f"{self.info.model_name}: {self.info.number_of_states} continuous states expected, "
-                f"got an array of shape {values.shape}"
-            )
-        self._me_call("setContinuousStates", values)
+        exchange.set_continuous_states(self._backend, self.info, self._me_ready, x)
         self._inputs_dirty = True
 
     def derivatives(self) -> npt.NDArray[np.float64]:
         """The state derivatives ``dx/dt`` at the current states and inputs (model exchange)."""
-        dx = np.zeros(self.info.number_of_states)
-        self._me_call("getContinuousStateDerivatives" if self._backend.major == 3 else "getDerivatives", dx)
-        return dx
-
-    def _me_call(self, name: str, array: npt.NDArray[np.float64]) -> None:
-        if self.interface != "me" or not self._initialized:
-            raise FmuError(
-                f"{self.info.model_name}: {name} needs an initialised model-exchange instance "
-                f"(open the Model with interface='me' and initialize() it)"
-            )
-        fmu = self._backend.fmu
-        pointer = array.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
-        self._backend.call(name, lambda: getattr(fmu, name)(pointer, len(array)))
-
-    # -- the stepping interface -------------------------------------------------------------------
-    # What the steppers of this package (the native sample, the batch, the system's native master,
-    # state-file starts) use to step this instance and account for what they did; nothing else
-    # of the model is theirs to touch.
-    @property
-    def backend(self) -> Backend:
-        """The FMI calls of this instance (``bridge.fmu`` only: FMI names stop there)."""
-        return self._backend
+        return exchange.derivatives(self._backend, self.info, self._me_ready)
 
     @property
-    def clock(self) -> Clock:
-        """The C ``long long`` holding the step index ``k``, which native steppers advance in place."""
-        return self._clock
+    def _me_ready(self) -> bool:
+        return self.interface == "me" and self._initialized
 
-    def attach_clock(self, clock: Clock) -> None:
-        """Keep ``k`` in ``clock`` from now on (a cell of a batch's array), carrying its value over."""
-        clock.value = self._clock.value
-        self._clock = clock
-
-    @property
-    def steppable(self) -> bool:
-        """True if :meth:`advance` would step now (open, initialised, not terminated, not failed)."""
-        return self._initialized and not self.terminated and not self._failed_status and not self._closed
-
-    @property
-    def initialized(self) -> bool:
-        """Whether the instance is initialised (or stands in a state set over an instance)."""
-        return self._initialized
-
-    @property
-    def failed_status(self) -> int:
-        """The FMI status of the last failed step (0: none since the last reset)."""
-        return self._failed_status
-
-    @property
-    def clocked(self) -> bool:
-        """Whether FMI 3.0 clocks tick in this instance (in Python: :mod:`bridge.fmu.clocks`)."""
-        return self._clocks is not None
-
-    def native_handles(self) -> dict[str, int]:
-        """Addresses for a native stepper that calls this instance's FMI functions directly.
-
-        Keys: ``component`` (the instance), ``major`` (FMI version), ``set_real``, ``get_real``,
-        ``do_step`` and ``bool_status`` (the Float64 set/get, doStep and, for FMI 2.0,
-        fmi2GetBooleanStatus; 0 where absent), ``get_state``, ``set_state``, ``free_state`` (the
-        FMU state functions; 0 where absent). Valid while the model is open and initialised; the
-        same dict while the instance is the same (a reset by restore or fmi reset keeps it).
-        In model exchange (fixed-step solvers only) :attr:`fixed_stepper` integrates.
-        """
-        b, cached = self._backend, self._handles
-        if cached is not None and cached[0] is b.component:  # the same instance: the same addresses
-            return cached[1]
-        if self._clocks is not None:
-            raise FmuError(
-                f"{self.info.model_name}: its clocks tick in Python (bridge.fmu.clocks), not natively"
-            )
-        if b.major < 2 or not b.component or (self.interface == "me" and self.fixed_stepper is None):
-            raise FmuError(
-                f"{self.info.model_name}: native stepping needs an initialised FMI 2.0/3.0 instance "
-                f"(co-simulation, or model exchange with solver 'rk4' or 'euler')"
-            )
-        handles = function_addresses(b)
-        self._handles = (b.component, handles)
-        return handles
-
-    @property
-    def fixed_stepper(self) -> FixedStepper | None:
-        """The native fixed-step integrator of a model-exchange instance (solver 'rk4' or
-        'euler', once initialised); None otherwise."""
-        return self._me if isinstance(self._me, FixedStepper) else None
-
-    def me_finish(self, code: int, n: int) -> bool:
-        """Finish a sample of ``n`` FMU steps from the current step index that a native batch
-        loop began with :attr:`fixed_stepper` and stopped with ``code`` (an event, termination or
-        a failure); the model then stands after the sample. True if the FMU asked to terminate.
-
-        Raises:
-            StepError: as :meth:`advance` does.
-        """
-        stepper = self.fixed_stepper
-        if stepper is None:
-            raise FmuError(f"{self.info.model_name}: no fixed-step integrator to finish the sample with")
-        k, t0, h = self.step_index, self.start_time_s, self.step_size_s
-        terminated = stepper.finish(code, t0 + k * h, t0 + (k + n) * h, k)
-        self.step_index, self.terminated = k + n, terminated
-        return terminated
-
-    def native_step_failed(self, status: int) -> bool:
-        """Account for a native doStep at the current step index that returned ``status``
-        (> Warning): True if the FMU asked to terminate, else :class:`StepError`."""
-        return self._step_failed(status)
-
+    # -- for state-file starts (bridge.fmu.start_state): the instance's own initialisation ----
     @property
     def init_values(self) -> dict[str, Any]:
         """The parameters and start values of the last initialisation, by name (for state files)."""
@@ -776,57 +573,3 @@ class Model:
             self._me = self._me_stepper(next_event_s)
         self._me.restart(self.time_s)
         self._me.next_event_s = next_event_s
-
-    def _advance_me(self, n: int) -> bool:
-        assert self._me is not None  # guarded by the caller
-        if self._clocks is not None:
-            return self._advance_clocked_me(n)
-        start = self.time_s
-        end = self.start_time_s + (self.step_index + n) * self.step_size_s
-        # Inputs are held piecewise constant: restart the integrator only where they may have jumped.
-        restart, self._inputs_dirty = self._inputs_dirty, False
-        terminated = self._me.advance(start, end, self.step_index, restart=restart)
-        self.step_index += n
-        self.terminated = terminated
-        return terminated
-
-    def _advance_clocked_me(self, n: int) -> bool:
-        """Model exchange with clocks: each FMU step integrated between the clocks' ticks."""
-        clocks, me = self._clocks, self._me
-        assert clocks is not None and me is not None  # guarded by the caller
-
-        def integrate(t0: float, t1: float) -> bool:
-            restart, self._inputs_dirty = self._inputs_dirty, False
-            return me.advance(t0, t1, self.step_index, restart=restart)
-
-        def after_event(t: float, next_event_s: float | None) -> None:
-            me.restart(t)
-            me.next_event_s = next_event_s
-
-        clocks.integrate, clocks.after_event = integrate, after_event
-        for _ in range(n):
-            status = clocks.step(self.time_s, self.step_size_s)
-            if status > WARNING:
-                return self._step_failed(status)
-            self.step_index += 1
-        return False
-
-    def _step_failed(self, status: int) -> bool:
-        stopped = self._clocks.terminated if self._clocks is not None else False
-        if status == DISCARD and (stopped or self._backend.terminated_after_discard()):
-            self.step_index += 1
-            self.terminated = True
-            return True
-        self._failed_status = status
-        log = self._backend.log.recent()
-        raise step_failed(
-            self.info, status, k=self.step_index, time_s=self.time_s, step_s=self.step_size_s, log=log
-        )
-
-    def _refuse_step(self) -> None:
-        state = "closed" if self._closed else "new" if not self._initialized else ""
-        state = state or ("terminated" if self.terminated else "")
-        log = self._backend.log.recent()
-        raise step_refused(
-            self.info, state, self._failed_status, k=self.step_index, time_s=self.time_s, log=log
-        )
