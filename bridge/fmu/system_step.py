@@ -200,6 +200,7 @@ class NativeMaster:
         iteration.states, iteration.saved_k = ctypes.addressof(self._states), self._saved_k.ctypes.data
         self._spec_ref = ctypes.byref(spec)
         self._n_obs, self._n_ext = len(observed), len(external)
+        self._done_ok: dict[int, Happened] = {}
         self.last_iterations = 0  # passes made in the last macro step (iterating)
         self.unconverged = 0  # macro steps that did not converge since the last look (iterating)
 
@@ -272,7 +273,7 @@ class NativeMaster:
             self._count_iterations()
         obs = self._obs_buffer.copy() if self._n_obs else self._obs.copy()
         if not code:  # every component stepped `count` macro steps with OK
-            return obs, Happened(count)
+            return obs, self._ok(count)
         return obs, self._happened(code)
 
     def run(self, count: int) -> Happened:
@@ -282,8 +283,16 @@ class NativeMaster:
         if self.iterating:
             self._count_iterations()
         if not code:
-            return Happened(self._spec.done)
+            return self._ok(self._spec.done)
         return self._happened(code)
+
+    def _ok(self, done: int) -> Happened:
+        """``Happened(done)``, made once per count: building a frozen dataclass costs about a
+        microsecond, as much as the rest of a small system's sample."""
+        happened = self._done_ok.get(done)
+        if happened is None:
+            happened = self._done_ok[done] = Happened(done)
+        return happened
 
     def _count_iterations(self) -> None:
         iteration = self._spec.iteration

@@ -65,7 +65,8 @@ def native_master(gain: Model, cart: Model) -> tuple[NativeMaster, list[np.ndarr
 def test_the_native_master_on_models_equals_a_jacobi_loop_of_model_calls(models: tuple[Model, Model]) -> None:
     gain, cart = models
     master, _, outputs = native_master(gain, cart)
-    rows, happened = [], Happened(0)
+    rows: list[list[float]] = []
+    happened = Happened(0)
     while not happened.stopped and len(rows) < 2000:
         assert master.refused() is None
         happened = master.run(1)

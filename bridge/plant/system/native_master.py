@@ -135,8 +135,9 @@ class NativeMaster:
                 call.stage(inputs)
             self._refused(inputs is not None)
         observation, happened = call.sample(inputs, count)
-        self._iterations()
-        if not happened.failed and not happened.stopped and happened.done == count:
+        if call.iterating:
+            self._iterations()
+        if happened.done == count and not happened.failed and not happened.stopped:
             self.done = count
             for plant in self._plants:
                 plant.sample += count
@@ -152,7 +153,8 @@ class NativeMaster:
         if self._call.refused() is not None:
             self._refused(False)
         happened = self._call.run(count)
-        self._iterations()
+        if self._call.iterating:
+            self._iterations()
         self.done = happened.done
         if happened.failed or happened.stopped:
             self.stopped = happened.stopped
@@ -164,10 +166,9 @@ class NativeMaster:
     def _iterations(self) -> None:
         """The master's iteration counts, as its Python loop keeps them."""
         call = self._call
-        if call.iterating:
-            self.master.last_iterations = call.last_iterations
-            self.master.unconverged_steps += call.unconverged
-            call.unconverged = 0
+        self.master.last_iterations = call.last_iterations
+        self.master.unconverged_steps += call.unconverged
+        call.unconverged = 0
 
     def _refused(self, with_inputs: bool) -> None:
         """The Python path raises the model's own refusal (terminated, failed, closed)."""
