@@ -40,10 +40,11 @@ class Instance:
     _backend: Backend
     _clock: Clock
     _do_step: Callable[[float, float], int]
-    _initialized: bool
+    # read by the steppers (the stepping interface below), set only by the instance itself
+    initialized: bool  # initialised, or standing in a state set over an instance
+    closed: bool  # freed: a new Model is needed
+    failed_status: int  # the FMI status of the last failed step (0: none since the last reset)
     _init_failed: bool
-    _closed: bool
-    _failed_status: int
     _me: exchange.Integrator | None
     _clocks: ClockDriver | None
     _handles: tuple[Any, dict[str, int]] | None  # (the instance, its addresses)
@@ -106,7 +107,7 @@ class Instance:
         Raises:
             StepError: the FMU returned Error/Fatal/Discard, or stepping after termination.
         """
-        if not self._initialized or self.terminated or self._failed_status:
+        if not self.initialized or self.terminated or self.failed_status:
             self._refuse_step()
         clock = self._clock
         if n == 1 and self._me is None:  # one FMU step per sample: the common hot path
@@ -168,18 +169,18 @@ class Instance:
             self.step_index += 1
             self.terminated = True
             return True
-        self._failed_status = status
+        self.failed_status = status
         log = self._backend.log.recent()
         raise step_failed(
             self.info, status, k=self.step_index, time_s=self.time_s, step_s=self.step_size_s, log=log
         )
 
     def _refuse_step(self) -> None:
-        state = "closed" if self._closed else "new" if not self._initialized else ""
+        state = "closed" if self.closed else "new" if not self.initialized else ""
         state = state or ("terminated" if self.terminated else "")
         log = self._backend.log.recent()
         raise step_refused(
-            self.info, state, self._failed_status, k=self.step_index, time_s=self.time_s, log=log
+            self.info, state, self.failed_status, k=self.step_index, time_s=self.time_s, log=log
         )
 
     # -- the stepping interface -------------------------------------------------------------------
@@ -204,22 +205,7 @@ class Instance:
     @property
     def steppable(self) -> bool:
         """True if :meth:`advance` would step now (open, initialised, not terminated, not failed)."""
-        return self._initialized and not self.terminated and not self._failed_status and not self._closed
-
-    @property
-    def closed(self) -> bool:
-        """Whether the instance is closed (freed; a new ``Model`` is needed)."""
-        return self._closed
-
-    @property
-    def initialized(self) -> bool:
-        """Whether the instance is initialised (or stands in a state set over an instance)."""
-        return self._initialized
-
-    @property
-    def failed_status(self) -> int:
-        """The FMI status of the last failed step (0: none since the last reset)."""
-        return self._failed_status
+        return self.initialized and not self.terminated and not self.failed_status and not self.closed
 
     @property
     def clocked(self) -> bool:

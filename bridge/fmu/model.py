@@ -134,10 +134,10 @@ class Model(Instance):
         self.can_restore = self.info.can_get_set_state.get(self.interface, False) and self.info.fmi_major >= 2
         self._clock = Clock(0)
         self.terminated = False
-        self._initialized = False
+        self.initialized = False
         self._init_failed = False
-        self._closed = False
-        self._failed_status = 0
+        self.closed = False
+        self.failed_status = 0
         self._me: exchange.Integrator | None = None
         self._handles: tuple[Any, dict[str, int]] | None = None  # (the instance, its addresses)
         self._inputs_dirty = False
@@ -185,16 +185,16 @@ class Model(Instance):
 
     def close(self) -> None:
         """Free the instance, its snapshots and the library; safe to call twice."""
-        if self._closed:
+        if self.closed:
             return
-        self._closed = True
-        was_initialized, self._initialized = self._initialized, False
+        self.closed = True
+        was_initialized, self.initialized = self.initialized, False
         self._snapshots.drop()
         if self._start is not None:
             start_state.free(self, self._start)
         self._me = None
         try:
-            if was_initialized and self._failed_status < FATAL:
+            if was_initialized and self.failed_status < FATAL:
                 self._backend.fmu.terminate()
         except Exception:
             _log.debug("terminate failed while closing %s", self.info.model_name, exc_info=True)
@@ -268,7 +268,7 @@ class Model(Instance):
         variables = list(dict.fromkeys(var for var, _ in elements.values()))
         flat = access.merge(self._backend, elements, values, self._to_c, self._where)
         clocks = self._clocks
-        if clocks is not None and self._initialized and any(v.variability != "continuous" for v in variables):
+        if clocks is not None and self.initialized and any(v.variability != "continuous" for v in variables):
             clocks.write_in_event_mode(lambda: access.write(self._backend, variables, flat, self._where))
             return
         if self.interface == "me" and any(v.variability != "continuous" for v in variables):
@@ -295,7 +295,7 @@ class Model(Instance):
     # -- initialisation and reset -------------------------------------------------------------
     def initialize(self, values: Mapping[str, Any] | None = None) -> None:
         """Instantiate (first call) and initialise with parameters and start values ``values``."""
-        if self._closed:
+        if self.closed:
             raise FmuError(f"{self.info.model_name}: the model is closed; open a new Model")
         checked = self._checked(values or {})
         if self._backend.component is not None and self.unusable:
@@ -321,7 +321,7 @@ class Model(Instance):
         if self._start is not None:
             start_state.restore(self, self._start, dict(values or {}))
             return
-        if not self._initialized:
+        if not self.initialized:
             self.initialize(values)
             return
         checked = self._checked(values) if values else {}
@@ -329,11 +329,11 @@ class Model(Instance):
         policy, snapshots = self.reset_policy, self._snapshots
         if policy in ("auto", "reset"):
             snapshots.judge_episode(self._clock.value, self.terminated)
-        snapshot = snapshots.get(key) if self._failed_status == 0 else None
+        snapshot = snapshots.get(key) if self.failed_status == 0 else None
         if snapshot is not None and self._restored(snapshot):
             return
         trust = snapshots.trust
-        fresh = policy == "reinstantiate" or self._failed_status >= FATAL or self.info.fmi_major == 1
+        fresh = policy == "reinstantiate" or self.failed_status >= FATAL or self.info.fmi_major == 1
         if fresh or (policy == "auto" and not trust.fmi_reset_works):
             self._reinstantiate(checked)
         else:
@@ -405,7 +405,7 @@ class Model(Instance):
         self._configured = True
 
     def _initialize(self, values: dict[Variable, Any]) -> None:
-        self._initialized = False
+        self.initialized = False
         self._init_failed = True  # until it completes
         self._backend.log.clear()
         if self._structural and not self._fresh_configuration():
@@ -427,9 +427,9 @@ class Model(Instance):
             self._clocks.start(self.start_time_s)
         if self.interface == "me":
             self._start_me()
-        self._initialized = True
+        self.initialized = True
         self._init_failed = False
-        self._failed_status = 0
+        self.failed_status = 0
         self._restart()
 
     def _start_me(self) -> None:
@@ -464,7 +464,7 @@ class Model(Instance):
     def save_state(self) -> ModelState:
         """The state now (FMU state, step index, time); needs ``can_restore`` (FMI 2.0/3.0 FMUs
         with canGetAndSetFMUstate), else :class:`FmuError`. Free it with :meth:`free_state`."""
-        if not self.can_restore or not self._initialized:
+        if not self.can_restore or not self.initialized:
             why = "is not initialised" if self.can_restore else "cannot get and set its state"
             raise FmuError(
                 f"{self.info.model_name}: cannot save the state: the FMU {why} "
@@ -476,12 +476,12 @@ class Model(Instance):
 
     def restore_state(self, state: ModelState) -> None:
         """Back to ``state`` (from :meth:`save_state` of this model, not yet freed)."""
-        if state.handle is None or self._closed:
+        if state.handle is None or self.closed:
             raise FmuError(f"{self.info.model_name}: cannot restore a freed state or into a closed model")
         self._backend.set_state(state.handle)
         self.step_index, self.terminated = state.step_index, state.terminated
-        if self._failed_status < FATAL:
-            self._failed_status = 0
+        if self.failed_status < FATAL:
+            self.failed_status = 0
         if self._me is not None:
             self._me.restart(self.time_s)
             self._me.next_event_s = state.next_event_s
@@ -490,7 +490,7 @@ class Model(Instance):
 
     def free_state(self, state: ModelState) -> None:
         """Release ``state``'s memory in the FMU; safe to call twice."""
-        if state.handle is not None and not self._closed:
+        if state.handle is not None and not self.closed:
             self._backend.free_state(state.handle)
         state.handle = None
 
@@ -547,7 +547,7 @@ class Model(Instance):
 
     @property
     def _me_ready(self) -> bool:
-        return self.interface == "me" and self._initialized
+        return self.interface == "me" and self.initialized
 
     # -- for state-file starts (bridge.fmu.start_state): the instance's own initialisation ----
     @property
@@ -566,7 +566,7 @@ class Model(Instance):
         ``start_time_s`` and stands at ``step_index``; model exchange integrates on from there."""
         self.start_time_s = start_time_s
         self.step_index, self.terminated = step_index, terminated
-        self._initialized, self._init_failed, self._failed_status = True, False, 0
+        self.initialized, self._init_failed, self.failed_status = True, False, 0
         if self.interface != "me":
             return
         if self._me is None or self._me.fmu is not self._backend.fmu:

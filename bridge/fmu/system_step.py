@@ -261,19 +261,29 @@ class NativeMaster:
 
     def sample(
         self, inputs: Sequence[float] | None, count: int
-    ) -> tuple[np.ndarray[Any, np.dtype[np.float64]], Happened]:
+    ) -> tuple[np.ndarray[Any, np.dtype[np.float64]], Happened] | None:
         """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
-        return the observation (a new array) and what happened; every component must be steppable
-        (:meth:`refused`)."""
-        with_inputs = 0 if inputs is None else 1
+        return the observation (a new array) and what happened; None, with nothing called, where
+        a component cannot step (:meth:`refused`)."""
+        for m in self._models:  # Instance.steppable inlined: a property call per model costs more here
+            if not m.initialized or m.terminated or m.failed_status or m.closed:
+                return None
+        with_inputs = 0
         if inputs is not None:
-            self.stage(inputs)
+            with_inputs = 1
+            try:
+                if inputs.__class__ is list:  # ctypes copies a list faster, numpy an array
+                    self._ext_c[:] = inputs
+                else:
+                    self._ext_view[:] = inputs
+            except (ValueError, TypeError):
+                self.stage(inputs)  # raises, saying what was expected
         code = self._call(self._spec_ref, count, with_inputs)
         if self.iterating:
             self._count_iterations()
         obs = self._obs_buffer.copy() if self._n_obs else self._obs.copy()
         if not code:  # every component stepped `count` macro steps with OK
-            return obs, self._ok(count)
+            return obs, self._done_ok.get(count) or self._ok(count)
         return obs, self._happened(code)
 
     def run(self, count: int) -> Happened:

@@ -66,7 +66,7 @@ def touches(source: str, privates: set[str]) -> list[tuple[int, str, str]]:
 
 def test_the_scan_sees_the_stepping_state_and_an_access_to_it() -> None:
     privates = model_privates()
-    assert {"_backend", "_clock", "_failed_status", "_initialize", "_snapshots"} <= privates
+    assert {"_backend", "_clock", "_me", "_initialize", "_snapshots"} <= privates
     # what the native sample did before the stepping interface: caught
     old = "h = model._native_handles()\nrefs = ctypes.byref(model._clock)\nx = getattr(m, '_backend')\n"
     assert sorted(touches(old, privates | {"_native_handles"})) == [
