@@ -201,6 +201,7 @@ class NativeMaster:
         self._spec_ref = ctypes.byref(spec)
         self._n_obs, self._n_ext = len(observed), len(external)
         self._done_ok: dict[int, Happened] = {}
+        self.happened = Happened(0)  # what the last sample did
         self.last_iterations = 0  # passes made in the last macro step (iterating)
         self.unconverged = 0  # macro steps that did not converge since the last look (iterating)
 
@@ -261,10 +262,11 @@ class NativeMaster:
 
     def sample(
         self, inputs: Sequence[float] | None, count: int
-    ) -> tuple[np.ndarray[Any, np.dtype[np.float64]], Happened] | None:
+    ) -> np.ndarray[Any, np.dtype[np.float64]] | None:
         """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
-        return the observation (a new array) and what happened; None, with nothing called, where
-        a component cannot step (:meth:`refused`)."""
+        return the observation (a new array), with what happened in :attr:`happened`; None, with
+        nothing called, where a component cannot step (:meth:`refused`). No tuple is built: one
+        more allocation per sample makes the garbage collector run measurably more often."""
         for m in self._models:  # Instance.steppable inlined: a property call per model costs more here
             if not m.initialized or m.terminated or m.failed_status or m.closed:
                 return None
@@ -281,10 +283,12 @@ class NativeMaster:
         code = self._call(self._spec_ref, count, with_inputs)
         if self.iterating:
             self._count_iterations()
-        obs = self._obs_buffer.copy() if self._n_obs else self._obs.copy()
-        if not code:  # every component stepped `count` macro steps with OK
-            return obs, self._done_ok.get(count) or self._ok(count)
-        return obs, self._happened(code)
+        obs: np.ndarray[Any, np.dtype[np.float64]] = (
+            self._obs_buffer.copy() if self._n_obs else self._obs.copy()
+        )
+        # every component stepped `count` macro steps with OK, or what stopped the call
+        self.happened = (self._done_ok.get(count) or self._ok(count)) if not code else self._happened(code)
+        return obs
 
     def run(self, count: int) -> Happened:
         """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then its

@@ -95,8 +95,8 @@ def test_the_native_master_on_models_equals_a_jacobi_loop_of_model_calls(models:
 def test_a_sample_sets_the_external_input_and_returns_the_observation(models: tuple[Model, Model]) -> None:
     gain, cart = models
     master, inputs, _ = native_master(gain, cart)
-    observation, happened = master.sample([FORCE], 5)
-    assert happened == Happened(5)
+    observation = master.sample([FORCE], 5)
+    assert observation is not None and master.happened == Happened(5)
     assert inputs[0][0] == FORCE and inputs[1][0] == FORCE  # scattered, then passed on by the link
     assert observation.shape == (1,) and observation[0] == cart.get(["x"])["x"] > 0.0
     assert cart.step_index == 10 and gain.step_index == 5

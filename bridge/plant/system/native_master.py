@@ -130,15 +130,15 @@ class NativeMaster:
         """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
         return the observation (a new array): :meth:`run` with the task's ends, in one call."""
         call = self._call
-        result = call.sample(inputs, count)
-        if result is None:  # a component cannot step: its own refusal, as the Python path raises it
+        observation = call.sample(inputs, count)
+        if observation is None:  # a component cannot step: its own refusal, as the Python path raises it
             if inputs is not None:
                 call.stage(inputs)
             self._refused(inputs is not None)
             raise BridgeError(
                 f"the system: a component cannot step, and did not say why{self.master.system.where}"
             )
-        observation, happened = result
+        happened = call.happened
         if call.iterating:
             self._iterations()
         if happened.done == count and not happened.failed and not happened.stopped:
