@@ -1,9 +1,11 @@
 """FMUs: the model vocabulary (``vocab``, no FMPy) and the FMU runtime (the only FMPy importer).
 
-Every call into an FMU is made here: ``Model`` (one instance, its clock, resets and states),
-``ModelBatch`` (N instances stepped in one native call), the one-call native sample
-(``sample``), FMI 3.0 clocks and scheduled execution (``clocks``) and the C helpers (``batch.c``,
-``fixed_step.c``) with their ctypes mirrors and the FMI status codes in one module (``abi``).
+Every call into an FMU is made here: ``Model`` (one instance, its clock, resets and states; its
+runtime and the one interface native steppers use are ``instance.Instance``), ``ModelBatch`` (N
+instances stepped in one native call), the one-call native sample (``sample``), the system's
+native master (``system_step``: models, links and buffers, no plant), FMI 3.0 clocks and
+scheduled execution (``clocks``) and the C helpers (``batch.c``, ``fixed_step.c``, ``master.c``)
+with their ctypes mirrors and the FMI status codes in one module (``abi``).
 FMI names (camelCase, value references, status codes) and ctypes stop here; everything above
 speaks in variable names, numpy arrays and seconds (pyproject.toml's import contracts enforce it).
 ``bridge.fmu.vocab`` (variables, model info, their JSON form) imports nothing heavy, so the task,

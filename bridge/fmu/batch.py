@@ -75,7 +75,7 @@ class ModelBatch:
         self._want_native = native
         self._clock = np.zeros(self.n, dtype=np.int64)
         for i, model in enumerate(self.models):
-            model._attach_clock(Clock.from_buffer(self._clock.data, i * self._clock.itemsize))
+            model.attach_clock(Clock.from_buffer(self._clock.data, i * self._clock.itemsize))
         self.input_names: tuple[str, ...] = ()
         self.output_names: tuple[str, ...] = ()
         self._inputs: list[SignalGroup] = []
@@ -122,10 +122,10 @@ class ModelBatch:
         if not self._decided:
             self._decide(model, i)
         if self._me is not None:
-            self._check_library(i, model._native_handles())
+            self._check_library(i, model.native_handles())
             self._me.bind(i, model)
         elif self._stepper is not None:
-            handles = model._native_handles()
+            handles = model.native_handles()
             self._check_library(i, handles)
             self._comps[i] = handles["component"]
         return outputs
@@ -149,7 +149,7 @@ class ModelBatch:
                 raise ConfigError(f"{self.name}: native stepping is not possible: {reason or 'no compiler'}")
             _log.info("%s: stepping in Python (%s)", self.name, reason or "no native stepper")
             return
-        h = model._native_handles()
+        h = model.native_handles()
         self._in_vr, self._out_vr, counts = self._value_references(i)
         self._spec = BatchSpec(
             h["major"], h["set_real"], h["get_real"], h["do_step"], h["bool_status"],
@@ -170,11 +170,11 @@ class ModelBatch:
         return np.array(in_vr, dtype=np.uint32), np.array(out_vr, dtype=np.uint32), (nv_in, nv_out)
 
     def _setup_me(self, model: Model, i: int) -> None:
-        stepper = model._fixed_stepper
+        stepper = model.fixed_stepper
         if stepper is None:  # _native_refusal checked the solver
             raise ConfigError(f"{self.name}: model exchange without a fixed-step solver")
         self._in_vr, self._out_vr, counts = self._value_references(i)
-        h = model._native_handles()
+        h = model.native_handles()
         self._handles = {key: h[key] for key in ("major", "set_real", "get_real")}
         self._me = MeBatch(
             h, in_vr=self._in_vr, out_vr=self._out_vr, start_time_s=model.start_time_s,
@@ -184,12 +184,12 @@ class ModelBatch:
 
     def _native_refusal(self, model: Model, i: int) -> str | None:
         info = model.info
-        if info.fmi_major < 2 or (model.interface == "me" and model._fixed_stepper is None):
+        if info.fmi_major < 2 or (model.interface == "me" and model.fixed_stepper is None):
             return (
                 f"it needs FMI 2.0/3.0 co-simulation, or model exchange with solver 'rk4' or 'euler'; "
                 f"this is FMI {info.fmi_version} {model.interface} (solver {model.solver!r})"
             )
-        if model._clocks is not None:
+        if model.clocked:
             return "its FMI 3.0 clocks tick in Python (bridge.fmu.clocks)"
         ins, outs = (group[i].float64_layout() for group in (self._inputs, self._outputs))
         if outs is None or (self.input_names and ins is None):
@@ -233,7 +233,7 @@ class ModelBatch:
         result = BatchOutcome(self._outputs_buf, terminated)
         if unfinished:  # terminations and failures: rare, accounted in each model
             for i in np.flatnonzero(terminated).tolist():
-                self.models[i]._native_terminated()
+                self.models[i].terminated = True
             names = (self.input_names, self.output_names)
             for i in np.flatnonzero((status > WARNING) & ~terminated).tolist():
                 result.errors[i] = batch_stepper.native_failure(self.models[i], int(status[i]), *names)

@@ -1,10 +1,10 @@
 """Batches of model-exchange instances: one native call integrates a sample of every instance.
 
 ``fixed_step_batch`` (``bridge/fmu/fixed_step.c``) sets each active instance's inputs, integrates
-its sample with the instance's own fixed-step integrator (``Model._fixed_stepper``: RK4 or Euler)
+its sample with the instance's own fixed-step integrator (``Model.fixed_stepper``: RK4 or Euler)
 exactly as the per-instance loop does, and gets its outputs, advancing each model's own clock in
 place. An instance that stops at an event, asks to terminate or fails is left where it stopped;
-:meth:`MeBatch.finish` then completes its sample through ``Model._me_finish`` (the event iteration
+:meth:`MeBatch.finish` then completes its sample through ``Model.me_finish`` (the event iteration
 and the rest of the sample, with the same FMI calls as the per-instance path), so trajectories are
 identical bit for bit.
 """
@@ -33,7 +33,7 @@ class MeBatch:
     """The native sample loop over ``n`` fixed-step model-exchange instances of one FMU.
 
     Args:
-        handles: ``Model._native_handles()`` of the first instance (FMI version, set/get).
+        handles: ``Model.native_handles()`` of the first instance (FMI version, set/get).
         in_vr, out_vr: the value references of the bound inputs and outputs (uint32, kept alive).
         start_time_s, step_size_s, steps: the time grid ``t0 + k h`` and FMU steps per sample.
         substeps: the integrator's steps per FMU step.
@@ -73,7 +73,7 @@ class MeBatch:
 
     def bind(self, i: int, model: Model) -> None:
         """Point slot ``i`` at ``model``'s integrator (after every reset: it may be a new one)."""
-        stepper = model._fixed_stepper
+        stepper = model.fixed_stepper
         if stepper is None:
             raise FmuError(f"{model.info.model_name}: a model-exchange batch needs solver 'rk4' or 'euler'")
         self.specs[i], self.calls[i] = stepper.addresses()
@@ -106,4 +106,4 @@ class MeBatch:
         code = int(self.codes[i])
         if code in _SET_OR_GET:  # the set (sample not begun) or the get (sample done, k moved) failed
             raise native_failure(model, code, *names)
-        return model._me_finish(code, self.steps)
+        return model.me_finish(code, self.steps)

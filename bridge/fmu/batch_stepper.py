@@ -113,7 +113,7 @@ def native_failure(
             log=model.log,
         )
     try:
-        model._native_step_failed(status)
+        model.native_step_failed(status)
     except FmuError as exc:
         return exc
     return FmuError(f"doStep returned {status_name(status)}", log=model.log)

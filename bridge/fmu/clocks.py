@@ -621,3 +621,25 @@ __all__ = [
     "check_settings",
     "clock_driver_needed",
 ]
+
+
+def clock_driver(
+    backend: Any,
+    info: ModelInfo,
+    interface: str,
+    intervals: Mapping[str, float] | None,
+    schedule: Mapping[str, Sequence[float]] | None,
+) -> ClockDriver | None:
+    """The clock driver of an instance (``backend``) where its FMU's clocks tick in this interface
+    (None where none do); ``intervals`` and ``schedule`` are refused where they have no clocks to set."""
+    if clock_driver_needed(info, interface):
+        driver = ClockDriver(backend, info, interface, intervals=intervals, schedule=schedule)
+        backend.clock_update = driver.clock_update
+        return driver
+    if intervals or schedule:
+        raise ConfigError(
+            f"{info.model_name}: clock_intervals and clock_schedule need FMI 3.0 input clocks "
+            f"in co-simulation with event mode or in scheduled execution; this FMU runs "
+            f"FMI {info.fmi_version} {interface.upper()} without them"
+        )
+    return None

@@ -35,7 +35,7 @@ def claim(info: ModelInfo, owner: object) -> None:
     with _LOCK:
         ref = _LIVE.get(key)
         holder = ref() if ref is not None else None
-        if holder is not None and not getattr(holder, "_closed", False):
+        if holder is not None and not getattr(holder, "closed", False):
             raise ConfigError(
                 f"{info.model_name} declares canBeInstantiatedOnlyOncePerProcess and an instance of it is "
                 f"already open in this process: a second one would share its global state. "

@@ -54,7 +54,7 @@ class NativeSample:
         self._n = steps_per_sample
         self._call = stepper.step_one
         self._spec = BatchSpec()
-        self._refs = (ctypes.byref(self._spec), ctypes.byref(model._clock))
+        self._refs = (ctypes.byref(self._spec), ctypes.byref(model.clock))
         self._u: int | None = None
         self._y: int | None = None
         self._component = ctypes.c_void_p(0)
@@ -70,7 +70,7 @@ class NativeSample:
         if inputs is not None and inputs.native_buffer(writing=True) is None:
             return None
         try:
-            model._native_handles()
+            model.native_handles()
         except FmuError:  # FMI 1.0, not initialised: the Python path serves it
             return None
         stepper = nat.load()
@@ -81,10 +81,10 @@ class NativeSample:
         do where the reset kept the instance (restore, fmi reset): a reset stays cheap."""
         model = self._model
         bound = self._bound
-        if bound is not None and bound[0] is model._backend.component and bound[1] is model._clock:
+        if bound is not None and bound[0] is model.backend.component and bound[1] is model.clock:
             return
-        h = model._native_handles()
-        self._bound = (model._backend.component, model._clock)
+        h = model.native_handles()
+        self._bound = (model.backend.component, model.clock)
         spec = self._spec
         spec.major, spec.set_real, spec.get_real = h["major"], h["set_real"], h["get_real"]
         spec.do_step, spec.bool_status = h["do_step"], h["bool_status"]
@@ -97,11 +97,11 @@ class NativeSample:
         assert out is not None  # checked in create()
         spec.out_vr, spec.n_out, spec.nv_out, self._y = out
         self._component.value = h["component"]
-        self._refs = (self._refs[0], ctypes.byref(model._clock))
+        self._refs = (self._refs[0], ctypes.byref(model.clock))
 
     def __call__(self, inputs: Sequence[float] | None) -> FloatArray:
         model = self._model
-        if not model._steppable:
+        if not model.steppable:
             model.advance(self._n)  # raises the model's own refusal (terminated, failed, closed)
         if inputs is not None and self._inputs is not None:
             self._inputs.stage(inputs)
@@ -113,6 +113,6 @@ class NativeSample:
                 raise nat.native_failure(
                     model, status, self._inputs.names if self._inputs is not None else (), self._outputs.names
                 )
-            model._native_terminated()
+            model.terminated = True
             self.terminated = True
         return self._outputs.latest()

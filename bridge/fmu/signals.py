@@ -54,7 +54,7 @@ class _Block:
     # ``vrs`` and ``ptr`` are integer addresses of ``_vrs`` and ``buf``, which the block keeps alive.
 
     def __init__(self, model: Model, elements: list[tuple[Variable, int | None]], index: list[int]) -> None:
-        backend = model._backend
+        backend = model.backend
         variables = [var for var, _ in elements]
         ctype = backend.ctype(variables[0].type)
         self.variables = variables
@@ -153,13 +153,13 @@ class SignalGroup:
         names: Sequence[str] | None = None,
     ) -> None:
         self._model = model
-        self._backend = model._backend
+        self._backend = model.backend
         variables = [var for var, _ in elements]
         self.variables = tuple(variables)
         self.names = tuple(names) if names is not None else tuple(v.name for v in variables)
         groups: dict[str, tuple[list[tuple[Variable, int | None]], list[int]]] = {}
         for i, element in enumerate(elements):
-            key = model._backend.type_key(element[0].type)
+            key = model.backend.type_key(element[0].type)
             members, index = groups.setdefault(key, ([], []))
             members.append(element)
             index.append(i)
@@ -245,7 +245,7 @@ class SignalGroup:
             if status > WARNING:
                 self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written()
+            self._model.inputs_written()
 
     def native_buffer(self, *, writing: bool) -> tuple[int, int, int, int] | None:
         """(value-reference array address, value references, values, float64 buffer address) of
@@ -306,7 +306,7 @@ class SignalGroup:
         if status > WARNING:
             self._fail("set", block, status)
         if self._notify:
-            self._model._inputs_written()
+            self._model.inputs_written()
 
     def _no_instance(self) -> FmuError:
         return FmuError(
@@ -353,7 +353,7 @@ class SignalGroup:
         raise FmuError(
             f"{self._model.info.model_name}: {what} of {names} returned {STATUS_NAMES[status]} "
             f"{self._where()}",
-            log=self._model._backend.log.recent(),
+            log=self._model.backend.log.recent(),
         )
 
 

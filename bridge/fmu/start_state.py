@@ -47,7 +47,7 @@ def to_file(model: Model, state: ModelState | None, max_bytes: int) -> StateFile
     try:
         if saved.handle is None:
             raise FmuError(f"{model.info.model_name}: cannot save a freed state")
-        payload = serial.serialize(model._backend, saved.handle, max_bytes)
+        payload = serial.serialize(model.backend, saved.handle, max_bytes)
     finally:
         if own:
             model.free_state(saved)
@@ -66,7 +66,7 @@ def to_file(model: Model, state: ModelState | None, max_bytes: int) -> StateFile
         next_event_s=saved.next_event_s,
         size=len(payload),
         sha256="",
-        start_values={name: _jsonable(value) for name, value in model._init_values.items()},
+        start_values={name: _jsonable(value) for name, value in model.init_values.items()},
     )
     return state_file.seal(header, payload)
 
@@ -86,8 +86,8 @@ def prepare(model: Model, file: StateFile, source: str) -> StartState:
 def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
     """Put ``model`` into the saved state (the reset of a state-file episode)."""
     _check_values(start, values)
-    backend = model._backend
-    if backend.component is not None and (model.unusable or model._failed_status >= FATAL):
+    backend = model.backend
+    if backend.component is not None and (model.unusable or model.failed_status >= FATAL):
         backend.free_instance()
         start.handle = None
     if backend.component is None:
@@ -96,21 +96,17 @@ def restore(model: Model, start: StartState, values: dict[str, Any]) -> None:
     try:
         _set(backend, start)
     except FmuError as first:
-        if model._initialized:
+        if model.initialized:
             raise _refused(model, start, first) from first
         # An FMU that reads or sets a state only once initialised (the standard allows both
         # straight after instantiation): initialised with the saving run's start values, then set.
         try:
-            model._initialize(model._check_init_values(start.file.header.start_values))
+            model.initialize_instance(start.file.header.start_values)
             _set(backend, start)
         except FmuError as exc:  # the FMU refused the bytes: say so, not what failed after it
             raise _refused(model, start, first) from exc
     header = start.file.header
-    model.start_time_s = start.start_time_s
-    model.step_index, model.terminated = start.step_index, header.terminated
-    model._initialized, model._init_failed, model._failed_status = True, False, 0
-    if model.interface == "me":
-        model._resume_me(header.next_event_s)
+    model.entered_state(start.start_time_s, start.step_index, header.terminated, header.next_event_s)
 
 
 def _set(backend: Any, start: StartState) -> None:
@@ -134,8 +130,8 @@ def _refused(model: Model, start: StartState, exc: FmuError) -> FmuError:
 
 
 def free(model: Model, start: StartState) -> None:
-    if start.handle is not None and start.component is model._backend.component:
-        model._backend.free_state(start.handle)
+    if start.handle is not None and start.component is model.backend.component:
+        model.backend.free_state(start.handle)
     start.handle = None
 
 

@@ -203,7 +203,7 @@ def test_bad_solver_settings_are_refused(
 def test_an_fmi_call_the_fmu_rejects_is_a_step_error_with_its_log(version: str) -> None:
     with Model(example_fmu("cartpole", version, "me"), step_size_s=0.02, solver="rk4") as model:
         model.initialize()
-        model._backend.fmu.terminate()  # behind the model's back: the FMU now refuses every step call
+        model.backend.fmu.terminate()  # behind the model's back: the FMU now refuses every step call
         with pytest.raises(StepError, match=f"fmi{version[0]}SetTime returned Error at t=0 s") as caught:
             model.advance(1)
         assert any("not allowed in terminated" in line for line in caught.value.log)

@@ -220,10 +220,10 @@ def test_auto_policy_snapshots_recurring_values_only(cartpole_fmu: Path) -> None
         for i in range(20):
             model.reset({"theta0": 0.01 * (i % 2)})  # two recurring value sets
             model.advance(2)  # auto keeps a snapshot taken after an fmi reset once its episode ran
-        assert sum(s is not None for s in model._snapshots.values()) == 2
+        assert sum(s is not None for s in model._snapshots.by_key.values()) == 2
         for i in range(20):
             model.reset({"theta0": 0.5 + i})  # never seen twice: no snapshots taken
-        assert sum(s is not None for s in model._snapshots.values()) <= 2
+        assert sum(s is not None for s in model._snapshots.by_key.values()) <= 2
 
 
 def test_reinstantiation_never_re_extracts(cartpole_fmu: Path, tmp_path: Path) -> None:

@@ -81,7 +81,7 @@ def test_state_file_reset_skips_initialisation() -> None:
         m.start_from(saved)
         m.reset({"warmup_steps": 2000})
         assert m.get(["T_init", "T"]) == values
-        assert m._init_values == {}  # Model._initialize (enter/exit initialisation mode) never ran
+        assert m.init_values == {}  # Model._initialize (enter/exit initialisation mode) never ran
 
 
 def test_other_step_size_starts_at_the_saved_time(tmp_path: Path) -> None:
@@ -239,7 +239,7 @@ def test_fmu_that_takes_a_state_only_once_initialised_is_initialised_first(
     fmu = example_fmu("slow_init_late", version, interface)
     restored, continued, saved = _saved(fmu)
     with Model(fmu, step_size_s=0.05) as m, pytest.raises(FmuError, match=r"(?i)deserializeFMUstate failed"):
-        serial.deserialize(m._backend, saved.payload)  # the refusal the fallback exists for
+        serial.deserialize(m.backend, saved.payload)  # the refusal the fallback exists for
     with Model(fmu, step_size_s=0.05) as m:
         m.start_from(saved)
         episodes = []
@@ -247,7 +247,7 @@ def test_fmu_that_takes_a_state_only_once_initialised_is_initialised_first(
             m.reset(FAST)
             assert m.time_s == saved.header.time_s
             episodes.append(_episode(m, _powers(25)))
-        assert m._init_values == FAST  # initialised once, with the saved start values
+        assert m.init_values == FAST  # initialised once, with the saved start values
     for episode in episodes:
         assert np.array_equal(episode, restored)
     assert np.array_equal(restored, continued) and restored[-1, 1] != restored[0, 1]

@@ -221,7 +221,7 @@ def test_the_model_refuses_element_wise_calls(fmu: Path) -> None:
     with Model(fmu) as model:
         model.initialize()
         with pytest.raises(FmuError, match=r"Expected nValues = 3 but was 1"):
-            model._backend.call("an element-wise set", lambda: model._backend.fmu.setFloat64([3], [1.0]))
+            model.backend.call("an element-wise set", lambda: model.backend.fmu.setFloat64([3], [1.0]))
         native = NativeSample.create(model, model.signals(U, writable=True), model.signals(OUTPUTS), 1)
         assert native is not None  # whole arrays in row-major order: the one-call sample serves them
         np.testing.assert_allclose(native([1.0, 2.0, 3.0]), closed_form(TIMES[1:2])[0], rtol=1e-12)

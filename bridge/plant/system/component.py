@@ -74,15 +74,13 @@ def component_plant_spec(
 class FmuComponent(LocalFmuPlant):
     """One component's FMU in this process (:func:`component_plant_spec`); a sample is one macro step."""
 
-    def native_done(self, k: int, terminated: bool) -> None:
-        """Account a sample the native master stepped (:mod:`.native_master`): step ``k`` reached."""
-        self.model._native_sampled(k, terminated)
-        self.terminated = terminated
+    def native_done(self) -> None:
+        """Account a sample the native master stepped (:mod:`.native_master`)."""
+        self.terminated = self.model.terminated
         self.sample += 1
 
-    def native_failed(self, status: int, k: int) -> None:
+    def native_failed(self, status: int) -> None:
         """Raise the error of a sample the native master stepped and the FMU failed (as :meth:`step`)."""
-        self.model._native_sampled(k, False)
         raise self._failed(sample_failure(self.model, status, self.input_names, self.output_names))
 
     can_settle = True

@@ -14,22 +14,21 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from bridge.errors import BridgeError, FmuError
+from bridge.fmu import system_step
 from bridge.fmu.clock_rules import clock_driver_needed
-from bridge.fmu.master_io import servable
-from bridge.fmu.signals import SignalGroup
-from bridge.fmu.system_step import NativeMaster, can_step_natively, library
+from bridge.fmu.system_step import Coupling, Happened, Unit
 from bridge.fmu.vocab import ModelInfo
-from bridge.plant.base import Plant
+from bridge.plant.base import FloatArray, Plant
 from bridge.plant.system.component import FmuComponent
 from bridge.plant.system.structure import Connection, SystemDescription
 from bridge.plant.system.transform import Affine, Convert
 
 if TYPE_CHECKING:
-    from bridge.plant.system.master import Master
+    from bridge.plant.system.master import Link, Master
 
 __all__ = ["NativeMaster", "native_master", "python_master_reason"]
 
@@ -87,38 +86,163 @@ def native_master(master: Master) -> NativeMaster | None:
     links = ((f"{k.source} -> {k.target}", k.convert) for k in master.links)
     if _setting_reason() or _component_reason(master.system, master.plants, infos) or _table_reason(links):
         return None
-    groups: dict[str, tuple[SignalGroup | None, SignalGroup | None]] = {}
-    for name, plant in master.plants.items():
+    units = []
+    for name in master.order:
+        plant = master.plants[name]
         if not isinstance(plant, FmuComponent):  # _component_reason said so already
             return None
-        why = _groups(name, plant, master.iterations > 1, groups)
-        if why:
+        unit, why = _unit(name, plant, master.iterations > 1)
+        if unit is None:
             _log.warning("the Python master steps this system: component %r %s", name, why)
             return None
-    function = library()
+        units.append(unit)
+    function = system_step.library()
     if function is None:
         return None
-    return NativeMaster(master, function, groups, master.external, master.observed)
+    position = {n: p for p, n in enumerate(master.order)}
+    call = system_step.NativeMaster(
+        function,
+        units,
+        [_coupling(link, position) for link in master.links],
+        gauss_seidel=master.system.algorithm == "gauss_seidel",
+        settle=[position[n] for n in master.settle_order],
+        max_iterations=master.iterations,
+        tolerance=master.system.tolerance,
+        external=[(position[n], j) for n, j in master.external],
+        observed=[(position[n], i) for n, i in master.observed],
+    )
+    return NativeMaster(master, call)
 
 
-def _groups(
-    name: str,
-    plant: FmuComponent,
-    iterating: bool,
-    groups: dict[str, tuple[SignalGroup | None, SignalGroup | None]],
-) -> str | None:
-    """Binds ``plant``'s signal groups into ``groups``; else why the native call cannot serve it."""
-    if not can_step_natively(plant.model):
-        return "cannot be stepped natively"
-    handles = plant.model._native_handles()
-    if iterating and not all(handles[k] for k in ("get_state", "set_state", "free_state")):
-        return "has no FMU state functions for fixed-point iteration"
+def _unit(name: str, plant: FmuComponent, iterating: bool) -> tuple[Unit | None, str]:
+    """``plant`` as the native call steps it; else None and why the call cannot serve it."""
     try:
         inputs = plant.model.signals(plant.input_names, writable=True) if plant.input_names else None
         outputs = plant.model.signals(plant.output_names) if plant.output_names else None
     except (FmuError, BridgeError) as exc:
-        return f"has signals the native call cannot take ({exc})"
-    if not servable(inputs, outputs):
-        return "has inputs that cannot be set during a step"
-    groups[name] = (inputs, outputs)
-    return None
+        return None, f"has signals the native call cannot take ({exc})"
+    unit = Unit(name, plant.model, inputs, outputs, plant.timing.steps_per_sample)
+    if not system_step.usable(unit, iterating):
+        return None, (
+            "cannot be stepped natively (its native handles, its FMU state functions for "
+            "fixed-point iteration, or inputs that cannot be set during a step)"
+        )
+    return unit, ""
+
+
+def _coupling(link: Link, position: Mapping[str, int]) -> Coupling:
+    """A master's link as the native call reads it; its conversion is None or an :class:`Affine`."""
+    ends = (position[link.source], link.i, position[link.target], link.j)
+    if link.convert is None:
+        return Coupling(*ends)
+    convert: Any = link.convert
+    return Coupling(*ends, convert.factor, convert.offset, affine=True)
+
+
+class NativeMaster:
+    """The master's macro steps as native calls (``bridge.fmu.system_step``), with the plant's
+    bookkeeping: each component's sample count and terminated flag, and a failure raised as the
+    Python master raises it (each component's own call says why). Call :meth:`refresh` after
+    every initialisation."""
+
+    def __init__(self, master: Master, call: system_step.NativeMaster) -> None:
+        self.master, self._call = master, call
+        self._names = list(master.order)
+        self._plants: list[FmuComponent] = [master.plants[n] for n in self._names]  # type: ignore[misc]
+        self.done = 0  # macro steps the last call completed
+        self.stopped = False  # whether a component asked to stop in the last call
+
+    def refresh(self) -> None:
+        """Hand the master's arrays to the native call again (instances and arrays may be new)."""
+        master, self.stopped = self.master, False
+        inputs, outputs = self._call.bind(
+            [master.inputs[n] for n in self._names], [master.outputs[n] for n in self._names]
+        )
+        for name, u, y in zip(self._names, inputs, outputs, strict=True):
+            master.inputs[name], master.outputs[name] = u, y
+
+    def sample(self, inputs: Sequence[float] | None, count: int) -> FloatArray:
+        """Set the task's ``inputs`` (None: keep the last), step up to ``count`` macro steps and
+        return the observation (a new array): :meth:`run` with the task's ends, in one call."""
+        call = self._call
+        observation = call.sample(inputs, count)
+        if observation is None:  # a component cannot step: its own refusal, as the Python path raises it
+            if inputs is not None:
+                call.stage(inputs)
+            self._refused(inputs is not None)
+            raise BridgeError(
+                f"the system: a component cannot step, and did not say why{self.master.system.where}"
+            )
+        happened = call.happened
+        if call.iterating:
+            self._iterations()
+        if happened.done == count and not happened.failed and not happened.stopped:
+            self.done = count
+            for plant in self._plants:
+                plant.sample += count
+            return observation
+        self.done, self.stopped = happened.done, happened.stopped
+        self._finish(happened)
+        return observation
+
+    def run(self, count: int) -> None:
+        """Up to ``count`` macro steps in one call (fewer when a component asks to stop: then it is
+        terminated); :attr:`done` says how many completed, also when one fails, which raises the
+        component's own error (as the Python master)."""
+        if self._call.refused() is not None:
+            self._refused(False)
+        happened = self._call.run(count)
+        if self._call.iterating:
+            self._iterations()
+        self.done = happened.done
+        if happened.failed or happened.stopped:
+            self.stopped = happened.stopped
+            self._finish(happened)
+            return
+        for plant in self._plants:
+            plant.sample += happened.done
+
+    def _iterations(self) -> None:
+        """The master's iteration counts, as its Python loop keeps them."""
+        call = self._call
+        self.master.last_iterations = call.last_iterations
+        self.master.unconverged_steps += call.unconverged
+        call.unconverged = 0
+
+    def _refused(self, with_inputs: bool) -> None:
+        """The Python path raises the model's own refusal (terminated, failed, closed)."""
+        if with_inputs:  # the task's inputs are where the Python path would have put them
+            for position, j, value in self._call.staged():
+                self.master.inputs[self._names[position]][j] = value
+        for name, plant in zip(self._names, self._plants, strict=True):
+            if not plant.model.steppable:
+                self.done = 0
+                plant.step(self.master.inputs[name].tolist())
+
+    def _finish(self, happened: Happened) -> None:
+        failed, done = happened.failed, happened.done
+        for position, plant in enumerate(self._plants):
+            plant.sample += done - (1 if not failed else 0)
+            if position < happened.stepped:
+                plant.native_done()
+        if failed:
+            self._fail(failed - 1, happened)
+
+    def _fail(self, position: int, happened: Happened) -> None:
+        plant, name = self._plants[position], self._names[position]
+        inputs = self.master.inputs[name].tolist()
+        if happened.during == "state":  # the FMU refused to save or restore its state: its own call says why
+            state = plant.save()
+            plant.restore(state)
+            plant.discard(state)
+            raise plant._failed(
+                FmuError(
+                    f"{plant.name}: the FMU state could not be saved or restored "
+                    f"(status {happened.status}) during fixed-point iteration"
+                )
+            )
+        if happened.during == "settling":  # set or get while settling: the Python path's own call says why
+            plant.settle(inputs)
+        if happened.nonfinite:  # the Python path's own check names the input
+            plant.step(inputs)
+        plant.native_failed(happened.status)
