@@ -26,8 +26,16 @@ def to_docs() -> bool:
 
 
 def counts_dir() -> Path:
-    """Where the fuzz and fault tests write their counts (docs/reliability/ only on request)."""
+    """Where the fuzz and fault tests write their counts (docs/reliability/ only on request).
+
+    Each test module keeps its tally in its process, so the tracked counts are rewritten only by a
+    run in one process: under pytest-xdist two workers would each write a part of one module's."""
     if to_docs():
+        if os.environ.get("PYTEST_XDIST_WORKER"):
+            raise RuntimeError(
+                f"{WRITE_DOCS}=1 under pytest-xdist: each worker would write a part of the counts; "
+                "run it in one process (add -p no:xdist or -n 0)"
+            )
         path = DOCS / "reliability"
     else:
         if not os.environ.get(RUN_DIR):
