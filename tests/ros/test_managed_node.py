@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 
 from bridge.errors import TransportError
-from bridge.experiment.config import load_experiment
 from bridge.experiment.examples import example_experiment
 from bridge.net import protocol as proto
 from bridge.net.discovery import query_info
@@ -103,9 +102,9 @@ def test_a_managed_node_that_is_not_active_refuses_native_clients_too(
     where = {"session": loopback.session, "prefix": loopback.prefix}
     with command(*args, ready="Ctrl-C stops it") as node:
         with pytest.raises(TransportError, match="plant"):  # unconfigured: no FMU, no native keys
-            RemotePlant(load_experiment(CARTPOLE), "plant", timeout_s=1.0, **where)
+            RemotePlant("plant", timeout_s=1.0, **where)
         assert probe.ask("lifecycle_change", node=NODE, transition="configure") == {"success": True}
-        plant = RemotePlant(load_experiment(CARTPOLE), "plant", timeout_s=60.0, **where)
+        plant = RemotePlant("plant", timeout_s=60.0, **where)
         try:
             plant.bind(["force"], ["x", "x_dot", "theta", "theta_dot"])
             with pytest.raises(
