@@ -45,6 +45,38 @@ def counts_dir() -> Path:
     return path
 
 
+def counts_file(name: str) -> Path:
+    """The file a test module writes its counts ``name`` to: under pytest-xdist one per worker
+    (each worker holds the tally of the tests it ran), read back together by :func:`read_counts`."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    stem = name.removesuffix(".json")
+    return counts_dir() / (f"{stem}.{worker}.json" if worker else name)
+
+
+def _merged(a: Any, b: Any) -> Any:
+    """Two tallies as one: numbers added (a ``seed`` kept), mappings merged key by key, anything
+    else kept."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        both = {k: a[k] if k == "seed" else _merged(a[k], b[k]) for k in a.keys() & b.keys()}
+        return {**a, **b, **both}
+    if isinstance(a, int | float) and isinstance(b, int | float) and not isinstance(a, bool):
+        return a + b
+    return a
+
+
+def read_counts(name: str) -> dict[str, Any] | None:
+    """The counts ``name`` written in this run, the workers' parts added (None: none written)."""
+    stem = name.removesuffix(".json")
+    parts = [counts_dir() / name, *sorted(counts_dir().glob(f"{stem}.gw*.json"))]
+    found = [json.loads(p.read_text()) for p in parts if p.is_file()]
+    if not found:
+        return None
+    total = found[0]
+    for part in found[1:]:
+        total = _merged(total, part)
+    return dict(total)
+
+
 HEADER = """# Reliability: hostile input and faults, counted
 
 Written by the test suite from `docs/reliability/*.json` (each fuzz or fault test writes its own
@@ -105,9 +137,9 @@ ROWS = {"experiment_fuzz.json": _experiments, "recording_fuzz.json": _recordings
 def render() -> str:
     rows = []
     for name, row in ROWS.items():
-        path = counts_dir() / name
-        if path.is_file():
-            rows.append(row(json.loads(path.read_text())))
+        data = read_counts(name)
+        if data is not None:
+            rows.append(row(data))
     faults = (DOCS / "reliability" / "faults.md").read_text()  # the fault-injection table, by hand
     return HEADER + "\n".join(rows) + "\n\n" + faults
 

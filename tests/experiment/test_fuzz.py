@@ -30,11 +30,11 @@ from bridge.experiment.examples import example_experiment, example_names
 from bridge.experiment.validate import check_experiment
 from bridge.fmu.vocab import ModelInfo
 from tests.conftest import check_with_model
-from tests.reliability_table import counts_dir
+from tests.reliability_table import counts_file
 
 MUTANTS_PER_EXAMPLE = 1000
 CLI_SAMPLE = 5  # accepted and as many rejected mutants per example also go through `fmu-bridge check`
-REPORT = counts_dir() / "experiment_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
+REPORT = counts_file("experiment_fuzz.json")  # docs/reliability/ only on request (reliability_table.py)
 NUMBERS = [math.inf, -math.inf, math.nan, 1e308, -1e308, 1e12, -1.0, 0.0, -0.0, 2**63, -(2**80)]
 OTHERS: list[Any] = ["text", "", None, True, [], {}, [1, "a"], {"k": 1}, "1e3", "example:nothing"]
 

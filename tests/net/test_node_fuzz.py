@@ -32,12 +32,12 @@ from bridge.net import protocol as proto
 from bridge.net.handshake import KeyPair
 from bridge.net.remote import describe_nodes
 from tests.conftest import Loopback, _wait_for_node, wait_until
-from tests.reliability_table import counts_dir
+from tests.reliability_table import counts_file
 
 pytestmark = pytest.mark.integration
 SEED = 20260412
 CARTPOLE = example_experiment("cartpole_continuous")
-COUNTS = counts_dir() / "node_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
+COUNTS = counts_file("node_fuzz.json")  # docs/reliability/ only on request (reliability_table.py)
 JAZZY = get_typestore(Stores.ROS2_JAZZY)
 JOINT_STATE = "sensor_msgs::msg::dds_::JointState_/RIHS01_a13ee3a330e346c9d87b5aa18d24e11690752bd33a0350f11c5882bc9179260e"  # noqa: E501
 TRIGGER = (

@@ -39,10 +39,10 @@ from bridge.recording.export import describe, export_csv
 from bridge.recording.reader import read_recording, recover_file
 from bridge.recording.writer import McapWriter
 from tests.conftest import Loopback, node_process
-from tests.reliability_table import counts_dir
+from tests.reliability_table import counts_file
 
 ROOT = Path(__file__).resolve().parents[2]
-COUNTS = counts_dir() / "recording_fuzz.json"  # docs/reliability/ only on request (reliability_table.py)
+COUNTS = counts_file("recording_fuzz.json")  # docs/reliability/ only on request (reliability_table.py)
 SEED = 20260412
 CORRUPTIONS = 1000
 RSS_GROWTH_MB = 300  # what the whole fuzz run may add to the process's peak memory
@@ -185,15 +185,23 @@ def _write_counts() -> None:
 
 
 # -- cuts --------------------------------------------------------------------------------------------
+SHARDS = 4  # each soak in four parts, so that workers side by side share it (the same offsets
+# and corruptions in all: a part takes every fourth)
+
+
 @pytest.mark.slow  # a read at every cut offset: a soak
-def test_a_recording_cut_at_every_byte_reads_partially_or_fails_clearly(tiny: Path, work: Path) -> None:
+@pytest.mark.parametrize("shard", range(SHARDS))
+def test_a_recording_cut_at_every_byte_reads_partially_or_fails_clearly(
+    tiny: Path, work: Path, shard: int
+) -> None:
     data = tiny.read_bytes()
     tmp_path = work
     rss = _peak_rss_mb()
     failures: list[str] = []
     seen: Counter[str] = Counter()
     previous = 0
-    for n in range(len(data)):
+    offsets = range(shard, len(data), SHARDS)
+    for n in offsets:
         (tmp_path / "cut.mcap.part").write_bytes(data[:n])
         outcome, messages = _checked(tmp_path / "cut.mcap.part", tmp_path, failures, f"cut at {n}")
         seen[outcome] += 1
@@ -204,8 +212,8 @@ def test_a_recording_cut_at_every_byte_reads_partially_or_fails_clearly(tiny: Pa
             _cli(tmp_path / "cut.mcap.part", tmp_path, failures, f"cut at {n}")
         assert messages >= previous, f"a longer prefix ({n} bytes) read fewer messages"
         previous = messages
-    TALLY["files_cut"] += 1
-    TALLY["cut_offsets"] += len(data)
+    TALLY["files_cut"] += shard == 0
+    TALLY["cut_offsets"] += len(offsets)
     assert not failures, failures[:3]
     assert seen["full"] == 0 and seen["partial"] > 0 and seen["clean_error"] > 0, seen
     assert _peak_rss_mb() - rss < RSS_GROWTH_MB
@@ -268,22 +276,25 @@ def _corrupt(rng: random.Random, data: bytes, layout: list[tuple[int, int, int]]
 
 
 @pytest.mark.slow  # a fuzz of many corruptions: a soak
-def test_random_corruptions_read_partially_or_fail_clearly(small: Path, work: Path) -> None:
+@pytest.mark.parametrize("shard", range(SHARDS))
+def test_random_corruptions_read_partially_or_fail_clearly(small: Path, work: Path, shard: int) -> None:
     data = small.read_bytes()
     tmp_path = work
     layout = _records_of(data)
-    rng = random.Random(SEED)
+    rng = random.Random(SEED)  # every part draws all corruptions, in order, and reads its own
     rss = _peak_rss_mb()
     failures: list[str] = []
     for i in range(CORRUPTIONS):
         kind, corrupted = _corrupt(rng, data, layout)
+        if i % SHARDS != shard:
+            continue
         TALLY[f"kind_{kind}"] += 1
         path = tmp_path / f"corrupt{'.mcap.part' if i % 2 else '.mcap'}"
         path.write_bytes(corrupted)
         _checked(path, tmp_path, failures, f"corruption {i} ({kind})")
         if i % 10 == 0:
             _cli(path, tmp_path, failures, f"corruption {i} ({kind})")
-    TALLY["corruptions"] += CORRUPTIONS
+    TALLY["corruptions"] += len(range(shard, CORRUPTIONS, SHARDS))
     assert not failures, failures[:3]
     assert _peak_rss_mb() - rss < RSS_GROWTH_MB
     _write_counts()
