@@ -69,22 +69,22 @@ def bind_signals(
     accepted; ``n_in`` and ``n_out`` values in the master's arrays); returns what must stay alive
     while ``c`` is used."""
     keep: list[Any] = []
-    c.n_in, c.nv_in, c.in_vr, c.n_in_blocks, c.in_blocks = 0, 0, None, 0, None
-    if inputs is not None:
-        direct = inputs.native_buffer(writing=True)
-        if direct is not None:
-            c.in_vr, c.n_in, c.nv_in, _ = direct
-        else:
-            blocks = _blocks(inputs.typed_blocks(writing=True) or [], keep)
-            keep.append(blocks)
-            c.nv_in, c.n_in_blocks, c.in_blocks = n_in, len(blocks), ctypes.addressof(blocks)
-    c.n_out, c.nv_out, c.out_vr, c.n_out_blocks, c.out_blocks = 0, 0, None, 0, None
-    if outputs is not None:
-        direct = outputs.native_buffer(writing=False)
-        if direct is not None:
-            c.out_vr, c.n_out, c.nv_out, _ = direct
-        else:
-            blocks = _blocks(outputs.typed_blocks(writing=False) or [], keep)
-            keep.append(blocks)
-            c.nv_out, c.n_out_blocks, c.out_blocks = n_out, len(blocks), ctypes.addressof(blocks)
+    c.in_vr, c.n_in, c.nv_in, c.n_in_blocks, c.in_blocks = _side(inputs, True, n_in, keep)
+    c.out_vr, c.n_out, c.nv_out, c.n_out_blocks, c.out_blocks = _side(outputs, False, n_out, keep)
     return keep
+
+
+def _side(
+    group: SignalGroup | None, writing: bool, n_values: int, keep: list[Any]
+) -> tuple[Any, int, int, int, int | None]:
+    """One side's fields (value references, their count, values in the master's array, typed
+    blocks and their address): a direct Float64 buffer, typed blocks, or nothing."""
+    if group is None:
+        return None, 0, 0, 0, None
+    direct = group.native_buffer(writing=writing)
+    if direct is not None:
+        vrs, n, nv, _ = direct
+        return vrs, n, nv, 0, None
+    blocks = _blocks(group.typed_blocks(writing=writing) or [], keep)
+    keep.append(blocks)
+    return None, 0, n_values, len(blocks), ctypes.addressof(blocks)
