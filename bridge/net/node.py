@@ -205,7 +205,7 @@ class FmuNode:
         if self.mode != "realtime":
             return
         if not self.counters["resets"]:  # the first start; a managed node resumes where it stopped
-            self.reset(dict(self.served.nominal), None, 0)
+            self.reset({}, None, 0)
         self._realtime = rt = RealtimeStepping(
             lambda: self._advance(self._latest_inputs, (0, b""), hold=True), self._publish,
             clock=self._link.clock, ended=lambda: self.lockstep.ended, lock=self._lock,
@@ -451,7 +451,7 @@ class FmuNode:
 
     def clock_start(self) -> int:
         """A new episode with the nominal values for an external clock: its start time in ns."""
-        self.reset(dict(self.served.nominal), None, self.lockstep.episode + 1)
+        self.reset({}, None, self.lockstep.episode + 1)
         return round(self.plant.time_s * 1e9)
 
     def describe(self) -> dict[str, Any]:

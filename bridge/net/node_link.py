@@ -204,7 +204,7 @@ def ros_reset(node: FmuNode, *, keep_inputs: bool = False) -> tuple[bool, str]:
         return False, f"reset refused: {refusal}"
     inputs = None if keep_inputs else list(node.start_inputs)
     try:
-        node.reset({**node.served.nominal, **node.ros_parameters}, inputs, node.lockstep.episode + 1)
+        node.reset(dict(node.ros_parameters), inputs, node.lockstep.episode + 1)
     except BridgeError as exc:
         return False, redact(f"reset failed: {exc}")
     return True, f"reset to t0 (episode {node.lockstep.episode})"
