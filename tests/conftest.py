@@ -24,6 +24,32 @@ for _variable in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
     os.environ.setdefault(_variable, "1")
 
 
+def _build_each_cli_once() -> None:
+    """typer's ``CliRunner.invoke`` turns the Typer app into its click command anew on every call
+    (every option's annotations evaluated again): 0.1-0.2 s for this CLI, more than most commands
+    under test take, and the recording soaks invoke it thousands of times. Built once per app
+    (and per set of registered commands) and process here: the command a console script builds
+    once per run. Without ``typer.testing._get_command`` (another typer) the runner is left as is."""
+    import typer.main
+    import typer.testing
+
+    build = typer.main.get_command
+    built: dict[tuple[int, int, int], tuple[object, Any]] = {}
+
+    def command(app: typer.Typer) -> Any:
+        key = (id(app), len(app.registered_commands), len(app.registered_groups))
+        held = built.get(key)
+        if held is None or held[0] is not app:
+            built[key] = held = (app, build(app))
+        return held[1]
+
+    if hasattr(typer.testing, "_get_command"):
+        typer.testing._get_command = command
+
+
+_build_each_cli_once()
+
+
 @pytest.fixture(scope="session", autouse=True)
 def _one_torch_thread() -> None:
     try:
