@@ -91,6 +91,15 @@ class RawFmpyLoop:
         self.fmu.reset()
         self.initialize()
 
+    def restart(self, state: Any, inputs: list[float]) -> Any:
+        """Back to a saved state as an RL loop's reset must be: the state restored, the initial
+        inputs written, the first outputs read into the observation array a policy takes."""
+        fmu = self.fmu
+        fmu.setFMUstate(state)
+        self.t = 0.0
+        fmu.setReal(self._in, inputs)
+        return np.array(fmu.getReal(self._out), dtype=np.float32)
+
     def run(self, steps: int, action: Callable[[list[float]], list[float]] | None = None) -> None:
         fmu, h, vin, vout = self.fmu, self.h, self._in, self._out
         t = self.t

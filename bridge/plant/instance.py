@@ -90,18 +90,15 @@ class FmuInstancePlant(Plant):
         m = self.model  # Model.time_s inlined: read once per step on the hot path
         return m.start_time_s + m.step_index * m.step_size_s
 
-    def _reset_values(self, values: Mapping[str, Any]) -> Mapping[str, Any]:
-        """A system's component sets its own parameters and start values under those given (the
-        system's task does not know them); an experiment's task gives its model's itself."""
-        if self.spec.component is None:
-            return values
-        return {**self.spec.model.initial_values(), **values}
-
     def reset(self, values: Mapping[str, Any], inputs: Sequence[float] | None) -> FloatArray:
         self.episode += 1
         self.sample, self.terminated = 0, False
+        if self.spec.component is not None:
+            # a system's component sets its own parameters and start values under those given (the
+            # system's task does not know them); an experiment's task gives its model's itself
+            values = {**self.spec.model.initial_values(), **values}
         try:
-            self.model.reset(self._reset_values(values))
+            self.model.reset(values)
             if inputs is not None:
                 self._write(inputs)
             outputs: FloatArray = self._read()
@@ -111,7 +108,11 @@ class FmuInstancePlant(Plant):
             if isinstance(exc, VariableError) or not self.model.unusable:
                 raise  # a name or value the model refuses before the FMU is asked: already clear
             raise self._init_refused(exc, values) from exc
-        self._bind_native()
+        native = self._native  # a reset touches little: after an episode little is in the caches
+        if native is not None:
+            native.refresh()
+        else:
+            self._bind_native()
         return outputs
 
     def _init_refused(self, exc: FmuError, values: Mapping[str, Any]) -> StepError:

@@ -155,6 +155,7 @@ class Task:
         self._build_termination()
         self._episode_hook = load_callable(exp.hooks.episode, "hooks.episode") if exp.hooks.episode else None
         self.episode: EpisodeSpec | None = None
+        self._repeat: list[float] | None = None  # the inputs a repeated episode starts from
         self._action_starts = [self._start(name) for name in self.action_inputs]  # the FMU's starts
         self._refs = np.zeros((1, len(self.reference_names)))
         self._no_columns = np.zeros((0, 0))
@@ -309,6 +310,13 @@ class Task:
     # -- episode life cycle --------------------------------------------------------------------------
     def new_episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
         """Choose and draw the next episode (scenario, parameters, profiles) from ``rng``."""
+        repeat = self._repeat
+        if repeat is not None and scenario is None:
+            # Nothing to choose or draw (see _repeatable): the last episode again, its tables kept.
+            # A reset after an episode finds little in the caches, so touching less is what counts.
+            self._inputs[:] = self._previous_inputs[:] = repeat
+            return self.episode  # type: ignore[return-value]
+        self._repeat = None
         spec = self.sampler.episode(rng, scenario)
         if self._episode_hook is not None:
             spec = self._episode_hook(spec, rng) or spec
@@ -339,7 +347,16 @@ class Task:
         # Noise for the whole episode in one vectorised draw: per sample it is a lookup.
         self._action_noise_table = noise_table(self._action_noise, rng, n + 1) if self._action_noise else []
         self.observer.new_episode(rng, n + 1)
+        if scenario is None and self._repeatable():
+            self._repeat = list(self._inputs)
         return spec
+
+    def _repeatable(self) -> bool:
+        """Whether every next episode equals this one without a draw from the generator: one
+        scenario taken without a choice, nothing drawn, no profile, no noise, no episode hook."""
+        if self._episode_hook is not None or self._action_noise or self.observer.has_noise:
+            return False
+        return self.sampler.repeats()
 
     def _start(self, name: str) -> float:
         var = self._variables[name]

@@ -193,6 +193,15 @@ class ScenarioSampler:
             return names[int(rng.choice(len(names), p=self._weights / self._weights.sum()))]
         return names[int(rng.integers(len(names)))]
 
+    def repeats(self) -> bool:
+        """Whether every training episode is the same one, drawn without the generator: one
+        scenario chosen without a draw, no value drawn, no reference or input profile."""
+        names = self.training
+        if not (self._mode == "fixed" or len(names) == 1):
+            return False
+        plan = self._plans.get(names[0]) or self._plan(names[0])
+        return not plan.draws and not plan.profiles
+
     def episode(self, rng: np.random.Generator, scenario: str | None = None) -> EpisodeSpec:
         """Everything an episode needs; ``scenario`` forces one by name."""
         name = scenario or self.choose(rng)

@@ -104,3 +104,65 @@ def test_episode_merges_values_and_draws() -> None:
     assert spec.scenario == "b" and spec.values["J"] == 0.02
     assert 0.9 <= spec.values["R"] <= 1.1 and spec.drawn == {"R": spec.values["R"]}
     assert spec.n_samples == 100
+
+
+def _episode_rows(env: object, **reset: object) -> tuple[str, np.ndarray]:
+    """One whole episode of a fixed action: its scenario and every observation."""
+    obs, info = env.reset(**reset)  # type: ignore[attr-defined]
+    rows, done = [obs], False
+    while not done:
+        obs, _, terminated, truncated, _ = env.step(np.array([0.4], dtype=np.float32))  # type: ignore[attr-defined]
+        rows.append(obs)
+        done = terminated or truncated
+    return info["scenario"], np.asarray(rows)
+
+
+def test_a_repeated_episode_is_the_drawn_one_and_a_forced_scenario_in_between_ends_the_repeat(
+    tmp_path: Path,
+) -> None:
+    """A task whose episodes are all one (nothing drawn, no profile, no noise) reuses the last
+    episode at reset; a scenario forced by a reset in between (evaluation) ends that, and the
+    next plain reset is the training episode again, exactly as a fresh env's."""
+    from bridge.env.fmu_env import FmuEnv
+
+    data = {
+        "model": {"fmu": "example:dcmotor", "episode_duration": 0.5},
+        "actions": {"inputs": ["voltage"]},
+        "observations": {"outputs": ["omega"], "scale": "none"},
+        "reward": {"terms": [{"alive": 1.0}]},
+        "scenarios": {"light": {}, "heavy": {"episode_duration": 1.0, "parameters": {"J": 0.05}}},
+        "schedule": {"training": ["light"], "evaluation": ["heavy"]},
+    }
+    exp = parse_experiment(data, source=tmp_path / "e.yaml")
+    with FmuEnv(exp) as env, FmuEnv(exp) as fresh:
+        assert env.task.sampler.repeats()
+        first = _episode_rows(env, seed=1)
+        again = _episode_rows(env)
+        heavy = _episode_rows(env, options={"scenario": "heavy"})
+        after = _episode_rows(env)
+        assert [first[0], again[0], heavy[0], after[0]] == ["light", "light", "heavy", "light"]
+        assert len(heavy[1]) == 2 * len(first[1]) - 1 and not np.array_equal(heavy[1][5], first[1][5])
+        for rows in (again, after):
+            np.testing.assert_array_equal(rows[1], first[1])
+        np.testing.assert_array_equal(_episode_rows(fresh, options={"scenario": "heavy"})[1], heavy[1])
+
+
+@pytest.mark.parametrize(
+    "extra",
+    [
+        {"randomization": {"parameters": {"R": {"uniform": [0.9, 1.1]}}}},
+        {"scenarios": {"a": {}, "b": {}}},
+        {"scenarios": {"a": {"references": {"omega_ref": 1.0}}}},
+    ],
+    ids=["a-drawn-value", "two-scenarios", "a-reference-profile"],
+)
+def test_episodes_that_draw_or_choose_do_not_repeat(extra: dict[str, object]) -> None:
+    data = {
+        "model": {"fmu": "example:dcmotor", "episode_duration": 1.0},
+        "actions": {"inputs": ["voltage"]},
+        "observations": {"outputs": ["omega"]},
+        "reward": {"terms": [{"alive": 1.0}]},
+        **extra,
+    }
+    exp = parse_experiment(data)
+    assert not ScenarioSampler(exp, lambda d=None: np.linspace(0.0, 1.0, 11)).repeats()  # type: ignore[arg-type]
