@@ -396,10 +396,38 @@ def balancer(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from agents.train import train
     from bridge.experiment.examples import example_experiment
 
+    def trained(run: Path) -> Path:
+        overrides = {"timesteps": 60_000, "eval_every": 1_000_000}
+        train(example_experiment("cartpole_balance"), overrides=overrides, run_dir=run, progress=False)
+        return run
+
     run = tmp_path_factory.mktemp("deploy") / "ppo"
-    overrides = {"timesteps": 60_000, "eval_every": 1_000_000}
-    train(example_experiment("cartpole_balance"), overrides=overrides, run_dir=run, progress=False)
-    return run
+    return shared_by_workers("balancer", tmp_path_factory, trained, run)
+
+
+def shared_by_workers(
+    name: str, factory: pytest.TempPathFactory, make: Callable[[Path], Path], into: Path
+) -> Path:
+    """``make(folder)`` once per test run, whatever the number of pytest-xdist workers: the first
+    worker that needs it makes it (the others wait on a lock, which costs no CPU the maker could
+    use) and every worker gets its own copy at ``into`` (tests may write into theirs). Without
+    xdist, ``make(into)``."""
+    import fcntl
+    import shutil
+
+    if os.environ.get("PYTEST_XDIST_TESTRUNUID") is None:
+        return make(into)
+    shared = factory.getbasetemp().parent / f"shared-{name}"  # the run's folder above every worker's
+    shared.mkdir(exist_ok=True)
+    with (shared / "lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        made = shared / "made"
+        if not (shared / "done").exists():
+            shutil.rmtree(made, ignore_errors=True)  # a maker that failed left a part
+            make(made)
+            (shared / "done").touch()
+    shutil.copytree(made, into)
+    return into
 
 
 if TYPE_CHECKING:
@@ -428,6 +456,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     from tiers import mark_tiers
 
     mark_tiers(items)
+    # The slow tier's tests first (a stable sort: each tier in its own order): where one run takes
+    # several tiers on several workers (CI), the longest tests start at once instead of last.
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 
 @pytest.hookimpl(wrapper=True)

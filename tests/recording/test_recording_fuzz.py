@@ -403,7 +403,11 @@ def test_counts_are_written() -> None:
         _write_counts()
         counts = json.loads(COUNTS.read_text())
         assert counts["tracebacks"] == 0
-        assert counts["corruptions"] == CORRUPTIONS
+        # every corruption this process's parts drew was read and counted by its kind: all of
+        # them where one process ran every part (under pytest-xdist the parts are spread)
+        assert sum(counts["corruption_kinds"].values()) == counts["corruptions"]
+        if "PYTEST_XDIST_WORKER" not in os.environ:
+            assert counts["corruptions"] == CORRUPTIONS
         assert zlib.crc32(COUNTS.read_bytes())  # written and not empty
 
 
