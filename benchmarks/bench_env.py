@@ -133,14 +133,18 @@ def main() -> None:
         isolated.close()
 
     for policy in ("restore", "auto"):
-        after, back_to_back, raw_us, whole_us = reset_costs(args.reset_episodes, args.reset_samples, policy)
+        after, back_to_back, raw_us, whole_us, direct_us = reset_costs(
+            args.reset_episodes, args.reset_samples, policy
+        )
         print(
             f"env.reset() with reset policy {policy} (cart-pole FMI 2.0 CS, no randomisation), "
             f"{args.reset_episodes} resets of each kind: after a finished {args.reset_samples}-sample "
             f"episode {after:.1f} us (median; target <= 30 us), back to back {back_to_back:.1f} us; "
             f"after an episode, a raw FMPy loop's own state restore {raw_us:.1f} us: "
             f"ratio {after / raw_us:.2f} (target <= 1.5); its whole restart (restore, initial input, "
-            f"first outputs as an observation) {whole_us:.1f} us: ratio {after / whole_us:.2f}"
+            f"first outputs as an observation) {whole_us:.1f} us: ratio {after / whole_us:.2f}; "
+            f"the same with the FMU's functions called directly {direct_us:.1f} us: "
+            f"ratio {after / direct_us:.2f}"
         )
     samples = []
     for _ in range(5):
@@ -161,8 +165,9 @@ def reset_costs(episodes: int, samples: int, policy: str = "restore") -> tuple[f
     of a raw FMPy loop's own state restore (``fmi2SetFMUstate`` of its snapshot after
     initialisation) after an episode of the same length; and of the raw loop's whole restart after
     an episode (:meth:`RawFmpyLoop.restart`: the restore, the initial input written, the first
-    outputs read into an observation array: what ``env.reset()`` must do at the least), interleaved
-    with the env's."""
+    outputs read into an observation array: what ``env.reset()`` must do at the least), with
+    FMPy's API and with the FMU's functions called directly (:meth:`RawFmpyLoop.restart_direct`),
+    interleaved with the env's."""
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "restore.yaml"
         text = RESTORE_EXPERIMENT.replace("EPISODE_S", repr(samples * 0.02))
@@ -171,7 +176,8 @@ def reset_costs(episodes: int, samples: int, policy: str = "restore") -> tuple[f
     raw = RawFmpyLoop(example_fmu("cartpole", "2.0", "cs"), ["force"], OUTPUTS, 0.02)
     snapshot = raw.fmu.getFMUstate()
     action = np.zeros(1, dtype=np.float32)
-    after, back_to_back, raw_after, raw_whole = [], [], [], []
+    after, back_to_back, raw_after, raw_whole, raw_direct = [], [], [], [], []
+    raw.prepare_direct()
     initial = [0.0]  # the force's start value: what env.reset() writes before its first observation
     env.reset(seed=0)
     clock = time.perf_counter
@@ -195,11 +201,15 @@ def reset_costs(episodes: int, samples: int, policy: str = "restore") -> tuple[f
         start = clock()
         raw.restart(snapshot, initial)
         raw_whole.append(clock() - start)
+        raw.run(samples, action=lambda y: [0.0])
+        start = clock()
+        raw.restart_direct(snapshot, initial)
+        raw_direct.append(clock() - start)
     raw.fmu.freeFMUstate(snapshot)
     env.close()
     raw.close()
-    us = [statistics.median(x) * 1e6 for x in (after, back_to_back, raw_after, raw_whole)]
-    return us[0], us[1], us[2], us[3]
+    us = [statistics.median(x) * 1e6 for x in (after, back_to_back, raw_after, raw_whole, raw_direct)]
+    return us[0], us[1], us[2], us[3], us[4]
 
 
 if __name__ == "__main__":
