@@ -1,0 +1,43 @@
+"""The conformance matrix's fixed action sequence, as an agent any path can load by name.
+
+``python:tests.conformance.sequence_policy:SEQUENCE`` (an ``evaluation.baselines`` entry of
+``type: python``) acts the same row ``k`` at sample ``k`` of every episode, whatever it observes,
+so ``evaluate`` in worker processes and a deployed agent drive the model as the matrix's own loop
+does. It keeps what it observed (this process's), for a path that has no other record of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+CALLABLE = "tests.conformance.sequence_policy:SEQUENCE"
+
+
+def action_row(k: int, n: int) -> np.ndarray:
+    """Row ``k`` of the sequence for ``n`` inputs: in [-1, 1], moving every input."""
+    j = np.arange(n, dtype=np.float32)
+    return np.sin(np.float32(0.7) * np.float32(k) + np.float32(1.3) * j).astype(np.float32)
+
+
+class Sequence:
+    """``fn(obs, signals) -> action`` with ``reset(task, seed)``, as ``PythonPolicy`` calls it."""
+
+    def __init__(self) -> None:
+        self.k = 0
+        self.n = 0
+        self.observations: list[np.ndarray] = []
+
+    def reset(self, task: Any, seed: int | None) -> None:
+        self.k, self.n = 0, len(task.action_inputs)
+
+    def __call__(self, obs: Any, signals: Mapping[str, float]) -> np.ndarray:
+        self.observations.append(np.array(obs, dtype=np.float64))
+        row = action_row(self.k, self.n)
+        self.k += 1
+        return row
+
+
+SEQUENCE = Sequence()
