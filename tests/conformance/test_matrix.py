@@ -5,7 +5,10 @@ driven and read by) and :data:`PATHS` (a way of running it). For every cell the 
 episodes of a fixed action sequence and its observations must equal ``FmuEnv``'s in this
 process bit for bit, or the path refuses with a :class:`ConfigError` naming the setting. A
 setting or a path added to a table is tested everywhere at once. In-process paths are the fast
-tier; paths that start processes are ``integration``.
+tier; paths that start processes are ``integration``. Each episode is exactly the action sequence
+long (``episode_duration``), so paths that run whole episodes (``evaluate``, whose agents and a
+deployed agent load the sequence as the experiment's baseline ``sequence``: sequence_policy.py)
+run the same ones, and every path must end them exactly there.
 
 The strict models (bridge/models/strict.py) misbehave as real exporters do: ``strict_reset``
 keeps its terminated flag through fmi reset and refuses state functions once reset;
