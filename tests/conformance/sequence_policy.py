@@ -28,13 +28,14 @@ class Sequence:
     def __init__(self) -> None:
         self.k = 0
         self.n = 0
-        self.observations: list[np.ndarray] = []
+        self.episodes: list[list[np.ndarray]] = []  # what it observed, per episode
 
     def reset(self, task: Any, seed: int | None) -> None:
         self.k, self.n = 0, len(task.action_inputs)
+        self.episodes.append([])
 
     def __call__(self, obs: Any, signals: Mapping[str, float]) -> np.ndarray:
-        self.observations.append(np.array(obs, dtype=np.float64))
+        self.episodes[-1].append(np.array(obs, dtype=np.float64))
         row = action_row(self.k, self.n)
         self.k += 1
         return row

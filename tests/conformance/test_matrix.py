@@ -334,7 +334,7 @@ def deployed_agent(setting: Setting, tmp_path: Path) -> np.ndarray:
         lambda inputs, step: published.append(inputs),
     )
     assert served.output_names == agent.task.output_names  # as AgentNode checks a node's
-    SEQUENCE.observations.clear()
+    SEQUENCE.episodes.clear()
     plant = fmu_plant(spec)
     try:
         plant.bind(served.input_names, served.output_names)
@@ -348,8 +348,42 @@ def deployed_agent(setting: Setting, tmp_path: Path) -> np.ndarray:
     finally:
         agent.close()
         plant.close()
-    assert len(published) >= len(EPISODES) * (STEPS + 1)
-    return np.asarray(SEQUENCE.observations, dtype=np.float64)
+    assert len(published) == len(EPISODES) * (STEPS + 1)
+    return np.concatenate(SEQUENCE.episodes)
+
+
+def deployed_agent_on_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge agent run sequence --runtime baseline --transport ros2`` (:class:`AgentNode`)
+    against ``fmu-bridge node --mode lockstep --ros`` over loopback Zenoh: each episode started by
+    a reset request naming no value (the node's nominal ones), then stepped by the agent's
+    actions on the ROS 2 view alone, which the node ends after ``episode_duration``."""
+    from agents.deploy import DeploySettings
+    from agents.deploy_io import AgentNode
+    from bridge.net import protocol as proto
+    from tests.conftest import node_process, wait_until
+
+    path = tmp_path / "deployed.yaml"
+    path.write_text(yaml.safe_dump(with_sequence(experiment(setting, tmp_path))))
+    SEQUENCE.episodes.clear()
+    settings = DeploySettings(
+        transport="ros2", node="matrix", prefix=net.prefix, timeout_s=60.0, runtime="baseline"
+    )
+    with node_process(path, "matrix", net, "--mode", "lockstep", "--ros"):
+        agent = AgentNode(Path("sequence"), path, settings, session=net.session)
+        try:
+            for n, _ in enumerate(EPISODES, start=1):
+                request = proto.encode_json({"episode": n, "values": {}})
+                for _reply in net.session.get(proto.Keys(net.prefix, "matrix").reset, payload=request):
+                    pass
+
+                def ended(n: int = n) -> bool:  # the node answers no action past the episode's end
+                    return len(SEQUENCE.episodes) == n and len(SEQUENCE.episodes[-1]) == STEPS + 1
+
+                wait_until(ended, 60.0, f"episode {n}'s {STEPS + 1} observations")
+        finally:
+            agent.close()
+    assert [len(e) for e in SEQUENCE.episodes] == [STEPS + 1] * len(EPISODES)
+    return np.concatenate(SEQUENCE.episodes)
 
 
 def recorded_observations(path: Path) -> list[np.ndarray]:
@@ -399,6 +433,7 @@ PROCESS_PATHS: dict[str, Callable[[Setting, Path, Any], np.ndarray]] = {
     "node": node,
     "isolated-node": isolated_node,
     "component-in-node": component_in_node,
+    "deployed-agent-on-node": deployed_agent_on_node,
     "evaluate-workers": evaluate_workers,
 }
 
