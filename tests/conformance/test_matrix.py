@@ -17,6 +17,7 @@ keeps its terminated flag through fmi reset and refuses state functions once res
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -353,34 +354,42 @@ def deployed_agent(setting: Setting, tmp_path: Path) -> np.ndarray:
 
 
 def deployed_agent_on_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
-    """``fmu-bridge agent run sequence --runtime baseline --transport ros2`` (:class:`AgentNode`)
-    against ``fmu-bridge node --mode lockstep --ros`` over loopback Zenoh: each episode started by
-    a reset request naming no value (the node's nominal ones), then stepped by the agent's
-    actions on the ROS 2 view alone, which the node ends after ``episode_duration``."""
+    """``fmu-bridge agent run sequence --runtime baseline`` (:class:`AgentNode`) against
+    ``fmu-bridge node --mode lockstep`` over loopback Zenoh: each episode started by a reset
+    request with the node's nominal values and the inputs' start values (what a ROS ``~/reset``
+    sends), then stepped by the agent's actions alone. A lockstep node steps as long as actions
+    come, so the agent holds its answer to an episode's last observation until the next reset
+    has been answered; that answer, for the old episode, is then refused by the node."""
     from agents.deploy import DeploySettings
     from agents.deploy_io import AgentNode
     from bridge.net import protocol as proto
+    from bridge.net.served import element_start
+    from bridge.plant.factory import model_info_for
+    from bridge.serving.experiment import experiment_served
     from tests.conftest import node_process, wait_until
 
     path = tmp_path / "deployed.yaml"
     path.write_text(yaml.safe_dump(with_sequence(experiment(setting, tmp_path))))
+    served = experiment_served(parse_experiment(yaml.safe_load(path.read_text()), source=path))[1]
+    info = model_info_for(parse_experiment(yaml.safe_load(path.read_text()), source=path))
+    starts = [element_start(info, name) for name in served.input_names]
     SEQUENCE.episodes.clear()
-    settings = DeploySettings(
-        transport="ros2", node="matrix", prefix=net.prefix, timeout_s=60.0, runtime="baseline"
-    )
-    with node_process(path, "matrix", net, "--mode", "lockstep", "--ros"):
+    SEQUENCE.hold_after, SEQUENCE.held, SEQUENCE.release = STEPS + 1, threading.Event(), threading.Event()
+    settings = DeploySettings(node="matrix", prefix=net.prefix, timeout_s=60.0, runtime="baseline")
+    with node_process(path, "matrix", net, "--mode", "lockstep"):
         agent = AgentNode(Path("sequence"), path, settings, session=net.session)
         try:
             for n, _ in enumerate(EPISODES, start=1):
-                request = proto.encode_json({"episode": n, "values": {}})
+                SEQUENCE.held.clear()
+                request = proto.encode_json({"episode": n, "values": {}, "inputs": starts})
                 for _reply in net.session.get(proto.Keys(net.prefix, "matrix").reset, payload=request):
                     pass
-
-                def ended(n: int = n) -> bool:  # the node answers no action past the episode's end
-                    return len(SEQUENCE.episodes) == n and len(SEQUENCE.episodes[-1]) == STEPS + 1
-
-                wait_until(ended, 60.0, f"episode {n}'s {STEPS + 1} observations")
+                if n > 1:
+                    SEQUENCE.release.set()  # the last episode's held answer: now for an old episode
+                wait_until(SEQUENCE.held.is_set, 60.0, f"episode {n}'s {STEPS + 1} observations")
         finally:
+            SEQUENCE.hold_after = None
+            SEQUENCE.release.set()
             agent.close()
     assert [len(e) for e in SEQUENCE.episodes] == [STEPS + 1] * len(EPISODES)
     return np.concatenate(SEQUENCE.episodes)
