@@ -163,28 +163,12 @@ def with_elements(variables: Mapping[str, Variable]) -> dict[str, Variable]:
     for var in variables.values():
         if not var.dimensions:
             continue
-        starts = _element_starts(var)
+        starts = var.element_starts()
         for i, name in enumerate(var.element_names()):
             out.setdefault(
                 name, dataclasses.replace(var, name=name, start=starts[i], dimensions=(), is_array=False)
             )
     return out
-
-
-def _element_starts(var: Variable) -> list[object]:
-    start = var.start
-    if isinstance(start, list | tuple) and len(start) == var.size:
-        return list(start)
-    if isinstance(start, str) and len(start.split()) == var.size:
-        return [_number(x) for x in start.split()]
-    return [start if isinstance(start, int | float) else None] * var.size
-
-
-def _number(text: str) -> object:
-    try:
-        return float(text)
-    except ValueError:
-        return None
 
 
 def _unknown(

@@ -85,6 +85,17 @@ class Variable:
         """Number of scalar elements: 1 for a scalar, the product of the dimensions for an array."""
         return math.prod(self.dimensions) if self.dimensions else 1
 
+    def element_starts(self) -> list[object]:
+        """The start value of each scalar element, in :meth:`element_names` order (None where the
+        FMU gives none). FMI 3.0 writes an array's start as space-separated values (``"1 2 3"``)
+        or one value for every element; an unreadable entry is None."""
+        start = self.start
+        if isinstance(start, list | tuple) and len(start) == self.size:
+            return list(start)
+        if isinstance(start, str) and len(start.split()) == self.size:
+            return [_number(x) for x in start.split()]
+        return [start if isinstance(start, int | float) else None] * self.size
+
     def element_names(self) -> list[str]:
         """Names of the scalar elements: ``name`` for a scalar, ``name[i]``, ``name[i,j]``... for an array.
 
@@ -196,6 +207,13 @@ class ModelInfo:
 
 
 _ELEMENT = re.compile(r"(.+)\[\s*(\d+(?:\s*,\s*\d+)*)\s*\]")
+
+
+def _number(text: str) -> object:
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
 
 def unknown_variable_error(name: str, info: ModelInfo, role: str = "variable") -> VariableError:

@@ -51,9 +51,7 @@ class Served:
 def element_start(info: ModelInfo, name: str) -> float:
     """The start value of a variable, or of one element ``u[2]`` of an FMI 3.0 array (0 without one)."""
     var, index = info.element(name)
-    start = var.start
-    if index is not None:
-        start = start[index] if isinstance(start, list | tuple) and index < len(start) else None
+    start: Any = var.start if index is None else var.element_starts()[index]
     try:
         return float(start) if start is not None else 0.0
     except (TypeError, ValueError):

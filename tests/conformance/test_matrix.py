@@ -5,7 +5,10 @@ driven and read by) and :data:`PATHS` (a way of running it). For every cell the 
 episodes of a fixed action sequence and its observations must equal ``FmuEnv``'s in this
 process bit for bit, or the path refuses with a :class:`ConfigError` naming the setting. A
 setting or a path added to a table is tested everywhere at once. In-process paths are the fast
-tier; paths that start processes are ``integration``.
+tier; paths that start processes are ``integration``. Each episode is exactly the action sequence
+long (``episode_duration``), so paths that run whole episodes (``evaluate``, whose agents and a
+deployed agent load the sequence as the experiment's baseline ``sequence``: sequence_policy.py)
+run the same ones, and every path must end them exactly there.
 
 The strict models (bridge/models/strict.py) misbehave as real exporters do: ``strict_reset``
 keeps its terminated flag through fmi reset and refuses state functions once reset;
@@ -14,6 +17,7 @@ keeps its terminated flag through fmi reset and refuses state functions once res
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,10 +31,12 @@ from bridge.env.batch import BatchEnv
 from bridge.env.fmu_env import FmuEnv
 from bridge.errors import ConfigError, TransportError
 from bridge.experiment.config import Experiment, parse_experiment
+from bridge.models.clocked import clocks_fmu
 from bridge.models.strict import strict_arrays_fmu, strict_reset_fmu
+from tests.conformance.sequence_policy import CALLABLE, SEQUENCE, action_row
 from tests.conftest import example_fmu
 
-STEPS = 6  # per episode: within every model's own episode (strict_reset stops after 10)
+STEPS = 6  # samples per episode: within every model's own episode (strict_reset stops after 10)
 EPISODES = (0, 1)  # seeds of the two episodes
 
 
@@ -78,6 +84,10 @@ def _cartpole(version: str, interface: str) -> Callable[[], Path]:
     return lambda: example_fmu("cartpole", version, interface)
 
 
+def _clocks(interface: str) -> Callable[[], Path]:
+    return lambda: clocks_fmu(interface)
+
+
 # high 4: a node refuses reset inputs outside the action range, and u's start (u[3] = 3) is one
 ARRAY_SIGNALS: dict[str, Any] = {
     "inputs": ["u[1]", "u[3]"],
@@ -89,6 +99,21 @@ CART: dict[str, Any] = {
     "outputs": ["x", "theta", "theta_dot"],
     "step_size": 0.02,
     "high": 5.0,
+}
+
+# clocks3 (bridge/models/clocked.py, docs/clocks.md): the agent drives r and ticks the triggered
+# clock (above 0.5); c_fixed at 0.05 + 0.2 k (not the FMU's 0.25), trigger also at the schedule's
+# times. 0.06 s samples: no tick of these falls on a sample time.
+CLOCKS: dict[str, Any] = {
+    "inputs": ["r", "trigger"],
+    "outputs": ["x", "u", "n_fixed", "n_trigger", "n_const", "n_out", "n_countdown"],
+    "step_size": 0.06,
+    "high": 1.0,
+    "keys": ("clock_intervals", "clock_schedule"),
+}
+CLOCK_SETTINGS: dict[str, Any] = {
+    "clock_intervals": {"c_fixed": 0.2},
+    "clock_schedule": {"trigger": [0.1, 0.25]},
 }
 
 SETTINGS: dict[str, Setting] = {
@@ -130,6 +155,11 @@ SETTINGS: dict[str, Setting] = {
     "fmi2-me": Setting(_cartpole("2.0", "me"), {"interface": "me"}, **CART, keys=("interface",)),
     "fmi1-cs": Setting(_cartpole("1.0", "cs"), {"parameters": {"theta0": 0.05}}, **CART, keys=("fmu",)),
     "fmi3-cs-cartpole": Setting(_cartpole("3.0", "cs"), {"start_values": {"theta0": 0.1}}, **CART),
+    "fmi3-cs-clocks": Setting(_clocks("cs"), {"interface": "cs", **CLOCK_SETTINGS}, **CLOCKS),
+    "fmi3-me-clocks": Setting(_clocks("me"), {"interface": "me", **CLOCK_SETTINGS}, **CLOCKS),
+    # scheduled execution: chosen explicitly, and as the only interface the FMU offers
+    "fmi3-se": Setting(_clocks("se"), {"interface": "se", **CLOCK_SETTINGS}, **CLOCKS),
+    "fmi3-se-auto": Setting(_clocks("se"), {"interface": "auto", **CLOCK_SETTINGS}, **CLOCKS),
 }
 
 
@@ -140,7 +170,7 @@ def experiment(setting: Setting, tmp_path: Path, **model: Any) -> dict[str, Any]
             "fmu": str(setting.fmu()),
             "step_size": setting.step_size,
             "sampling_time": setting.step_size,
-            "episode_duration": 100 * setting.step_size,
+            "episode_duration": STEPS * setting.step_size,  # evaluate and agents run whole episodes
             **setting.model,
             **(setting.prepare(tmp_path) if setting.prepare else {}),
             **model,
@@ -156,10 +186,14 @@ def experiment(setting: Setting, tmp_path: Path, **model: Any) -> dict[str, Any]
 
 
 def actions(setting: Setting) -> np.ndarray:
-    """A fixed action sequence in [-1, 1] that moves every input."""
-    k = np.arange(STEPS, dtype=np.float32)[:, None]
-    j = np.arange(len(setting.inputs), dtype=np.float32)[None, :]
-    return np.sin(0.7 * k + 1.3 * j).astype(np.float32)
+    """A fixed action sequence in [-1, 1] that moves every input (the agent paths' sequence too)."""
+    return np.array([action_row(k, len(setting.inputs)) for k in range(STEPS)])
+
+
+def with_sequence(data: dict[str, Any]) -> dict[str, Any]:
+    """The experiment with the fixed sequence as its baseline ``sequence`` (what agents load)."""
+    baseline = {"type": "python", "callable": CALLABLE}
+    return {**data, "evaluation": {"baselines": {"sequence": baseline}}}
 
 
 def run_env(env: Any, setting: Setting) -> np.ndarray:
@@ -167,22 +201,24 @@ def run_env(env: Any, setting: Setting) -> np.ndarray:
     for seed in EPISODES:
         obs, _ = env.reset(seed=seed)
         rows.append(obs)
-        for action in actions(setting):
-            obs, *_ = env.step(action)
+        for k, action in enumerate(actions(setting)):
+            obs, _, terminated, truncated, _ = env.step(action)
             rows.append(obs)
+            assert (terminated, truncated) == (False, k == STEPS - 1), f"episode {seed} ended at {k}"
     return np.asarray(rows, dtype=np.float64)
 
 
 def run_batch(exp: Experiment, setting: Setting, n: int) -> np.ndarray:
-    env = BatchEnv(exp, n)
+    env = BatchEnv(exp, n, autoreset=False)  # the last observation of each episode, not the next reset
     try:
         rows = []
         for seed in EPISODES:
             obs = env.reset_all([seed] * n)[0]
             rows.append(obs)
-            for action in actions(setting):
-                obs = env.step(np.repeat(action[None, :], n, axis=0))[0]
+            for k, action in enumerate(actions(setting)):
+                obs, _, terminated, truncated, _ = env.step(np.repeat(action[None, :], n, axis=0))
                 rows.append(obs.copy())  # the env's own buffer, written again at the next call
+                assert not np.any(terminated) and np.all(truncated == (k == STEPS - 1)), (seed, k)
     finally:
         env.close()
     every = np.asarray(rows, dtype=np.float64)  # (time, env, signal)
@@ -237,19 +273,24 @@ def system_component(setting: Setting, tmp_path: Path) -> np.ndarray:
     return rows
 
 
-def node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+def node(setting: Setting, tmp_path: Path, net: Any, *flags: str) -> np.ndarray:
     """``fmu-bridge node`` serving the experiment, driven by RemoteFmuEnv over loopback Zenoh."""
     from bridge.env import RemoteFmuEnv
     from tests.conftest import node_process
 
     path = tmp_path / "node.yaml"
     path.write_text(yaml.safe_dump(experiment(setting, tmp_path)))
-    with node_process(path, "matrix", net):
-        remote = RemoteFmuEnv(path, "matrix", session=net.session, prefix=net.prefix)
+    with node_process(path, "matrix", net, *flags):
+        remote = RemoteFmuEnv(path, "matrix", session=net.session, prefix=net.prefix, timeout_s=60.0)
         try:
             return run_env(remote, setting)
         finally:
             remote.close()
+
+
+def isolated_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge node --isolate``: the node's FMU in a child process of the node."""
+    return node(setting, tmp_path, net, "--isolate")
 
 
 def component_in_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
@@ -270,15 +311,139 @@ def component_in_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
     return rows
 
 
+def deployed_agent(setting: Setting, tmp_path: Path) -> np.ndarray:
+    """A deployed agent (``fmu-bridge agent run sequence --runtime baseline``) on the outputs of
+    the plant a node of the experiment runs, reset as a node resets it (its nominal values, the
+    inputs' start values) and stepped with the inputs the agent publishes. The observations are
+    the ones the agent's Task computed (what its policy was given)."""
+    from agents.deploy import DeployedAgent, DeploySettings, deployment_experiment, model_info_for
+    from agents.policies import load_policy
+    from bridge.net.served import element_start
+    from bridge.plant.factory import fmu_plant
+    from bridge.serving.experiment import experiment_served
+
+    path = tmp_path / "agent.yaml"
+    path.write_text(yaml.safe_dump(with_sequence(experiment(setting, tmp_path))))
+    exp, _ = deployment_experiment(tmp_path, path)
+    spec, served = experiment_served(exp)  # what a node of this experiment runs and serves
+    published: list[list[float]] = []
+    agent = DeployedAgent(
+        load_policy(Path("sequence"), "baseline", exp),
+        exp,
+        model_info_for(exp, tmp_path, None),
+        DeploySettings(runtime="baseline", timeout_s=600.0),
+        lambda inputs, step: published.append(inputs),
+    )
+    assert served.output_names == agent.task.output_names  # as AgentNode checks a node's
+    SEQUENCE.episodes.clear()
+    plant = fmu_plant(spec)
+    try:
+        plant.bind(served.input_names, served.output_names)
+        starts = [element_start(plant.info, name) for name in served.input_names]
+        for episode in EPISODES:
+            outputs = plant.reset(dict(served.nominal), starts)
+            for k in range(STEPS + 1):
+                inputs = agent.observe(outputs.tolist(), episode=episode, step=k)
+                if k < STEPS:
+                    outputs = plant.step(inputs)
+    finally:
+        agent.close()
+        plant.close()
+    assert len(published) == len(EPISODES) * (STEPS + 1)
+    return np.concatenate(SEQUENCE.episodes)
+
+
+def deployed_agent_on_node(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge agent run sequence --runtime baseline`` (:class:`AgentNode`) against
+    ``fmu-bridge node --mode lockstep`` over loopback Zenoh: each episode started by a reset
+    request with the node's nominal values and the inputs' start values (what a ROS ``~/reset``
+    sends), then stepped by the agent's actions alone. A lockstep node steps as long as actions
+    come, so the agent holds its answer to an episode's last observation until the next reset
+    has been answered; that answer, for the old episode, is then refused by the node."""
+    from agents.deploy import DeploySettings
+    from agents.deploy_io import AgentNode
+    from bridge.net import protocol as proto
+    from bridge.net.served import element_start
+    from bridge.plant.factory import model_info_for
+    from bridge.serving.experiment import experiment_served
+    from tests.conftest import node_process, wait_until
+
+    path = tmp_path / "deployed.yaml"
+    path.write_text(yaml.safe_dump(with_sequence(experiment(setting, tmp_path))))
+    served = experiment_served(parse_experiment(yaml.safe_load(path.read_text()), source=path))[1]
+    info = model_info_for(parse_experiment(yaml.safe_load(path.read_text()), source=path))
+    starts = [element_start(info, name) for name in served.input_names]
+    SEQUENCE.episodes.clear()
+    SEQUENCE.hold_after, SEQUENCE.held, SEQUENCE.release = STEPS + 1, threading.Event(), threading.Event()
+    settings = DeploySettings(node="matrix", prefix=net.prefix, timeout_s=60.0, runtime="baseline")
+    with node_process(path, "matrix", net, "--mode", "lockstep"):
+        agent = AgentNode(Path("sequence"), path, settings, session=net.session)
+        try:
+            for n, _ in enumerate(EPISODES, start=1):
+                SEQUENCE.held.clear()
+                request = proto.encode_json({"episode": n, "values": {}, "inputs": starts})
+                for _reply in net.session.get(proto.Keys(net.prefix, "matrix").reset, payload=request):
+                    pass
+                if n > 1:
+                    SEQUENCE.release.set()  # the last episode's held answer: now for an old episode
+                wait_until(SEQUENCE.held.is_set, 60.0, f"episode {n}'s {STEPS + 1} observations")
+        finally:
+            SEQUENCE.hold_after = None
+            SEQUENCE.release.set()
+            agent.close()
+    assert [len(e) for e in SEQUENCE.episodes] == [STEPS + 1] * len(EPISODES)
+    return np.concatenate(SEQUENCE.episodes)
+
+
+def recorded_observations(path: Path) -> list[np.ndarray]:
+    """``/observations`` of an MCAP recording, in file order, read by mcap's own ROS 2 decoder."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        messages = reader.iter_decoded_messages(topics=["/observations"], log_time_order=False)
+        return [np.asarray(m.position, dtype=np.float64) for *_, m in messages]
+
+
+def evaluate_workers(setting: Setting, tmp_path: Path, net: Any) -> np.ndarray:
+    """``fmu-bridge evaluate a=sequence b=sequence --workers 2 --episodes 2``: each agent a cell
+    in a worker process, each recorded to MCAP and its observations read back."""
+    from agents.evaluate import evaluate
+
+    path = tmp_path / "evaluate.yaml"
+    path.write_text(yaml.safe_dump(with_sequence(experiment(setting, tmp_path))))
+    result = evaluate(
+        ["a=sequence", "b=sequence"],
+        path,
+        episodes=len(EPISODES),
+        seed=EPISODES[0],
+        workers=2,
+        record_dir=tmp_path / "recordings",
+    )
+    assert len(result.recordings) == 2
+    cells = []
+    for name, recording in zip(result.agents, result.recordings):
+        lengths = [len(trace.time_s) for trace in result.traces[(name, "nominal")]]
+        assert lengths == [STEPS + 1] * len(EPISODES), f"episodes of {lengths} samples"
+        cells.append(np.asarray(recorded_observations(recording)))
+    np.testing.assert_array_equal(cells[1], cells[0])  # the two workers agree
+    return cells[0]
+
+
 PATHS: dict[str, Callable[[Setting, Path], np.ndarray]] = {
     "batch-1": batch_of(1),
     "batch-3": batch_of(3),
     "system-component": system_component,
+    "deployed-agent": deployed_agent,
 }
 PROCESS_PATHS: dict[str, Callable[[Setting, Path, Any], np.ndarray]] = {
     "isolated": isolated,
     "node": node,
+    "isolated-node": isolated_node,
     "component-in-node": component_in_node,
+    "deployed-agent-on-node": deployed_agent_on_node,
+    "evaluate-workers": evaluate_workers,
 }
 
 

@@ -198,6 +198,19 @@ def test_system_of_two_array_models_equals_closed_form(
     np.testing.assert_allclose(np.asarray(rows)[1:], system_closed_form()[1:], rtol=1e-12, atol=1e-12)
 
 
+def test_a_node_holds_each_input_element_at_its_array_start_value(fmu: Path) -> None:
+    """What a node holds its inputs at before an action and sends at a ROS reset: an element's
+    start is its entry of the array's start (``u``'s is "1 2 3"), as the env's task reads it,
+    not 0 (the node read only a parsed list)."""
+    from bridge.experiment.validate import with_elements
+    from bridge.fmu import read_model_info
+    from bridge.net.served import element_start
+
+    info = read_model_info(fmu)
+    assert [element_start(info, name) for name in U] == [1.0, 2.0, 3.0]
+    assert [with_elements(info.variables)[name].start for name in U] == [1.0, 2.0, 3.0]
+
+
 @pytest.mark.integration
 def test_node_over_loopback_zenoh_equals_the_single_env(fmu: Path, tmp_path: Path, loopback: Any) -> None:
     from bridge.env import RemoteFmuEnv
