@@ -105,17 +105,19 @@ class RawFmpyLoop:
         """:meth:`restart` with FMPy's checked wrappers left out: the FMU's own three functions
         called through ctypes with arguments built beforehand (:meth:`prepare_direct`), the outputs
         copied into an observation. The least a Python reset that returns an observation does."""
-        fmu, (vin, nin, u, vout, nout, y) = self.fmu, self._direct
-        c = fmu.component
-        fmu.fmi2SetFMUstate(c, state)
+        (set_state, set_real, get_real), (vin, nin, u, vout, nout, y) = self._functions, self._direct
+        c = self.fmu.component
+        set_state(c, state)
         self.t = 0.0
         u[:] = inputs
-        fmu.fmi2SetReal(c, vin, nin, u)
-        fmu.fmi2GetReal(c, vout, nout, y)
+        set_real(c, vin, nin, u)
+        get_real(c, vout, nout, y)
         return np.array(y, dtype=np.float32)
 
     def prepare_direct(self) -> None:
         n_in, n_out = len(self._in), len(self._out)
+        functions = self.fmu._functions  # FMPy's ctypes functions, under its logging wrapper
+        self._functions = tuple(functions[f"fmi2{name}"] for name in ("SetFMUstate", "SetReal", "GetReal"))
         self._direct = (
             (ctypes.c_uint * n_in)(*self._in),
             n_in,
