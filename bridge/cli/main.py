@@ -126,24 +126,20 @@ def models(
     as_json: Annotated[bool, typer.Option("--json", help="Machine-readable output.")] = False,
 ) -> None:
     """List the bundled example models, build them with gcc, and print their paths."""
-    from bridge.models import example_fmu, handwritten_variants, list_variants
+    from bridge.models import build_all, handwritten_variants, list_variants
 
-    rows: list[dict[str, Any]] = []
-    for variant in [*list_variants(), *handwritten_variants()]:
-        path = (
-            str(example_fmu(variant.name, variant.fmi_version, variant.interface, rebuild=rebuild))
-            if build or rebuild
-            else None
-        )
-        rows.append(
-            {
-                "model": variant.name,
-                "fmi_version": variant.fmi_version,
-                "interface": variant.interface,
-                "path": path,
-                "description": variant.description,
-            }
-        )
+    variants = [*list_variants(), *handwritten_variants()]
+    paths = build_all(variants, rebuild=rebuild) if build or rebuild else [None] * len(variants)
+    rows: list[dict[str, Any]] = [
+        {
+            "model": variant.name,
+            "fmi_version": variant.fmi_version,
+            "interface": variant.interface,
+            "path": str(path) if path is not None else None,
+            "description": variant.description,
+        }
+        for variant, path in zip(variants, paths, strict=True)
+    ]
     if as_json:
         sys.stdout.write(json.dumps(rows, indent=2) + "\n")
         return

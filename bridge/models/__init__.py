@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -109,13 +110,14 @@ def example_fmu(name: str, fmi_version: str = "2.0", interface: str = "cs", *, r
     return target
 
 
-def build_all(*, rebuild: bool = False) -> list[Path]:
-    """Build (or find in the cache) every variant of every example model; gcc runs in parallel.
+def build_all(variants: Sequence[ModelVariant] | None = None, *, rebuild: bool = False) -> list[Path]:
+    """Build (or find in the cache) ``variants`` (every variant of every generated example model by
+    default); gcc runs in parallel.
 
     Returns:
-        The archive paths in the order of :func:`list_variants`.
+        The archive paths in the order of ``variants`` (of :func:`list_variants` by default).
     """
-    variants = list_variants()
+    variants = list_variants() if variants is None else variants
     with ThreadPoolExecutor(max_workers=min(8, os.cpu_count() or 1)) as pool:
         futures = [
             pool.submit(example_fmu, v.name, v.fmi_version, v.interface, rebuild=rebuild) for v in variants

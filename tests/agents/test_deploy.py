@@ -76,8 +76,11 @@ def closed_loop(
                 payload=proto.encode_json({"episode": 9, "values": {"theta0": 0.04}}),
             ):
                 pass
+            # the samples wanted, and in real time (which runs on) a few more; a lockstep episode
+            # ends after its 500 samples, so asking more of it waited for the deadline
+            wanted = samples + (20 if mode == "realtime" else 0)
             deadline = time.monotonic() + 120
-            while len([f for f in frames if f.episode == 9]) < samples + 20 and time.monotonic() < deadline:
+            while len([f for f in frames if f.episode == 9]) < wanted and time.monotonic() < deadline:
                 time.sleep(0.05)
             node = describe_nodes(net.session, ["plant"], prefix=net.prefix, timeout_s=10)[0]  # type: ignore[arg-type]
         finally:
