@@ -411,14 +411,19 @@ def shared_by_workers(
     """``make(folder)`` once per test run, whatever the number of pytest-xdist workers: the first
     worker that needs it makes it (the others wait on a lock, which costs no CPU the maker could
     use) and every worker gets its own copy at ``into`` (tests may write into theirs). Without
-    xdist, ``make(into)``."""
+    xdist, ``make(into)``. ``FMU_BRIDGE_TEST_SHARED`` names a folder that keeps what was made for
+    the test runs after (CI: the ROS venv's tests take the policy its pinned tiers trained)."""
     import fcntl
     import shutil
 
-    if os.environ.get("PYTEST_XDIST_TESTRUNUID") is None:
+    kept = os.environ.get("FMU_BRIDGE_TEST_SHARED")
+    if kept:
+        shared = Path(kept) / name
+    elif os.environ.get("PYTEST_XDIST_TESTRUNUID") is not None:
+        shared = factory.getbasetemp().parent / f"shared-{name}"  # the run's folder above every worker's
+    else:
         return make(into)
-    shared = factory.getbasetemp().parent / f"shared-{name}"  # the run's folder above every worker's
-    shared.mkdir(exist_ok=True)
+    shared.mkdir(parents=True, exist_ok=True)
     with (shared / "lock").open("w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)
         made = shared / "made"
