@@ -126,14 +126,11 @@ class FmuInstancePlant(Plant):
         return self.failure(StepError, MODEL_INIT_FAILED, detail, hint, step=None, time_s=None, log=exc.log)
 
     def _bind_native(self) -> None:
-        """The one-call native sample where it applies (once the instance exists), re-pointed at
-        the instance after every reset; ``FMU_BRIDGE_NO_NATIVE=1`` keeps the Python path."""
-        if self._native is None:
-            if self._groups is not None and not os.environ.get("FMU_BRIDGE_NO_NATIVE"):
-                self._native = NativeSample.create(self.model, *self._groups, self._n)
-                self._groups = None  # decided once
-        else:
-            self._native.refresh()
+        """The one-call native sample where it applies, decided once the instance exists (reset
+        re-points it at the instance afterwards); ``FMU_BRIDGE_NO_NATIVE=1`` keeps the Python path."""
+        if self._groups is not None and not os.environ.get("FMU_BRIDGE_NO_NATIVE"):
+            self._native = NativeSample.create(self.model, *self._groups, self._n)
+            self._groups = None  # decided once
 
     def send(self, inputs: Sequence[float] | None) -> None:
         self._pending = inputs
